@@ -1,0 +1,7 @@
+//! # tangent-host
+//!
+//! The `std` companion of the Tangent instrument: capture files, the capture simulator,
+//! replay and measurement of recorded captures, calibration, the device link and the field
+//! log. The `tangent` binary is a thin CLI over these modules (one file per subcommand in
+//! `src/cli/`).
+#![deny(missing_docs)]

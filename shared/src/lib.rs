@@ -1,0 +1,29 @@
+//! # tangent-core
+//!
+//! The measurement core of Tangent, a handheld laser-plane triangulation instrument. It is
+//! `no_std` and allocation-free: every buffer is owned by the caller (as in smoltcp), and every
+//! fallible step returns a typed error instead of panicking on bad data.
+//!
+//! Modules follow the measurement chain, one chapter of the method each (see `docs/`):
+//!
+//! | chain step | module | derivation |
+//! |---|---|---|
+//! | scalar type | [`real`] | – |
+//! | camera model | [`camera`] | `docs/camera-model.md` |
+//! | laser planes, triangulation | [`laser_plane`] | `docs/laser-plane.md` |
+//! | calibration set | [`calibration`] | `docs/formats.md` |
+//! | frames, subtraction, thresholds, segmentation, speckle filter | [`image`] | `docs/image-processing.md` |
+//! | subpixel peak estimators | [`peaks`] | `docs/subpixel.md` |
+//! | laser-curve extraction and smoothing | [`curve`] | `docs/image-processing.md` |
+//! | solvers per object kind | [`solvers`] | `docs/cylinder.md`, … |
+//! | device ↔ host wire protocol | [`protocol`] | `docs/protocol.md` |
+//! | the whole chain, frame pair → result | [`pipeline`] | `docs/pipeline.md` |
+#![no_std]
+#![deny(missing_docs)]
+#![forbid(unsafe_code)]
+
+#[cfg(feature = "std")]
+extern crate std;
+
+pub mod real;
+pub mod image;
