@@ -5,3 +5,10 @@
 //! log. The `tangent` binary is a thin CLI over these modules (one file per subcommand in
 //! `src/cli/`).
 #![deny(missing_docs)]
+
+pub mod calibrate;
+pub mod calibration_file;
+pub mod capture;
+pub mod pgm;
+pub mod simulate;
+pub mod study;

@@ -16,12 +16,21 @@ struct Cli {
 #[derive(Subcommand, Debug)]
 enum Command {
     // Each variant: `Name(cli::name::Args)`; keep one per line, alphabetical.
+    /// A PNG of a capture: frames, difference, true and extracted laser curves.
+    Inspect(cli::inspect::Args),
+    /// Render synthetic captures (one stem, random stems, or the test corpus).
+    Simulate(cli::simulate::Args),
+    /// Studies that generate the tables in docs/ (e.g. `study subpixel`).
+    Study(cli::study::Args),
 }
 
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let result: anyhow::Result<std::process::ExitCode> = match cli.command {
         // Each arm: `Command::Name(args) => cli::name::run(args),`
+        Command::Inspect(args) => cli::inspect::run(args),
+        Command::Simulate(args) => cli::simulate::run(args),
+        Command::Study(args) => cli::study::run(args),
     };
     match result {
         Ok(code) => code,

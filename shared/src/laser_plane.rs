@@ -10,15 +10,15 @@
 //! tilt `δ` of the fan towards the optical axis ([`LaserPlane::from_baseline_tilt`]):
 //!
 //! ```text
-//!        side view (x axis out of the page; y down, z forward)
+//!   side view, x axis out of the page (y down, z forward)
 //!
-//!   y=0  C ●━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━━▶ z
-//!          ┃  ▲                                        ___----   ● (0, 0, e/tan δ)
-//!          ┃  │ e                            ___----‾‾‾           (axis crossing)
-//!          ┃  ▼                   ___----‾‾‾
-//!   y=e  S ●           ___----‾‾‾   laser plane, rising at angle δ
-//!          ┃ ___----‾‾‾ δ           (contains the x direction)
-//!          ▼ y    ‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾ (parallel to z)
+//!   C o--------------------------------------------o------> z   (optical axis, y = 0)
+//!     |                                  ______.--'  z0 = e / tan(delta)
+//!     | e                    ______.----'
+//!     |          ______.----'   laser plane, seen edge-on (contains the x axis)
+//!   S o____.----'  ) delta
+//!     |  - - - - - - - - - - -   (through S, parallel to z)
+//!     v y
 //! ```
 //!
 //! Every pixel of the laser curve then maps to one 3-D point: the pixel's ray meets the
@@ -31,7 +31,10 @@ use core::fmt;
 use serde::{Deserialize, Serialize};
 
 use crate::camera::{Camera, CameraError};
-use crate::real::{Float, Mat3, Real, Vec2, Vec3, PI};
+// `Float` supplies sqrt/atan2/… in `no_std`; with `std` the inherent methods win.
+#[allow(unused_imports)]
+use crate::real::Float;
+use crate::real::{Mat3, Real, Vec2, Vec3, PI};
 
 /// Largest distance (metres) between the given source point and the plane that
 /// [`LaserPlane::new`] silently corrects by projecting the source onto the plane.
@@ -72,7 +75,9 @@ pub enum LaserPlaneError {
 impl fmt::Display for LaserPlaneError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            LaserPlaneError::DegenerateNormal => write!(f, "laser-plane normal is zero or not finite"),
+            LaserPlaneError::DegenerateNormal => {
+                write!(f, "laser-plane normal is zero or not finite")
+            }
             LaserPlaneError::SourceNotInPlane => {
                 write!(f, "laser source point is not in the laser plane")
             }
@@ -80,7 +85,9 @@ impl fmt::Display for LaserPlaneError {
                 f,
                 "laser plane passes through the camera centre (or offset not finite)"
             ),
-            LaserPlaneError::InvalidBaseline => write!(f, "laser baseline must be finite and positive"),
+            LaserPlaneError::InvalidBaseline => {
+                write!(f, "laser baseline must be finite and positive")
+            }
             LaserPlaneError::InvalidTilt => {
                 write!(f, "laser tilt must be finite with |tilt| < 90 degrees")
             }
@@ -136,7 +143,7 @@ impl LaserPlane {
             return Err(LaserPlaneError::SourceNotInPlane);
         }
         let gap = n.dot(&source) - d;
-        if !(gap.abs() <= SOURCE_IN_PLANE_TOLERANCE) {
+        if gap.is_nan() || gap.abs() > SOURCE_IN_PLANE_TOLERANCE {
             return Err(LaserPlaneError::SourceNotInPlane);
         }
         Ok(LaserPlane {
@@ -259,7 +266,7 @@ impl LaserPlane {
             return Err(LaserPlaneError::CameraInPlane);
         }
         let gap = self.signed_distance(self.source);
-        if !(gap.abs() <= SOURCE_IN_PLANE_TOLERANCE) {
+        if gap.is_nan() || gap.abs() > SOURCE_IN_PLANE_TOLERANCE {
             return Err(LaserPlaneError::SourceNotInPlane);
         }
         Ok(())
@@ -277,7 +284,7 @@ impl LaserPlane {
             return Err(LaserPlaneError::RayParallel);
         }
         let denom = self.normal.dot(&ray);
-        if !(denom.abs() > 16.0 * Real::EPSILON * len) {
+        if denom.is_nan() || denom.abs() <= 16.0 * Real::EPSILON * len {
             return Err(LaserPlaneError::RayParallel);
         }
         let t = self.offset / denom;
@@ -407,4 +414,315 @@ pub fn triangulate(
 ) -> Result<Vec3, TriangulationError> {
     let ray = camera.pixel_to_ray(pixel)?;
     Ok(plane.intersect_ray(ray)?)
+}
+
+#[cfg(test)]
+// The casts to f64 are no-ops in f64 builds but needed with `--features f32`.
+#[allow(clippy::unnecessary_cast)]
+mod tests {
+    use super::*;
+    use crate::camera::Distortion;
+
+    /// Machine epsilon of the precision under test, as `f64`.
+    const EPS: f64 = Real::EPSILON as f64;
+
+    /// Thesis plane of the reference design: e = 0.10 m, axis crossing at 1.5 m.
+    fn thesis_plane() -> (LaserPlane, f64, f64) {
+        let e = 0.10;
+        let tilt = (0.10f64 / 1.5).atan();
+        (
+            LaserPlane::from_baseline_tilt(e as Real, tilt as Real).unwrap(),
+            e,
+            tilt,
+        )
+    }
+
+    fn close(a: Vec3, b: [f64; 3], tol: f64) -> bool {
+        (a.x as f64 - b[0]).abs() <= tol
+            && (a.y as f64 - b[1]).abs() <= tol
+            && (a.z as f64 - b[2]).abs() <= tol
+    }
+
+    #[test]
+    fn baseline_tilt_geometry() {
+        let (p, e, tilt) = thesis_plane();
+        // n = (0, cos δ, sin δ), d = e cos δ, S = (0, e, 0).
+        assert!(close(p.normal, [0.0, tilt.cos(), tilt.sin()], 4.0 * EPS));
+        assert!((p.offset as f64 - e * tilt.cos()).abs() <= 4.0 * EPS * e);
+        assert!(close(p.source, [0.0, e, 0.0], 4.0 * EPS));
+        // Contains its source, the axis crossing (0, 0, e/tan δ) = (0, 0, 1.5), and the
+        // x direction from there. Distances of O(1 m) points carry ~4 ε·1.5 m of rounding.
+        let tol = 8.0 * EPS * 1.5;
+        assert!((p.signed_distance(p.source) as f64).abs() <= tol);
+        assert!((p.signed_distance(Vec3::new(0.0, 0.0, 1.5)) as f64).abs() <= tol);
+        assert!((p.signed_distance(Vec3::new(0.7, 0.0, 1.5)) as f64).abs() <= tol);
+        assert!((p.axis_crossing().unwrap() as f64 - 1.5).abs() <= tol);
+        // The camera is on the negative side, a point below the plane line on the positive.
+        assert!(p.signed_distance(Vec3::zeros()) < 0.0);
+        // Inverse.
+        let (e2, t2) = p.baseline_tilt();
+        assert!((e2 as f64 - e).abs() <= 8.0 * EPS * e);
+        assert!((t2 as f64 - tilt).abs() <= 8.0 * EPS);
+        assert_eq!(p.roll(), 0.0);
+    }
+
+    #[test]
+    fn baseline_tilt_roll_round_trip() {
+        for &(e, t, r) in &[(0.1, 0.2, 0.3), (0.05, -0.4, -1.0), (0.3, 1.2, 2.5)] {
+            let p = LaserPlane::from_baseline_tilt_roll(e, t, r).unwrap();
+            let (e2, t2) = p.baseline_tilt();
+            // asin near |δ| = 1.2 amplifies the rounding of n_z by 1/cos δ ≈ 2.8.
+            assert!(((e2 - e) / e).abs() as f64 <= 16.0 * EPS, "{e} {e2}");
+            assert!((t2 - t).abs() as f64 <= 16.0 * EPS, "{t} {t2}");
+            assert!((p.roll() - r).abs() as f64 <= 16.0 * EPS, "{r}");
+            // The source is at distance e from the camera, in the plane.
+            assert!((p.source.norm() - e).abs() as f64 <= 4.0 * EPS);
+        }
+    }
+
+    #[test]
+    fn plane_through_three_known_points() {
+        // x + 2y + 3z = 6 through its axis intercepts: n = (1,2,3)/√14, d = 6/√14.
+        let p = LaserPlane::from_points(
+            Vec3::new(6.0, 0.0, 0.0),
+            Vec3::new(0.0, 3.0, 0.0),
+            Vec3::new(0.0, 0.0, 2.0),
+            Vec3::new(0.0, 0.0, 2.0),
+        )
+        .unwrap();
+        let s = 14f64.sqrt();
+        assert!(close(p.normal, [1.0 / s, 2.0 / s, 3.0 / s], 8.0 * EPS));
+        assert!((p.offset as f64 - 6.0 / s).abs() <= 16.0 * EPS * 6.0);
+        // Collinear points: no plane.
+        let c = LaserPlane::from_points(
+            Vec3::new(0.0, 0.0, 1.0),
+            Vec3::new(0.0, 0.0, 2.0),
+            Vec3::new(0.0, 0.0, 3.0),
+            Vec3::new(0.0, 0.0, 1.0),
+        );
+        assert_eq!(c, Err(LaserPlaneError::DegenerateNormal));
+    }
+
+    #[test]
+    fn ray_plane_intersection_at_known_poses() {
+        // Plane z = 2 given with a non-unit, inward normal: normalised and flipped.
+        let p = LaserPlane::new(Vec3::new(0.0, 0.0, -3.0), -6.0, Vec3::new(0.5, 0.0, 2.0)).unwrap();
+        assert_eq!(p.normal, Vec3::new(0.0, 0.0, 1.0));
+        assert_eq!(p.offset, 2.0);
+        let x = p.intersect_ray(Vec3::new(0.1, -0.2, 1.0)).unwrap();
+        assert!(close(x, [0.2, -0.4, 2.0], 4.0 * EPS));
+        // Thesis plane: the ray (0, y, 1) meets it at t = e / (y + tan δ).
+        let (p, e, tilt) = thesis_plane();
+        for &y in &[0.0, 0.05, 0.2] {
+            let x = p.intersect_ray(Vec3::new(0.0, y as Real, 1.0)).unwrap();
+            let t = e / (y + tilt.tan());
+            // Relative rounding of a few ε, amplified by t ≤ 1.5 m.
+            assert!(
+                close(x, [0.0, y * t, t], 16.0 * EPS * 1.5),
+                "{y}: {x:?} vs t = {t}"
+            );
+        }
+    }
+
+    #[test]
+    fn intersection_error_cases() {
+        let (p, _, tilt) = thesis_plane();
+        // Along x: in a direction of the plane, parallel.
+        assert_eq!(
+            p.intersect_ray(Vec3::new(1.0, 0.0, 0.0)),
+            Err(LaserPlaneError::RayParallel)
+        );
+        assert_eq!(
+            p.intersect_ray(Vec3::zeros()),
+            Err(LaserPlaneError::RayParallel)
+        );
+        assert_eq!(
+            p.intersect_ray(Vec3::new(Real::NAN, 0.0, 1.0)),
+            Err(LaserPlaneError::RayParallel)
+        );
+        // Above the plane's horizon (y < −tan δ) the ray meets the plane behind the camera.
+        assert_eq!(
+            p.intersect_ray(Vec3::new(0.0, -(2.0 * tilt.tan()) as Real, 1.0)),
+            Err(LaserPlaneError::BehindCamera)
+        );
+        let z2 = LaserPlane::new(Vec3::new(0.0, 0.0, 1.0), 2.0, Vec3::new(0.0, 0.0, 2.0)).unwrap();
+        assert_eq!(
+            z2.intersect_ray(Vec3::new(0.0, 0.0, -1.0)),
+            Err(LaserPlaneError::BehindCamera)
+        );
+    }
+
+    #[test]
+    fn construction_error_cases() {
+        let s = Vec3::new(0.0, 0.0, 2.0);
+        let z = Vec3::new(0.0, 0.0, 1.0);
+        assert_eq!(
+            LaserPlane::new(Vec3::zeros(), 2.0, s),
+            Err(LaserPlaneError::DegenerateNormal)
+        );
+        assert_eq!(
+            LaserPlane::new(Vec3::new(Real::NAN, 0.0, 1.0), 2.0, s),
+            Err(LaserPlaneError::DegenerateNormal)
+        );
+        assert_eq!(
+            LaserPlane::new(z, 0.0, Vec3::zeros()),
+            Err(LaserPlaneError::CameraInPlane)
+        );
+        assert_eq!(
+            LaserPlane::new(z, 2.0, Vec3::new(0.0, 0.0, 2.01)),
+            Err(LaserPlaneError::SourceNotInPlane)
+        );
+        // A source 1 µm off the plane is projected onto it.
+        let p = LaserPlane::new(z, 2.0, Vec3::new(0.3, 0.0, 2.000001)).unwrap();
+        assert!((p.signed_distance(p.source) as f64).abs() <= 4.0 * EPS * 2.0);
+        assert_eq!(
+            LaserPlane::from_baseline_tilt(0.0, 0.1),
+            Err(LaserPlaneError::InvalidBaseline)
+        );
+        assert_eq!(
+            LaserPlane::from_baseline_tilt(-0.1, 0.1),
+            Err(LaserPlaneError::InvalidBaseline)
+        );
+        assert_eq!(
+            LaserPlane::from_baseline_tilt(0.1, 1.6),
+            Err(LaserPlaneError::InvalidTilt)
+        );
+        assert_eq!(
+            LaserPlane::from_baseline_tilt(0.1, Real::NAN),
+            Err(LaserPlaneError::InvalidTilt)
+        );
+        let mut bad = thesis_plane().0;
+        bad.normal *= 2.0;
+        assert_eq!(bad.validate(), Err(LaserPlaneError::DegenerateNormal));
+        assert_eq!(thesis_plane().0.validate(), Ok(()));
+    }
+
+    #[test]
+    fn plane_coordinates() {
+        let (p, e, tilt) = thesis_plane();
+        let (a, b) = p.plane_axes();
+        // Zero roll: a = x̂, b = (0, −sin δ, cos δ).
+        assert!(close(a, [1.0, 0.0, 0.0], 4.0 * EPS));
+        assert!(close(b, [0.0, -tilt.sin(), tilt.cos()], 4.0 * EPS));
+        // The axis crossing is straight ahead of the source along b at √(e² + z0²).
+        let q = p.to_plane_coords(Vec3::new(0.0, 0.0, 1.5));
+        assert!(
+            (q.x as f64).abs() <= 8.0 * EPS
+                && (q.y as f64 - (e * e + 2.25).sqrt()).abs() <= 8.0 * EPS * 1.5
+        );
+        // Camera centre's foot: (0, e sin δ).
+        let c = p.camera_centre_in_plane();
+        assert!(
+            (c.x as f64).abs() <= 4.0 * EPS && (c.y as f64 - e * tilt.sin()).abs() <= 8.0 * EPS
+        );
+        // Round trip and orthonormality for a rolled, generic plane.
+        let p = LaserPlane::from_baseline_tilt_roll(0.12, 0.3, 0.4).unwrap();
+        let (a, b) = p.plane_axes();
+        assert!(
+            (a.norm() - 1.0).abs() as f64 <= 4.0 * EPS
+                && (b.norm() - 1.0).abs() as f64 <= 4.0 * EPS
+        );
+        assert!((a.dot(&b) as f64).abs() <= 4.0 * EPS);
+        assert!(
+            (a.dot(&p.normal) as f64).abs() <= 4.0 * EPS
+                && (b.dot(&p.normal) as f64).abs() <= 4.0 * EPS
+        );
+        assert!(b.z > 0.0 && a.x > 0.0);
+        let q = Vec2::new(-0.3, 1.7);
+        let x = p.from_plane_coords(q);
+        assert!((p.signed_distance(x) as f64).abs() <= 8.0 * EPS * 2.0);
+        let q2 = p.to_plane_coords(x);
+        assert!(((q2 - q).norm() as f64) <= 8.0 * EPS * 2.0);
+        // Plane perpendicular to the optical axis: fallback axes still orthonormal.
+        let f = LaserPlane::new(Vec3::new(0.0, 0.0, 1.0), 1.0, Vec3::new(0.0, 0.1, 1.0)).unwrap();
+        let (a, b) = f.plane_axes();
+        assert!(
+            close(b, [0.0, -1.0, 0.0], 4.0 * EPS) && (a.norm() - 1.0).abs() as f64 <= 4.0 * EPS
+        );
+    }
+
+    #[test]
+    fn homography_is_the_ray_plane_map() {
+        let p = LaserPlane::from_baseline_tilt_roll(0.1, 0.07, 0.2).unwrap();
+        let g = p.plane_to_normalised_homography();
+        let gi = p.normalised_to_plane_homography();
+        let id = g * gi;
+        for i in 0..3 {
+            for j in 0..3 {
+                let expect = if i == j { 1.0 } else { 0.0 };
+                // det G = −d = −0.1: inversion loses up to ~|G|·|G⁻¹| ≈ 20/0.1 ulps.
+                assert!((id[(i, j)] as f64 - expect).abs() <= 400.0 * EPS, "{id}");
+            }
+        }
+        assert!((g.determinant() as f64 + p.offset as f64).abs() <= 16.0 * EPS);
+        for &q in &[
+            Vec2::new(0.2, 1.0),
+            Vec2::new(-0.4, 2.5),
+            Vec2::new(0.0, 0.5),
+        ] {
+            // Forward: plane point → its normalised image.
+            let x = p.from_plane_coords(q);
+            let h = g * Vec3::new(q.x, q.y, 1.0);
+            assert!(((h / h.z - x / x.z).norm() as f64) <= 32.0 * EPS);
+            // Backward: image → plane through the inverse equals the ray–plane intersection.
+            let ray = x / x.z;
+            let back = gi * ray;
+            let q_h = Vec2::new(back.x / back.z, back.y / back.z);
+            let q_i = p.to_plane_coords(p.intersect_ray(ray).unwrap());
+            // In-plane metres at ≤ 2.5 m: ~ε·2.5·(condition ≈ 20).
+            assert!(
+                ((q_h - q).norm() as f64) <= 64.0 * EPS * 2.5,
+                "{q_h:?} {q:?}"
+            );
+            assert!(
+                ((q_i - q).norm() as f64) <= 64.0 * EPS * 2.5,
+                "{q_i:?} {q:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn triangulate_recovers_points_of_the_plane() {
+        let cam = Camera {
+            distortion: Distortion {
+                k1: -0.3,
+                k2: 0.1,
+                k3: -0.01,
+                p1: 1e-3,
+                p2: -1e-3,
+            },
+            cx: 371.2,
+            cy: 244.8,
+            ..Camera::reference_design()
+        };
+        let (p, _, _) = thesis_plane();
+        for &q in &[
+            Vec2::new(0.0, 1.0),
+            Vec2::new(0.15, 0.6),
+            Vec2::new(-0.3, 2.5),
+            Vec2::new(0.05, 1.5),
+        ] {
+            let x = p.from_plane_coords(q);
+            let px = cam.project(x).unwrap();
+            let t = triangulate(&cam, &p, px).unwrap();
+            // Error model: the ray carries ~1e-3 px-equivalent in f32 (≈ 8 ε (1 + |d|)
+            // normalised incl. pixel rounding), i.e. an angle α ≈ 8 ε·1.5 rad; along the
+            // plane the depth error is z²/(e cos δ)·α-ish → z²/e · α with z ≤ 2.5, e = 0.1.
+            let z = x.z as f64;
+            let tol = z * z / 0.1 * 16.0 * EPS * 1.5 + 8.0 * EPS * z;
+            assert!(
+                ((t - x).norm() as f64) <= tol,
+                "{q:?}: {t:?} vs {x:?} (tol {tol})"
+            );
+        }
+        // Above the plane's horizon: behind the camera. NaN pixel: camera error.
+        assert_eq!(
+            triangulate(&cam, &p, Vec2::new(375.0, 100.0)),
+            Err(TriangulationError::Plane(LaserPlaneError::BehindCamera))
+        );
+        assert_eq!(
+            triangulate(&cam, &p, Vec2::new(Real::NAN, 100.0)),
+            Err(TriangulationError::Camera(CameraError::NonFinite))
+        );
+    }
 }

@@ -26,4 +26,13 @@
 extern crate std;
 
 pub mod real;
+pub mod camera;
+pub mod laser_plane;
+pub mod calibration;
+pub mod protocol;
 pub mod image;
+pub mod peaks;
+pub mod curve;
+pub mod solvers;
+pub mod error_model;
+pub mod pipeline;

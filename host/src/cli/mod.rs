@@ -1,2 +1,6 @@
 //! One module per `tangent` subcommand. Each exposes an `Args` struct (clap) and
 //! `run(args) -> anyhow::Result<ExitCode>`.
+
+pub mod inspect;
+pub mod simulate;
+pub mod study;

@@ -7,6 +7,12 @@
 
 use core::fmt;
 
+pub mod filter;
+pub mod segment;
+pub mod select;
+pub mod subtract;
+pub mod threshold;
+
 /// A pixel type the pipeline accepts: `u8` (8-bit sensors) or `u16` (10/12/16-bit sensors).
 pub trait Pixel: Copy + Default + Ord + Into<u32> + fmt::Debug + 'static {
     /// Bits of the storage type (8 or 16).
@@ -215,6 +221,19 @@ impl<'a, P: Pixel> FrameMut<'a, P> {
     pub fn row_mut(&mut self, y: usize) -> &mut [P] {
         let start = y * self.stride;
         &mut self.data[start..start + self.width]
+    }
+    /// Row `y - 1` (read-only) together with row `y` (mutable), for one-pass neighbourhood
+    /// algorithms that write a row while reading the previous one (segmentation). `None` if
+    /// `y == 0` or `y >= height`.
+    pub fn previous_and_row_mut(&mut self, y: usize) -> Option<(&[P], &mut [P])> {
+        if y == 0 || y >= self.height {
+            return None;
+        }
+        let (head, tail) = self.data.split_at_mut(y * self.stride);
+        let prev_start = (y - 1) * self.stride;
+        let prev = head.get(prev_start..prev_start + self.width)?;
+        let cur = tail.get_mut(..self.width)?;
+        Some((prev, cur))
     }
     /// A read-only view of the same pixels.
     pub fn as_frame(&self) -> Frame<'_, P> {

@@ -1,0 +1,461 @@
+//! The emulated board: `qemu-system-arm -M mps2-an500` (Cortex-M7), see `qemu/run.sh`.
+//!
+//! * link: CMSDK APB UART0 at 0x4000_4000 (QEMU's first `-serial`), polled;
+//! * clock: SysTick on the 25 MHz core clock, wrapping every 2²⁴ ticks, extended to 64 bits
+//!   by counting wraps in the SysTick exception. With `-icount shift=0` QEMU's virtual
+//!   clock advances 1 ns per instruction, so one tick is 40 instructions: the benchmark's
+//!   instruction counter;
+//! * camera: frame pairs from PGM files on the host, read by semihosting, one pair per
+//!   capture, cycling through the pairs named on the command line. The laser-on file is
+//!   used only when the strobe really lit a laser, the laser-off file otherwise;
+//! * lasers: a bitmask in RAM (no hardware), trigger: none, watchdog: none (QEMU's
+//!   CMSDK watchdog is not wired to reset on this machine model);
+//! * calibration store: RAM, initialised from a calibration record file (`--calib`).
+//!
+//! Command line (semihosting `SYS_GET_CMDLINE`, QEMU's `-append`):
+//! `[--calib FILE] [--bench] OFF.pgm ON.pgm [OFF.pgm ON.pgm …]`.
+
+use core::fmt::Write as _;
+use core::future::poll_fn;
+use core::sync::atomic::{AtomicU32, Ordering};
+use core::task::Poll;
+
+use cortex_m::peripheral::syst::SystClkSource;
+use cortex_m::peripheral::SYST;
+use cortex_m_semihosting::{nr, syscall};
+use tangent_core::protocol::{self, calibration_record, WireCalibration};
+
+use crate::hal::{self, CameraError, Geometry, LinkError, Strobe};
+use crate::pgm;
+
+/// SysTick input clock of mps2-an500 (Hz).
+pub const SYSCLK_HZ: u64 = 25_000_000;
+const RELOAD: u32 = 0x00FF_FFFF;
+
+/// SysTick wraps since boot; incremented by [`on_systick`].
+static WRAPS: AtomicU32 = AtomicU32::new(0);
+
+/// Call from the `SysTick` exception handler.
+pub fn on_systick() {
+    WRAPS.fetch_add(1, Ordering::Relaxed);
+}
+
+/// Starts SysTick as a free-running 24-bit down-counter with the wrap interrupt.
+pub fn start_systick(mut syst: SYST) {
+    syst.set_clock_source(SystClkSource::Core);
+    syst.set_reload(RELOAD);
+    syst.clear_current();
+    syst.enable_interrupt();
+    syst.enable_counter();
+}
+
+/// Core-clock ticks since boot (25 MHz).
+pub fn ticks() -> u64 {
+    loop {
+        let hi = WRAPS.load(Ordering::Relaxed);
+        let val = SYST::get_current();
+        // A wrap between the two reads of WRAPS shows as a changed count: retry.
+        if WRAPS.load(Ordering::Relaxed) == hi {
+            return ((hi as u64) << 24) + (RELOAD - val) as u64;
+        }
+    }
+}
+
+/// SysTick-based clock.
+pub struct QemuClock;
+
+impl hal::Clock for QemuClock {
+    fn now_us(&self) -> u64 {
+        ticks() * 1_000_000 / SYSCLK_HZ
+    }
+
+    async fn delay_us(&self, us: u32) {
+        let end = ticks() + us as u64 * SYSCLK_HZ / 1_000_000;
+        poll_fn(|cx| {
+            if ticks() >= end {
+                Poll::Ready(())
+            } else {
+                cx.waker().wake_by_ref();
+                Poll::Pending
+            }
+        })
+        .await
+    }
+}
+
+/// CMSDK APB UART (QEMU `cmsdk-apb-uart`): DATA, STATE (bit 0 TX full, bit 1 RX full),
+/// CTRL (bit 0 TX enable, bit 1 RX enable), INTSTATUS, BAUDDIV.
+pub struct Uart {
+    base: usize,
+}
+
+impl Uart {
+    /// UART0 of mps2-an500.
+    pub const UART0: usize = 0x4000_4000;
+
+    /// Enables TX and RX. QEMU ignores the baud rate but wants a divisor ≥ 16.
+    ///
+    /// # Safety
+    /// `base` must be a CMSDK UART owned by the caller alone.
+    pub unsafe fn new(base: usize) -> Self {
+        let u = Uart { base };
+        u.write_reg(0x10, 16);
+        u.write_reg(0x08, 0b11);
+        u
+    }
+
+    fn read_reg(&self, off: usize) -> u32 {
+        // SAFETY: a register of the UART this value owns (see `new`).
+        unsafe { core::ptr::read_volatile((self.base + off) as *const u32) }
+    }
+
+    fn write_reg(&self, off: usize, v: u32) {
+        // SAFETY: as in `read_reg`.
+        unsafe { core::ptr::write_volatile((self.base + off) as *mut u32, v) }
+    }
+
+    fn try_read(&self) -> Option<u8> {
+        if self.read_reg(0x04) & 0b10 != 0 {
+            Some(self.read_reg(0x00) as u8)
+        } else {
+            None
+        }
+    }
+}
+
+impl hal::Link for Uart {
+    async fn read(&mut self, buf: &mut [u8]) -> Result<usize, LinkError> {
+        poll_fn(|cx| {
+            let mut n = 0;
+            while n < buf.len() {
+                match self.try_read() {
+                    Some(b) => {
+                        buf[n] = b;
+                        n += 1;
+                    }
+                    None => break,
+                }
+            }
+            if n > 0 {
+                Poll::Ready(Ok(n))
+            } else {
+                cx.waker().wake_by_ref();
+                Poll::Pending
+            }
+        })
+        .await
+    }
+
+    async fn write_all(&mut self, data: &[u8]) -> Result<(), LinkError> {
+        for &b in data {
+            while self.read_reg(0x04) & 0b01 != 0 {}
+            self.write_reg(0x00, b as u32);
+        }
+        Ok(())
+    }
+}
+
+/// Lasers as a bitmask (the emulated camera asks the strobe whether they are lit).
+pub struct QemuLaser {
+    mask: u8,
+}
+
+impl QemuLaser {
+    /// Two lasers, off.
+    pub const fn new() -> Self {
+        QemuLaser { mask: 0 }
+    }
+}
+
+impl Default for QemuLaser {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl hal::Laser for QemuLaser {
+    fn count(&self) -> u8 {
+        2
+    }
+    fn set(&mut self, mask: u8) {
+        self.mask = mask & 0b11;
+    }
+}
+
+/// No trigger on the emulated board: measurements come from the link.
+pub struct NoTrigger;
+
+impl hal::Trigger for NoTrigger {
+    fn is_pressed(&mut self) -> bool {
+        false
+    }
+    async fn wait_pressed(&mut self) {
+        core::future::pending::<()>().await
+    }
+}
+
+/// No watchdog on the emulated board.
+pub struct NoWatchdog;
+
+impl hal::Watchdog for NoWatchdog {
+    fn feed(&mut self) {}
+}
+
+/// Calibration kept in RAM (initialised from `--calib`).
+pub struct RamStore {
+    cal: Option<WireCalibration>,
+}
+
+impl RamStore {
+    /// A store holding `cal`.
+    pub fn new(cal: Option<WireCalibration>) -> Self {
+        RamStore { cal }
+    }
+}
+
+impl hal::CalibrationStore for RamStore {
+    fn load(&mut self) -> Option<WireCalibration> {
+        self.cal.clone()
+    }
+    fn save(&mut self, calibration: &WireCalibration) -> Result<(), u32> {
+        self.cal = Some(calibration.clone());
+        Ok(())
+    }
+}
+
+/// Most frame pairs on the command line.
+pub const MAX_SCENES: usize = 32;
+
+/// The emulated camera: frame pairs from PGM files.
+pub struct FileCamera<'c> {
+    scenes: heapless::Vec<(&'c str, &'c str), MAX_SCENES>,
+    next: usize,
+    geometry: Geometry,
+}
+
+impl<'c> FileCamera<'c> {
+    /// A camera over `(off, on)` file pairs, all of the size of the first one.
+    pub fn new(scenes: heapless::Vec<(&'c str, &'c str), MAX_SCENES>) -> Result<Self, CameraError> {
+        let (off, _) = scenes.first().ok_or(CameraError::Source)?;
+        let h = read_pgm_header(off)?;
+        let geometry = Geometry {
+            width: u16::try_from(h.width).map_err(|_| CameraError::Source)?,
+            height: u16::try_from(h.height).map_err(|_| CameraError::Source)?,
+            row_offset: 0,
+        };
+        Ok(FileCamera {
+            scenes,
+            next: 0,
+            geometry,
+        })
+    }
+
+    /// Number of frame pairs.
+    pub fn scene_count(&self) -> usize {
+        self.scenes.len()
+    }
+}
+
+impl hal::Camera for FileCamera<'_> {
+    fn geometry(&self) -> Geometry {
+        self.geometry
+    }
+
+    async fn capture<L: hal::Laser, C: hal::Clock>(
+        &mut self,
+        _exposure_us: u32,
+        strobe: &Strobe<'_, L, C>,
+        buf: &mut [u8],
+    ) -> Result<(), CameraError> {
+        let (off, on) = *self.scenes.get(self.next).ok_or(CameraError::Source)?;
+        strobe.on();
+        let lit = strobe.is_lit();
+        strobe.off();
+        let path = if lit { on } else { off };
+        // A pair is (dark, lit): the lit frame completes it and the next pair begins.
+        if strobe.mask() != 0 {
+            self.next = (self.next + 1) % self.scenes.len().max(1);
+        }
+        read_pgm_into(path, self.geometry, buf)
+    }
+}
+
+/// A semihosting file handle, closed on drop.
+struct HostFile(usize);
+
+impl HostFile {
+    fn open(path: &str, mode: usize) -> Option<HostFile> {
+        // SYS_OPEN wants a NUL-terminated name and its length without the NUL.
+        let mut name = [0u8; 256];
+        let bytes = path.as_bytes();
+        name.get_mut(..bytes.len())?.copy_from_slice(bytes);
+        *name.get_mut(bytes.len())? = 0;
+        // SAFETY: semihosting call with a valid, NUL-terminated buffer.
+        let fd = unsafe { syscall!(OPEN, name.as_ptr(), mode, bytes.len()) };
+        if fd as isize == -1 {
+            None
+        } else {
+            Some(HostFile(fd))
+        }
+    }
+
+    fn len(&self) -> Option<usize> {
+        // SAFETY: semihosting call on an open handle.
+        let n = unsafe { syscall!(FLEN, self.0) };
+        if n as isize == -1 {
+            None
+        } else {
+            Some(n)
+        }
+    }
+
+    fn seek(&self, pos: usize) -> Option<()> {
+        // SAFETY: semihosting call on an open handle.
+        let r = unsafe { syscall!(SEEK, self.0, pos) };
+        (r == 0).then_some(())
+    }
+
+    /// Reads up to `buf.len()` bytes; returns how many.
+    fn read(&self, buf: &mut [u8]) -> usize {
+        // SAFETY: semihosting call writing at most buf.len() bytes into buf.
+        let not_read = unsafe { syscall!(READ, self.0, buf.as_mut_ptr(), buf.len()) };
+        buf.len().saturating_sub(not_read)
+    }
+
+    fn read_exact(&self, buf: &mut [u8]) -> Option<()> {
+        let mut done = 0;
+        while done < buf.len() {
+            let n = self.read(buf.get_mut(done..)?);
+            if n == 0 {
+                return None;
+            }
+            done += n;
+        }
+        Some(())
+    }
+}
+
+impl Drop for HostFile {
+    fn drop(&mut self) {
+        // SAFETY: closes the handle this value owns.
+        unsafe {
+            syscall!(CLOSE, self.0);
+        }
+    }
+}
+
+fn read_pgm_header(path: &str) -> Result<pgm::PgmHeader, CameraError> {
+    let f = HostFile::open(path, nr::open::R_BINARY).ok_or(CameraError::Source)?;
+    let mut head = [0u8; 128];
+    let n = f.read(&mut head);
+    pgm::parse_header(head.get(..n).ok_or(CameraError::Source)?).ok_or(CameraError::Source)
+}
+
+/// Reads an 8-bit PGM of exactly `geometry`'s size into `buf`. 16-bit files (10-bit
+/// sensor data) are reduced to their top 8 bits, as the DCMI's 8-bit bus wired to D9..D2
+/// of the sensor would see them.
+fn read_pgm_into(path: &str, geometry: Geometry, buf: &mut [u8]) -> Result<(), CameraError> {
+    let h = read_pgm_header(path)?;
+    if h.width != geometry.width as usize || h.height != geometry.height as usize {
+        return Err(CameraError::Source);
+    }
+    let len = geometry.frame_len();
+    let dst = buf.get_mut(..len).ok_or(CameraError::BufferSize)?;
+    let f = HostFile::open(path, nr::open::R_BINARY).ok_or(CameraError::Source)?;
+    if f.len().ok_or(CameraError::Source)? < h.data_offset + len * h.bytes_per_sample() {
+        return Err(CameraError::Source);
+    }
+    f.seek(h.data_offset).ok_or(CameraError::Source)?;
+    if h.bytes_per_sample() == 1 {
+        f.read_exact(dst).ok_or(CameraError::Source)?;
+        if h.maxval < 255 {
+            // Scale n-bit data to 8 bits is not what a sensor does; such files are not
+            // captures of this camera.
+            return Err(CameraError::Source);
+        }
+    } else {
+        // Significant bits of the samples (10 for maxval 1023); keep the top 8.
+        let bits = 32 - (h.maxval as u32).leading_zeros();
+        let down = bits.saturating_sub(8);
+        let mut row = [0u8; 2 * 1024];
+        let w = geometry.width as usize;
+        let row_bytes = row.get_mut(..2 * w).ok_or(CameraError::Source)?;
+        for dst_row in dst.chunks_exact_mut(w) {
+            f.read_exact(row_bytes).ok_or(CameraError::Source)?;
+            for (d, s) in dst_row.iter_mut().zip(row_bytes.chunks_exact(2)) {
+                let v = u16::from_be_bytes([s[0], s[1]]);
+                *d = (v >> down).min(255) as u8;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Reads a whole host file into `buf`; returns its length.
+pub fn read_file(path: &str, buf: &mut [u8]) -> Option<usize> {
+    let f = HostFile::open(path, nr::open::R_BINARY)?;
+    let n = f.len()?;
+    f.read_exact(buf.get_mut(..n)?)?;
+    Some(n)
+}
+
+/// Loads a calibration record file (`protocol::calibration_record`).
+pub fn load_calibration(path: &str) -> Option<WireCalibration> {
+    let mut buf = [0u8; calibration_record::MAX_RECORD];
+    let n = read_file(path, &mut buf)?;
+    calibration_record::decode(buf.get(..n)?)
+}
+
+/// The command line given to QEMU (`-append`), into `buf`.
+pub fn command_line(buf: &mut [u8]) -> Option<&str> {
+    let mut block = [buf.as_mut_ptr() as usize, buf.len()];
+    // SAFETY: SYS_GET_CMDLINE writes at most block[1] bytes into buf and the length
+    // into block[1].
+    // (Not `syscall!`, which would wrap the pointer in another parameter block.)
+    let r = unsafe { cortex_m_semihosting::syscall1(nr::GET_CMDLINE, block.as_mut_ptr() as usize) };
+    if r != 0 {
+        return None;
+    }
+    let n = block[1];
+    core::str::from_utf8(buf.get(..n)?).ok()
+}
+
+/// Writes a line to the host's console (semihosting), for logs and benchmark output.
+pub fn log(args: core::fmt::Arguments<'_>) {
+    let mut line: heapless::String<256> = heapless::String::new();
+    let _ = line.write_fmt(args);
+    let _ = line.push('\n');
+    if let Ok(mut out) = cortex_m_semihosting::hio::hstderr() {
+        let _ = out.write_all(line.as_bytes());
+    }
+}
+
+/// Ends the emulation with a status.
+pub fn exit(success: bool) -> ! {
+    use cortex_m_semihosting::debug;
+    debug::exit(if success {
+        debug::EXIT_SUCCESS
+    } else {
+        debug::EXIT_FAILURE
+    });
+    loop {
+        cortex_m::asm::wfi();
+    }
+}
+
+/// The emulated board.
+pub struct Qemu<'c>(core::marker::PhantomData<&'c ()>);
+
+impl<'c> hal::Board for Qemu<'c> {
+    type Camera = FileCamera<'c>;
+    type Laser = QemuLaser;
+    type Trigger = NoTrigger;
+    type Link = Uart;
+    type Clock = QemuClock;
+    type Store = RamStore;
+    type Watchdog = NoWatchdog;
+    const KIND: protocol::Board = protocol::Board::Emulated;
+    fn log(args: core::fmt::Arguments<'_>) {
+        log(args)
+    }
+}

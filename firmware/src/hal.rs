@@ -1,0 +1,255 @@
+//! The small hardware traits the application runs on, one per device the instrument has.
+//!
+//! Each board (`board::h743`, `board::qemu`) implements them; the application
+//! ([`crate::app`]) knows nothing else about the hardware. Async methods run on whatever
+//! executor the board uses (embassy on the H743, a busy-polling `block_on` on QEMU), so the
+//! futures need not be `Send`.
+#![allow(async_fn_in_trait)]
+
+use core::cell::{Cell, RefCell};
+
+use tangent_core::protocol::{self, WireCalibration};
+
+/// Monotonic time since boot.
+pub trait Clock {
+    /// Microseconds since boot.
+    fn now_us(&self) -> u64;
+    /// Milliseconds since boot.
+    fn now_ms(&self) -> u64 {
+        self.now_us() / 1000
+    }
+    /// Waits at least `us` microseconds.
+    async fn delay_us(&self, us: u32);
+}
+
+/// The line lasers. Bit `i` of a mask is laser (and calibration plane) `i`.
+pub trait Laser {
+    /// How many lasers the board drives.
+    fn count(&self) -> u8;
+    /// Switches the lasers of `mask` on and every other laser off (`0` = all off). Must
+    /// take effect before it returns.
+    fn set(&mut self, mask: u8);
+}
+
+/// The trigger push-button (debounced by the board).
+pub trait Trigger {
+    /// True while the trigger is held.
+    fn is_pressed(&mut self) -> bool;
+    /// Completes on the next (debounced) press. Boards without a trigger never complete.
+    async fn wait_pressed(&mut self);
+}
+
+/// Why a link operation failed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LinkError {
+    /// The host is not connected (USB cable out, port closed).
+    Disconnected,
+}
+
+/// The byte stream to the host (USB CDC-ACM or a UART).
+pub trait Link {
+    /// Waits for at least one byte and returns how many were written into `buf`.
+    async fn read(&mut self, buf: &mut [u8]) -> Result<usize, LinkError>;
+    /// Writes every byte of `data`.
+    async fn write_all(&mut self, data: &[u8]) -> Result<(), LinkError>;
+}
+
+/// Position of the camera's frames on the sensor.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Geometry {
+    /// Frame width (pixels).
+    pub width: u16,
+    /// Frame height (pixels).
+    pub height: u16,
+    /// Sensor row of the frame's first row (windowed read-out; 0 for a full frame).
+    pub row_offset: u16,
+}
+
+impl Geometry {
+    /// Bytes of one 8-bit frame.
+    pub fn frame_len(&self) -> usize {
+        self.width as usize * self.height as usize
+    }
+}
+
+/// Why a capture failed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CameraError {
+    /// The sensor did not deliver the frame in time.
+    Timeout,
+    /// The frame arrived corrupted (DMA overrun, DCMI error).
+    Transfer,
+    /// Sensor configuration over I²C failed.
+    Bus,
+    /// The frame source is unusable (emulated board: missing or malformed capture file).
+    Source,
+    /// The buffer does not match the frame size.
+    BufferSize,
+}
+
+impl CameraError {
+    /// Detail code sent with [`protocol::ErrorCode::CameraFailure`].
+    pub fn code(self) -> u32 {
+        match self {
+            CameraError::Timeout => 1,
+            CameraError::Transfer => 2,
+            CameraError::Bus => 3,
+            CameraError::Source => 4,
+            CameraError::BufferSize => 5,
+        }
+    }
+}
+
+/// The camera: exposes and reads 8-bit frames of a fixed [`Geometry`].
+pub trait Camera {
+    /// Size and position of the frames.
+    fn geometry(&self) -> Geometry;
+    /// Exposes one frame for `exposure_us` and reads it into `buf`
+    /// (`geometry().frame_len()` bytes). The driver calls [`Strobe::on`] when integration
+    /// starts and [`Strobe::off`] when it ends, so the lasers light only the exposure.
+    async fn capture<L: Laser, C: Clock>(
+        &mut self,
+        exposure_us: u32,
+        strobe: &Strobe<'_, L, C>,
+        buf: &mut [u8],
+    ) -> Result<(), CameraError>;
+}
+
+/// Where the calibration lives between power cycles.
+pub trait CalibrationStore {
+    /// The stored calibration, if a valid one is stored.
+    fn load(&mut self) -> Option<WireCalibration>;
+    /// Stores `calibration` (replacing the previous one); the error is a board code.
+    fn save(&mut self, calibration: &WireCalibration) -> Result<(), u32>;
+}
+
+/// The hardware watchdog that resets a hung firmware.
+pub trait Watchdog {
+    /// Restarts the watchdog countdown.
+    fn feed(&mut self);
+}
+
+/// Everything a board provides.
+pub trait Board {
+    /// The camera.
+    type Camera: Camera;
+    /// The lasers.
+    type Laser: Laser;
+    /// The trigger.
+    type Trigger: Trigger;
+    /// The host link.
+    type Link: Link;
+    /// The clock.
+    type Clock: Clock;
+    /// Calibration storage.
+    type Store: CalibrationStore;
+    /// The watchdog.
+    type Watchdog: Watchdog;
+    /// What the board reports in [`protocol::DeviceInfo::board`].
+    const KIND: protocol::Board;
+    /// Writes a diagnostic line (defmt on the H743, semihosting on QEMU).
+    fn log(args: core::fmt::Arguments<'_>);
+}
+
+/// The board's devices, as separate fields so the application can borrow them
+/// independently (e.g. the camera while the clock guards the laser).
+pub struct Devices<B: Board> {
+    /// The camera.
+    pub camera: B::Camera,
+    /// The lasers.
+    pub laser: B::Laser,
+    /// The trigger.
+    pub trigger: B::Trigger,
+    /// The host link.
+    pub link: B::Link,
+    /// The clock.
+    pub clock: B::Clock,
+    /// Calibration storage.
+    pub store: B::Store,
+    /// The watchdog.
+    pub watchdog: B::Watchdog,
+}
+
+/// Lights the lasers of one exposure, for the camera driver, and keeps account of how
+/// long they have been on so a guard can force them off.
+///
+/// Dropping a `Strobe` switches every laser off: whichever way a capture ends
+/// (success, error, timeout, cancelled future), the lasers are off afterwards.
+pub struct Strobe<'a, L: Laser, C: Clock> {
+    laser: RefCell<&'a mut L>,
+    clock: &'a C,
+    mask: u8,
+    lit_since_us: Cell<Option<u64>>,
+    tripped: Cell<bool>,
+}
+
+impl<'a, L: Laser, C: Clock> Strobe<'a, L, C> {
+    /// A strobe for the lasers of `mask` (0 = a dark exposure: [`Strobe::on`] lights
+    /// nothing). Switches every laser off first.
+    pub fn new(laser: &'a mut L, clock: &'a C, mask: u8) -> Self {
+        laser.set(0);
+        Strobe {
+            laser: RefCell::new(laser),
+            clock,
+            mask,
+            lit_since_us: Cell::new(None),
+            tripped: Cell::new(false),
+        }
+    }
+
+    /// The lasers this exposure lights.
+    pub fn mask(&self) -> u8 {
+        self.mask
+    }
+
+    /// Lights the lasers (integration is starting). Does nothing once tripped.
+    pub fn on(&self) {
+        if self.tripped.get() || self.mask == 0 {
+            return;
+        }
+        if let Ok(mut laser) = self.laser.try_borrow_mut() {
+            laser.set(self.mask);
+            if self.lit_since_us.get().is_none() {
+                self.lit_since_us.set(Some(self.clock.now_us()));
+            }
+        }
+    }
+
+    /// Switches the lasers off (integration has ended).
+    pub fn off(&self) {
+        if let Ok(mut laser) = self.laser.try_borrow_mut() {
+            laser.set(0);
+        }
+        self.lit_since_us.set(None);
+    }
+
+    /// True while the lasers are lit.
+    pub fn is_lit(&self) -> bool {
+        self.lit_since_us.get().is_some()
+    }
+
+    /// How long the lasers have been lit (0 when off).
+    pub fn lit_for_us(&self) -> u64 {
+        match self.lit_since_us.get() {
+            Some(t) => self.clock.now_us().saturating_sub(t),
+            None => 0,
+        }
+    }
+
+    /// Forces the lasers off for the rest of this exposure (the guard's hard limit).
+    pub fn trip(&self) {
+        self.tripped.set(true);
+        self.off();
+    }
+
+    /// True when the guard forced the lasers off.
+    pub fn tripped(&self) -> bool {
+        self.tripped.get()
+    }
+}
+
+impl<L: Laser, C: Clock> Drop for Strobe<'_, L, C> {
+    fn drop(&mut self) {
+        self.laser.get_mut().set(0);
+    }
+}

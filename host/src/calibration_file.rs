@@ -1,0 +1,288 @@
+//! The calibration file: a TOML mirror of [`tangent_core::calibration::Calibration`].
+//!
+//! Units are in the key names (`fx_px`, `offset_m`, `source_m`), so a file read by a person
+//! cannot be misread; unknown keys are rejected (a misspelt `k1` must not silently become
+//! zero distortion). The layout, documented in `docs/formats.md`:
+//!
+//! ```toml
+//! id = 0
+//!
+//! [camera]
+//! width_px = 752
+//! height_px = 480
+//! fx_px = 1000.0
+//! fy_px = 1000.0
+//! cx_px = 375.5
+//! cy_px = 239.5
+//!
+//! [camera.distortion]          # OpenCV (k1, k2, p1, p2, k3), dimensionless; optional
+//! k1 = 0.0
+//! k2 = 0.0
+//! k3 = 0.0
+//! p1 = 0.0
+//! p2 = 0.0
+//!
+//! [[planes]]                   # plane i is lit by laser output i; n·X = offset
+//! normal = [0.0, 0.99778, 0.06652]
+//! offset_m = 0.099778
+//! source_m = [0.0, 0.1, 0.0]
+//! ```
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+use tangent_core::calibration::{Calibration, CalibrationError, MAX_PLANES};
+use tangent_core::camera::{Camera, Distortion};
+use tangent_core::laser_plane::LaserPlane;
+use tangent_core::real::{Real, Vec3};
+
+/// Why a calibration file was rejected.
+#[derive(Debug, thiserror::Error)]
+pub enum CalibrationFileError {
+    /// A key the format does not define (often a typo).
+    #[error("unknown key `{key}`{}", at(.line))]
+    UnknownKey {
+        /// The key.
+        key: String,
+        /// 1-based line of the key in the file, when known.
+        line: Option<usize>,
+    },
+    /// A required key is absent.
+    #[error("missing key `{key}`{}", at(.line))]
+    MissingKey {
+        /// The key.
+        key: String,
+        /// 1-based line of the enclosing table, when known.
+        line: Option<usize>,
+    },
+    /// No `[[planes]]` entry: a calibration needs at least one laser plane.
+    #[error("the calibration has no laser plane (add at least one [[planes]] table)")]
+    MissingPlanes,
+    /// More `[[planes]]` than the core holds.
+    #[error("the calibration has {0} laser planes, at most {MAX_PLANES} are supported")]
+    TooManyPlanes(usize),
+    /// The TOML is malformed or a value has the wrong type.
+    #[error("calibration TOML{}: {message}", at(.line))]
+    Syntax {
+        /// The parser's message.
+        message: String,
+        /// 1-based line, when known.
+        line: Option<usize>,
+    },
+    /// The values parse but do not form a valid calibration (e.g. a normal of zero length).
+    #[error("invalid calibration: {0}")]
+    Invalid(CalibrationError),
+    /// The file could not be read or written.
+    #[error("calibration file {path}: {source}")]
+    Io {
+        /// The file.
+        path: String,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+}
+
+fn at(line: &Option<usize>) -> String {
+    line.map(|l| format!(" (line {l})")).unwrap_or_default()
+}
+
+/// `[camera.distortion]`: OpenCV's Brown–Conrady coefficients (dimensionless).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DistortionToml {
+    /// Radial `r²` coefficient.
+    #[serde(default)]
+    pub k1: f64,
+    /// Radial `r⁴` coefficient.
+    #[serde(default)]
+    pub k2: f64,
+    /// Radial `r⁶` coefficient.
+    #[serde(default)]
+    pub k3: f64,
+    /// Tangential coefficient `p1`.
+    #[serde(default)]
+    pub p1: f64,
+    /// Tangential coefficient `p2`.
+    #[serde(default)]
+    pub p2: f64,
+}
+
+/// `[camera]`: intrinsics in pixels.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraToml {
+    /// Image width (pixels).
+    pub width_px: u32,
+    /// Image height (pixels).
+    pub height_px: u32,
+    /// Focal length along `u` (pixels).
+    pub fx_px: f64,
+    /// Focal length along `v` (pixels).
+    pub fy_px: f64,
+    /// Principal point `u` (pixels).
+    pub cx_px: f64,
+    /// Principal point `v` (pixels).
+    pub cy_px: f64,
+    /// Lens distortion; absent means none.
+    #[serde(default)]
+    pub distortion: DistortionToml,
+}
+
+/// One `[[planes]]` entry: `normal·X = offset_m` in the camera frame, with the laser's
+/// emission point.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlaneToml {
+    /// Plane normal (normalised on reading; the sign is made to give a positive offset).
+    pub normal: [f64; 3],
+    /// Distance from the camera centre to the plane along `normal` (metres).
+    pub offset_m: f64,
+    /// Laser emission point (fan apex), camera frame (metres).
+    pub source_m: [f64; 3],
+}
+
+/// The whole calibration file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CalibrationToml {
+    /// Calibration identifier (unit serial or calibration run).
+    pub id: u32,
+    /// The camera.
+    pub camera: CameraToml,
+    /// The laser planes, in the order of the laser outputs. Required, at least one
+    /// (defaulted to empty here only so that its absence gives [`CalibrationFileError::MissingPlanes`]).
+    #[serde(default)]
+    pub planes: Vec<PlaneToml>,
+}
+
+fn v3(a: [f64; 3]) -> Vec3 {
+    Vec3::new(a[0] as Real, a[1] as Real, a[2] as Real)
+}
+
+fn a3(v: Vec3) -> [f64; 3] {
+    [v.x as f64, v.y as f64, v.z as f64]
+}
+
+impl CalibrationToml {
+    /// Mirror of a core calibration.
+    pub fn from_calibration(c: &Calibration) -> Self {
+        let d = c.camera.distortion;
+        CalibrationToml {
+            id: c.id,
+            camera: CameraToml {
+                width_px: c.camera.width,
+                height_px: c.camera.height,
+                fx_px: c.camera.fx as f64,
+                fy_px: c.camera.fy as f64,
+                cx_px: c.camera.cx as f64,
+                cy_px: c.camera.cy as f64,
+                distortion: DistortionToml {
+                    k1: d.k1 as f64,
+                    k2: d.k2 as f64,
+                    k3: d.k3 as f64,
+                    p1: d.p1 as f64,
+                    p2: d.p2 as f64,
+                },
+            },
+            planes: c
+                .planes
+                .iter()
+                .map(|p| PlaneToml {
+                    normal: a3(p.normal),
+                    offset_m: p.offset as f64,
+                    source_m: a3(p.source),
+                })
+                .collect(),
+        }
+    }
+
+    /// The core calibration, validated ([`Calibration::new`]: normals normalised, sources
+    /// projected onto their planes within tolerance, camera checked).
+    pub fn to_calibration(&self) -> Result<Calibration, CalibrationFileError> {
+        if self.planes.is_empty() {
+            return Err(CalibrationFileError::MissingPlanes);
+        }
+        if self.planes.len() > MAX_PLANES {
+            return Err(CalibrationFileError::TooManyPlanes(self.planes.len()));
+        }
+        let c = &self.camera;
+        let d = c.distortion;
+        let camera = Camera {
+            width: c.width_px,
+            height: c.height_px,
+            fx: c.fx_px as Real,
+            fy: c.fy_px as Real,
+            cx: c.cx_px as Real,
+            cy: c.cy_px as Real,
+            distortion: Distortion {
+                k1: d.k1 as Real,
+                k2: d.k2 as Real,
+                k3: d.k3 as Real,
+                p1: d.p1 as Real,
+                p2: d.p2 as Real,
+            },
+        };
+        let mut planes = Vec::with_capacity(self.planes.len());
+        for (index, p) in self.planes.iter().enumerate() {
+            let plane = LaserPlane::new(v3(p.normal), p.offset_m as Real, v3(p.source_m))
+                .map_err(|error| CalibrationFileError::Invalid(CalibrationError::Plane { index, error }))?;
+            planes.push(plane);
+        }
+        Calibration::new(self.id, camera, &planes).map_err(CalibrationFileError::Invalid)
+    }
+}
+
+/// Maps a `toml` deserialisation error to the precise variants.
+///
+/// serde reports unknown and missing fields only as messages (`unknown field `x`, expected
+/// …` / `missing field `x``); the key is the text between the first pair of backticks.
+pub(crate) fn map_toml_error(err: &toml::de::Error, text: &str) -> CalibrationFileError {
+    let message = err.message().to_string();
+    let line = err
+        .span()
+        .map(|s| text.get(..s.start).map_or(0, |t| t.matches('\n').count()) + 1);
+    let key = || message.split('`').nth(1).unwrap_or("").to_string();
+    if message.starts_with("unknown field") {
+        CalibrationFileError::UnknownKey { key: key(), line }
+    } else if message.starts_with("missing field") {
+        CalibrationFileError::MissingKey { key: key(), line }
+    } else {
+        CalibrationFileError::Syntax { message: message.trim().to_string(), line }
+    }
+}
+
+/// Parses a calibration from TOML text and validates it. Never panics.
+pub fn parse(text: &str) -> Result<Calibration, CalibrationFileError> {
+    let file: CalibrationToml = toml::from_str(text).map_err(|e| map_toml_error(&e, text))?;
+    file.to_calibration()
+}
+
+/// Parses a calibration from an already-parsed TOML table (the inline form of
+/// `capture.toml`). Line numbers are not available in this form.
+pub fn from_value(value: toml::Value) -> Result<Calibration, CalibrationFileError> {
+    let file = CalibrationToml::deserialize(value).map_err(|e| map_toml_error(&e, ""))?;
+    file.to_calibration()
+}
+
+/// Serialises a calibration as TOML text (the layout of the module documentation).
+pub fn to_string(c: &Calibration) -> String {
+    // Serialising plain structs of numbers and arrays cannot fail.
+    toml::to_string(&CalibrationToml::from_calibration(c)).unwrap_or_default()
+}
+
+/// Reads and parses a calibration file.
+pub fn read(path: &Path) -> Result<Calibration, CalibrationFileError> {
+    let text = std::fs::read_to_string(path).map_err(|source| CalibrationFileError::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    parse(&text)
+}
+
+/// Writes a calibration file.
+pub fn write(path: &Path, c: &Calibration) -> Result<(), CalibrationFileError> {
+    std::fs::write(path, to_string(c)).map_err(|source| CalibrationFileError::Io {
+        path: path.display().to_string(),
+        source,
+    })
+}

@@ -1,0 +1,504 @@
+//! Capture directories: `capture.toml` + PGM frames (+ ground truth for synthetic captures).
+//!
+//! A capture is what one trigger press records: a laser-off frame, one or more laser-on
+//! frames, the metadata needed to interpret them (sensor, exposure, which lasers were lit,
+//! the calibration) and, for synthetic or reference captures, the ground truth. The format is
+//! specified for people writing captures by hand in `docs/formats.md`; this module is its
+//! reader and writer. Every malformation is a specific [`CaptureError`].
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use tangent_core::calibration::Calibration;
+
+use crate::calibration_file::{self, CalibrationFileError};
+use crate::pgm::{Pgm, PgmError};
+use crate::simulate::scene::Object;
+
+/// The `format_version` this reader understands.
+pub const FORMAT_VERSION: u32 = 1;
+
+/// Name of the metadata file inside a capture directory.
+pub const META_FILE: &str = "capture.toml";
+
+/// Header line of the truth-curve CSV.
+pub const TRUTH_CURVE_HEADER: &str = "plane,column,row_px,x_m,y_m,z_m,object";
+
+/// What the capture measures (selects the solver).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Mode {
+    /// A stem (cylinder, possibly tilted or elliptic).
+    Cylinder,
+    /// A sphere.
+    Sphere,
+    /// One or more walls (planes).
+    Wall,
+    /// A road-surface profile.
+    Road,
+}
+
+/// One frame of the capture: its PGM file and the laser planes lit while it was exposed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FrameEntry {
+    /// File name, relative to the capture directory (no directories, no `..`).
+    pub file: String,
+    /// Indices (into the calibration's planes) of the lasers that were on; `[]` for the
+    /// laser-off (ambient) frame.
+    pub lasers_on: Vec<usize>,
+}
+
+/// The `[truth]` table: the exact scene and the exact laser curves.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Truth {
+    /// CSV file (relative to the capture directory) with the true laser-curve rows
+    /// (header [`TRUTH_CURVE_HEADER`]); absent when not known.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub truth_curve: Option<String>,
+    /// The objects of the scene, in the camera frame of the laser-on frame (metres).
+    #[serde(default)]
+    pub objects: Vec<Object>,
+}
+
+/// `capture.toml`, as written on disk.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CaptureMeta {
+    /// Format version; must equal [`FORMAT_VERSION`].
+    pub format_version: u32,
+    /// Sensor name (free text, e.g. `"MT9V034"` or `"simulated MT9V034"`).
+    pub sensor: String,
+    /// Frame width (pixels).
+    pub width: u32,
+    /// Frame height (pixels).
+    pub height: u32,
+    /// Significant bits per sample; every PGM's maxval must be `2^bit_depth − 1`.
+    pub bit_depth: u8,
+    /// Exposure time of every frame (seconds).
+    pub exposure_s: f64,
+    /// Analogue gain (dimensionless, 1 = unity).
+    pub gain: f64,
+    /// What is measured.
+    pub mode: Mode,
+    /// When the capture was taken (TOML offset date-time, RFC 3339).
+    pub timestamp: toml::value::Datetime,
+    /// Free-text note (what the capture shows).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub description: String,
+    /// The frames: exactly one with `lasers_on = []`, at least one with lasers on.
+    pub frames: Vec<FrameEntry>,
+    /// The calibration: a path (relative to the capture directory) to a calibration TOML
+    /// file, or the calibration inline as a table.
+    pub calibration: toml::Value,
+    /// Ground truth, for synthetic and reference captures.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub truth: Option<Truth>,
+    /// The simulator's parameters for synthetic captures (`docs/simulator.md`); readers that
+    /// are not the simulator ignore it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub simulation: Option<toml::Value>,
+}
+
+/// One point of the true laser curve.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TruthPoint {
+    /// Laser plane index.
+    pub plane: usize,
+    /// Image column `u` (the curve is sampled at pixel-centre columns).
+    pub column: u32,
+    /// Subpixel row `v` of the curve's centre in that column (pixels).
+    pub row_px: f64,
+    /// The 3-D point on the object (camera frame, metres).
+    pub point_m: [f64; 3],
+    /// Index of the lit object in `truth.objects`.
+    pub object: usize,
+}
+
+/// Why a capture could not be read or written.
+#[derive(Debug, thiserror::Error)]
+pub enum CaptureError {
+    /// A file of the capture could not be read or written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// `capture.toml` has a key the format does not define.
+    #[error("capture.toml: unknown key `{key}`{}", at(.line))]
+    UnknownKey {
+        /// The key.
+        key: String,
+        /// 1-based line, when known.
+        line: Option<usize>,
+    },
+    /// `capture.toml` lacks a required key.
+    #[error("capture.toml: missing key `{key}`{}", at(.line))]
+    MissingKey {
+        /// The key.
+        key: String,
+        /// 1-based line of the enclosing table, when known.
+        line: Option<usize>,
+    },
+    /// `capture.toml` is not valid TOML or a value has the wrong type.
+    #[error("capture.toml{}: {message}", at(.line))]
+    Syntax {
+        /// The parser's message.
+        message: String,
+        /// 1-based line, when known.
+        line: Option<usize>,
+    },
+    /// `format_version` is not [`FORMAT_VERSION`].
+    #[error("capture format version {0} is not supported (this reader knows {FORMAT_VERSION})")]
+    UnsupportedVersion(u32),
+    /// A field has an impossible value (message says which).
+    #[error("capture.toml: {0}")]
+    InvalidField(String),
+    /// The calibration (inline or referenced) is invalid.
+    #[error("calibration: {0}")]
+    Calibration(#[from] CalibrationFileError),
+    /// A frame file is not a valid PGM.
+    #[error("frame {file}: {source}")]
+    Pgm {
+        /// The frame file.
+        file: String,
+        /// What is wrong with it.
+        source: PgmError,
+    },
+    /// A frame's size differs from the `width × height` of `capture.toml`.
+    #[error("frame {file} is {actual:?} pixels, capture.toml says {expected:?}")]
+    FrameSizeMismatch {
+        /// The frame file.
+        file: String,
+        /// `(width, height)` from `capture.toml`.
+        expected: (u32, u32),
+        /// `(width, height)` of the PGM.
+        actual: (usize, usize),
+    },
+    /// The capture's frame size differs from the calibration's image size.
+    #[error("frames are {frames:?} pixels but the calibration is for {calibration:?}")]
+    CalibrationSizeMismatch {
+        /// `(width, height)` of the frames.
+        frames: (u32, u32),
+        /// `(width, height)` of the calibration's camera.
+        calibration: (u32, u32),
+    },
+    /// A frame's maxval is not `2^bit_depth − 1`.
+    #[error("frame {file} has maxval {actual}, bit_depth {bit_depth} needs {expected}")]
+    WrongMaxval {
+        /// The frame file.
+        file: String,
+        /// Declared bit depth.
+        bit_depth: u8,
+        /// `2^bit_depth − 1`.
+        expected: u32,
+        /// The PGM's maxval.
+        actual: u16,
+    },
+    /// No frame has `lasers_on = []`, or more than one has.
+    #[error("a capture needs exactly one laser-off frame (lasers_on = []), found {0}")]
+    OffFrameCount(usize),
+    /// No frame has a laser on.
+    #[error("a capture needs at least one laser-on frame")]
+    NoOnFrame,
+    /// A frame lights a plane the calibration does not have.
+    #[error("frame {file} lights laser plane {plane}, the calibration has {count}")]
+    NoSuchPlane {
+        /// The frame file.
+        file: String,
+        /// The plane index.
+        plane: usize,
+        /// Number of planes in the calibration.
+        count: usize,
+    },
+    /// A file name is absolute, contains a directory or `..`.
+    #[error("file name {0:?} must be a plain name inside the capture directory")]
+    BadFileName(String),
+    /// The truth-curve CSV is malformed.
+    #[error("truth curve {file} line {line}: {message}")]
+    TruthCurve {
+        /// The CSV file.
+        file: String,
+        /// 1-based line.
+        line: usize,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+fn at(line: &Option<usize>) -> String {
+    line.map(|l| format!(" (line {l})")).unwrap_or_default()
+}
+
+/// A capture in memory.
+#[derive(Debug, Clone)]
+pub struct Capture {
+    /// The metadata (`capture.toml`).
+    pub meta: CaptureMeta,
+    /// The calibration, resolved (inline or from its file) and validated.
+    pub calibration: Calibration,
+    /// The frames, in the order of `meta.frames`.
+    pub frames: Vec<Pgm>,
+    /// The true laser curve, when the capture has one.
+    pub truth_curve: Option<Vec<TruthPoint>>,
+}
+
+fn check_file_name(name: &str) -> Result<(), CaptureError> {
+    let p = Path::new(name);
+    let plain = !name.is_empty()
+        && p.components().count() == 1
+        && matches!(p.components().next(), Some(std::path::Component::Normal(_)));
+    if plain {
+        Ok(())
+    } else {
+        Err(CaptureError::BadFileName(name.to_string()))
+    }
+}
+
+fn map_meta_error(err: &toml::de::Error, text: &str) -> CaptureError {
+    match calibration_file::map_toml_error(err, text) {
+        CalibrationFileError::UnknownKey { key, line } => CaptureError::UnknownKey { key, line },
+        CalibrationFileError::MissingKey { key, line } => CaptureError::MissingKey { key, line },
+        CalibrationFileError::Syntax { message, line } => CaptureError::Syntax { message, line },
+        other => CaptureError::Syntax { message: other.to_string(), line: None },
+    }
+}
+
+impl CaptureMeta {
+    /// Parses `capture.toml` text (syntax, keys and types only; [`Capture::read`] checks the
+    /// rest against the frames and the calibration). Never panics.
+    pub fn parse(text: &str) -> Result<Self, CaptureError> {
+        let meta: CaptureMeta = toml::from_str(text).map_err(|e| map_meta_error(&e, text))?;
+        if meta.format_version != FORMAT_VERSION {
+            return Err(CaptureError::UnsupportedVersion(meta.format_version));
+        }
+        if !(1..=16).contains(&meta.bit_depth) {
+            return Err(CaptureError::InvalidField(format!(
+                "bit_depth {} is outside 1..=16",
+                meta.bit_depth
+            )));
+        }
+        if meta.width == 0 || meta.height == 0 {
+            return Err(CaptureError::InvalidField("width and height must be positive".into()));
+        }
+        if !(meta.exposure_s.is_finite() && meta.exposure_s > 0.0) {
+            return Err(CaptureError::InvalidField("exposure_s must be positive".into()));
+        }
+        if !(meta.gain.is_finite() && meta.gain > 0.0) {
+            return Err(CaptureError::InvalidField("gain must be positive".into()));
+        }
+        let ts = &meta.timestamp;
+        if ts.date.is_none() || ts.time.is_none() || ts.offset.is_none() {
+            return Err(CaptureError::InvalidField(format!(
+                "timestamp {ts} must be a full RFC 3339 date-time with offset (e.g. 2025-06-01T10:00:00Z)"
+            )));
+        }
+        for f in &meta.frames {
+            check_file_name(&f.file)?;
+        }
+        if let Some(name) = meta.truth.as_ref().and_then(|t| t.truth_curve.as_ref()) {
+            check_file_name(name)?;
+        }
+        let off = meta.frames.iter().filter(|f| f.lasers_on.is_empty()).count();
+        if off != 1 {
+            return Err(CaptureError::OffFrameCount(off));
+        }
+        if meta.frames.len() < 2 {
+            return Err(CaptureError::NoOnFrame);
+        }
+        Ok(meta)
+    }
+
+    /// The calibration this metadata names (inline table, or a file relative to `dir`).
+    pub fn resolve_calibration(&self, dir: &Path) -> Result<Calibration, CaptureError> {
+        match &self.calibration {
+            toml::Value::String(name) => {
+                // A calibration may live next to several captures, so `..` is allowed here.
+                Ok(calibration_file::read(&dir.join(name))?)
+            }
+            toml::Value::Table(_) => Ok(calibration_file::from_value(self.calibration.clone())?),
+            other => Err(CaptureError::InvalidField(format!(
+                "calibration must be a file name or a table, not a {}",
+                other.type_str()
+            ))),
+        }
+    }
+}
+
+impl Capture {
+    /// Reads and checks a capture directory.
+    pub fn read(dir: &Path) -> Result<Self, CaptureError> {
+        let meta_path = dir.join(META_FILE);
+        let text = std::fs::read_to_string(&meta_path)
+            .map_err(|source| CaptureError::Io { path: meta_path.clone(), source })?;
+        let meta = CaptureMeta::parse(&text)?;
+        let calibration = meta.resolve_calibration(dir)?;
+        let cam = (calibration.camera.width, calibration.camera.height);
+        if cam != (meta.width, meta.height) {
+            return Err(CaptureError::CalibrationSizeMismatch {
+                frames: (meta.width, meta.height),
+                calibration: cam,
+            });
+        }
+        let count = calibration.planes.len();
+        for f in &meta.frames {
+            if let Some(&plane) = f.lasers_on.iter().find(|&&p| p >= count) {
+                return Err(CaptureError::NoSuchPlane { file: f.file.clone(), plane, count });
+            }
+        }
+        let expected_maxval = (1u32 << meta.bit_depth) - 1;
+        let mut frames = Vec::with_capacity(meta.frames.len());
+        for f in &meta.frames {
+            let pgm = Pgm::read(&dir.join(&f.file))
+                .map_err(|source| CaptureError::Pgm { file: f.file.clone(), source })?;
+            if (pgm.width, pgm.height) != (meta.width as usize, meta.height as usize) {
+                return Err(CaptureError::FrameSizeMismatch {
+                    file: f.file.clone(),
+                    expected: (meta.width, meta.height),
+                    actual: (pgm.width, pgm.height),
+                });
+            }
+            if pgm.maxval as u32 != expected_maxval {
+                return Err(CaptureError::WrongMaxval {
+                    file: f.file.clone(),
+                    bit_depth: meta.bit_depth,
+                    expected: expected_maxval,
+                    actual: pgm.maxval,
+                });
+            }
+            frames.push(pgm);
+        }
+        let truth_curve = match meta.truth.as_ref().and_then(|t| t.truth_curve.as_ref()) {
+            Some(name) => {
+                let path = dir.join(name);
+                let text = std::fs::read_to_string(&path)
+                    .map_err(|source| CaptureError::Io { path, source })?;
+                Some(parse_truth_curve(&text, name)?)
+            }
+            None => None,
+        };
+        Ok(Capture { meta, calibration, frames, truth_curve })
+    }
+
+    /// Writes the capture into `dir` (created if needed): `capture.toml`, the frames, and
+    /// the truth curve when present. An inline calibration is written from
+    /// `self.calibration`; a calibration given by path is left where it is.
+    pub fn write(&self, dir: &Path) -> Result<(), CaptureError> {
+        std::fs::create_dir_all(dir)
+            .map_err(|source| CaptureError::Io { path: dir.to_path_buf(), source })?;
+        if self.frames.len() != self.meta.frames.len() {
+            return Err(CaptureError::InvalidField(format!(
+                "{} frames for {} frame entries",
+                self.frames.len(),
+                self.meta.frames.len()
+            )));
+        }
+        for (entry, pgm) in self.meta.frames.iter().zip(&self.frames) {
+            check_file_name(&entry.file)?;
+            pgm.write(&dir.join(&entry.file))
+                .map_err(|source| CaptureError::Pgm { file: entry.file.clone(), source })?;
+        }
+        if let (Some(points), Some(name)) = (
+            &self.truth_curve,
+            self.meta.truth.as_ref().and_then(|t| t.truth_curve.as_ref()),
+        ) {
+            check_file_name(name)?;
+            let path = dir.join(name);
+            std::fs::write(&path, format_truth_curve(points))
+                .map_err(|source| CaptureError::Io { path, source })?;
+        }
+        let path = dir.join(META_FILE);
+        std::fs::write(&path, self.meta_text()?).map_err(|source| CaptureError::Io { path, source })
+    }
+
+    /// The `capture.toml` text [`Capture::write`] writes.
+    pub fn meta_text(&self) -> Result<String, CaptureError> {
+        let mut meta = self.meta.clone();
+        if matches!(meta.calibration, toml::Value::Table(_)) {
+            let c = calibration_file::CalibrationToml::from_calibration(&self.calibration);
+            meta.calibration = toml::Value::try_from(c)
+                .map_err(|e| CaptureError::InvalidField(e.to_string()))?;
+        }
+        toml::to_string(&meta).map_err(|e| CaptureError::InvalidField(e.to_string()))
+    }
+
+    /// The laser-off frame.
+    pub fn off_frame(&self) -> &Pgm {
+        // `CaptureMeta::parse` guarantees exactly one; `position` cannot fail on read
+        // captures, and a hand-built one falls back to the first frame.
+        let i = self.meta.frames.iter().position(|f| f.lasers_on.is_empty()).unwrap_or(0);
+        &self.frames[i]
+    }
+
+    /// The laser-on frames with the planes each one lit.
+    pub fn on_frames(&self) -> impl Iterator<Item = (&[usize], &Pgm)> {
+        self.meta
+            .frames
+            .iter()
+            .zip(&self.frames)
+            .filter(|(e, _)| !e.lasers_on.is_empty())
+            .map(|(e, p)| (e.lasers_on.as_slice(), p))
+    }
+}
+
+/// Parses the truth-curve CSV (`docs/formats.md`). `file` names it in errors.
+pub fn parse_truth_curve(text: &str, file: &str) -> Result<Vec<TruthPoint>, CaptureError> {
+    let err = |line: usize, message: String| CaptureError::TruthCurve {
+        file: file.to_string(),
+        line,
+        message,
+    };
+    let mut lines = text.lines().enumerate();
+    match lines.next() {
+        Some((_, h)) if h.trim() == TRUTH_CURVE_HEADER => {}
+        _ => return Err(err(1, format!("the header must be `{TRUTH_CURVE_HEADER}`"))),
+    }
+    let mut out = Vec::new();
+    for (i, line) in lines {
+        let n = i + 1;
+        if line.trim().is_empty() {
+            continue;
+        }
+        let f: Vec<&str> = line.split(',').map(str::trim).collect();
+        if f.len() != 7 {
+            return Err(err(n, format!("expected 7 fields, found {}", f.len())));
+        }
+        let num = |k: usize| -> Result<f64, CaptureError> {
+            f[k].parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| err(n, format!("field {} ({:?}) is not a finite number", k + 1, f[k])))
+        };
+        let int = |k: usize| -> Result<usize, CaptureError> {
+            f[k].parse::<usize>()
+                .map_err(|_| err(n, format!("field {} ({:?}) is not an index", k + 1, f[k])))
+        };
+        out.push(TruthPoint {
+            plane: int(0)?,
+            column: u32::try_from(int(1)?).map_err(|_| err(n, "column too large".into()))?,
+            row_px: num(2)?,
+            point_m: [num(3)?, num(4)?, num(5)?],
+            object: int(6)?,
+        });
+    }
+    Ok(out)
+}
+
+/// Formats the truth-curve CSV. Rows to 1e-6 px and points to 1e-9 m: far below any
+/// estimator's resolution (0.01 px) and any object tolerance (0.1 mm), so the rounding is
+/// not part of any test budget.
+pub fn format_truth_curve(points: &[TruthPoint]) -> String {
+    let mut s = String::with_capacity(points.len() * 48 + 64);
+    s.push_str(TRUTH_CURVE_HEADER);
+    s.push('\n');
+    for p in points {
+        s.push_str(&format!(
+            "{},{},{:.6},{:.9},{:.9},{:.9},{}\n",
+            p.plane, p.column, p.row_px, p.point_m[0], p.point_m[1], p.point_m[2], p.object
+        ));
+    }
+    s
+}

@@ -1,0 +1,85 @@
+//! The line laser: a Gaussian sheet of light fanned from its source point
+//! (`docs/simulator.md`, "Laser").
+
+use serde::{Deserialize, Serialize};
+use tangent_core::laser_plane::LaserPlane;
+use tangent_core::real::Vec3;
+
+/// Parameters of every line laser of the device (all planes are alike).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LaserParams {
+    /// Wavelength (metres); sets the speckle size.
+    pub wavelength_m: f64,
+    /// Optical power of each laser (watts). Class 2 is ≤ 1 mW.
+    pub power_w: f64,
+    /// Full fan angle (radians); the power is spread uniformly over it (Powell lens).
+    pub fan_angle_rad: f64,
+    /// `1/e²` half-thickness of the sheet at the source (metres).
+    pub waist_half_width_m: f64,
+    /// Growth of the half-thickness with distance (radians): `w(r) = √(w0² + (θ·r)²)`.
+    pub divergence_rad: f64,
+}
+
+impl Default for LaserParams {
+    /// A 1 mW, 650 nm line laser with a 45° Powell fan (covers the 41° horizontal field of
+    /// the reference camera from 0.1 m below it), 0.6 mm waist and 1 mrad thickness
+    /// divergence: `w` = 1.2 mm at 1 m, 3.1 mm at 3 m — the "1–3 mm line" of datasheets.
+    fn default() -> Self {
+        LaserParams {
+            wavelength_m: 650e-9,
+            power_w: 1e-3,
+            fan_angle_rad: 45f64.to_radians(),
+            waist_half_width_m: 0.6e-3,
+            divergence_rad: 1e-3,
+        }
+    }
+}
+
+impl LaserParams {
+    /// `1/e²` half-thickness at distance `r` from the source (metres).
+    pub fn half_width(&self, r: f64) -> f64 {
+        (self.waist_half_width_m.powi(2) + (self.divergence_rad * r).powi(2)).sqrt()
+    }
+
+    /// Irradiance (W/m²) the laser of `plane` puts on a surface at `p` with unit normal
+    /// `normal`, ignoring occlusion (the caller checks the segment to the source):
+    ///
+    /// ```text
+    /// E = P/(θ_fan·r) · √(2/π)/w(r) · exp(−2 s²/w(r)²) · cos ι
+    /// ```
+    ///
+    /// with `r = |p − S|`, `s` the signed distance from the plane, `ι` the incidence angle
+    /// (`docs/simulator.md`, "Laser irradiance"). Zero outside the fan, behind the surface,
+    /// and beyond `5 w` from the plane (`exp(−50)` ≈ 2e-22: nothing).
+    pub fn irradiance(&self, plane: &LaserPlane, p: Vec3, normal: Vec3) -> f64 {
+        let to_source = plane.source - p;
+        let r = to_source.norm();
+        if !(r > 1e-6) {
+            return 0.0;
+        }
+        let cos_inc = normal.dot(&to_source) / r;
+        if cos_inc <= 0.0 {
+            return 0.0;
+        }
+        let w = self.half_width(r);
+        let s = plane.signed_distance(p);
+        if s.abs() > 5.0 * w {
+            return 0.0;
+        }
+        if !self.in_fan(plane, p) {
+            return 0.0;
+        }
+        let line_density = self.power_w / (self.fan_angle_rad * r);
+        let profile = (2.0 / std::f64::consts::PI).sqrt() / w * (-2.0 * s * s / (w * w)).exp();
+        line_density * profile * cos_inc
+    }
+
+    /// True when `p` (projected onto the plane) is inside the fan: the angle from the fan's
+    /// central direction (the in-plane depth axis `b` of [`LaserPlane::plane_axes`]) is at
+    /// most half the fan angle.
+    pub fn in_fan(&self, plane: &LaserPlane, p: Vec3) -> bool {
+        let q = plane.to_plane_coords(p);
+        q.y > 0.0 && q.x.atan2(q.y).abs() <= 0.5 * self.fan_angle_rad
+    }
+}

@@ -1,0 +1,317 @@
+//! The capture simulator: renders laser-off / laser-on frame pairs of known scenes with the
+//! exact ground truth (`docs/simulator.md`).
+//!
+//! Chain: [`scene`] (objects, textures, ray casting) → [`render`] (per-pixel irradiance
+//! layers by ray tracing through the camera model, adaptive supersampling, exact true
+//! curve) → [`sensor`] (radiometry, PSF, speckle, shot/read noise, gain, quantisation) →
+//! [`crate::capture::Capture`]. [`corpus`] lists the committed test captures.
+//!
+//! Deterministic: every random draw comes from a `Pcg64` seeded from the spec's seed and
+//! the (frame, row) it belongs to, so the result does not depend on thread scheduling.
+
+pub mod corpus;
+pub mod laser;
+pub mod render;
+pub mod scene;
+pub mod sensor;
+
+use rand::SeedableRng;
+use rand_pcg::Pcg64;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use tangent_core::calibration::{Calibration, MAX_PLANES};
+
+use crate::capture::{Capture, CaptureMeta, FrameEntry, Mode, Truth, FORMAT_VERSION};
+use crate::calibration_file::CalibrationToml;
+use crate::pgm::Pgm;
+use laser::LaserParams;
+use render::{HandMotion, Lighting, RenderSetup};
+use scene::{splitmix, Object, Scene, SceneError};
+use sensor::{OpticsParams, SensorParams};
+
+/// How the exposure time is chosen.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Exposure {
+    /// Like the sensor's automatic exposure: the brightest pixel of the (noise-free) laser-on
+    /// frame reaches `peak_fraction` of full scale, within `[20 µs, max_s]`.
+    Auto {
+        /// Target fraction of full scale for the brightest pixel.
+        peak_fraction: f64,
+        /// Longest exposure allowed (hand-held: ≈ 30 ms).
+        max_s: f64,
+    },
+    /// A fixed exposure time.
+    Fixed {
+        /// Seconds.
+        seconds: f64,
+    },
+}
+
+/// Everything the simulator needs besides the calibration and the objects; written to the
+/// `[simulation]` table of `capture.toml`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SimParams {
+    /// Seed of every random draw (noise, speckle, textures). Below 2⁶³ (TOML integers).
+    pub seed: u64,
+    /// Laser planes lit in the laser-on frame(s).
+    pub lit_planes: Vec<usize>,
+    /// One laser-on frame per lit plane instead of one frame with all of them.
+    pub separate_frames: bool,
+    /// Ambient light.
+    pub lighting: Lighting,
+    /// The lasers.
+    pub laser: LaserParams,
+    /// Lens and filter.
+    pub optics: OpticsParams,
+    /// The sensor.
+    pub sensor: SensorParams,
+    /// Exposure control.
+    pub exposure: Exposure,
+    /// Analogue gain.
+    pub gain: f64,
+    /// Multiplicative laser speckle on or off.
+    pub speckle: bool,
+    /// Device displacement of the laser-off frame relative to the laser-on frame.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hand_motion: Option<HandMotion>,
+    /// `n` of the `n × n` supersampling of stripe and edge pixels.
+    pub supersampling: usize,
+}
+
+impl Default for SimParams {
+    /// Plane 0 lit, forest shade, the reference laser/lens/sensor, auto exposure to 70 %
+    /// (max 30 ms), unity gain, speckle on, no hand motion, 8 × 8 supersampling.
+    fn default() -> Self {
+        SimParams {
+            seed: 1,
+            lit_planes: vec![0],
+            separate_frames: false,
+            lighting: Lighting::shade(),
+            laser: LaserParams::default(),
+            optics: OpticsParams::default(),
+            sensor: SensorParams::default(),
+            exposure: Exposure::Auto { peak_fraction: 0.7, max_s: 0.03 },
+            gain: 1.0,
+            speckle: true,
+            hand_motion: None,
+            supersampling: 8,
+        }
+    }
+}
+
+/// A complete simulation request.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimSpec {
+    /// Measurement mode written to the capture.
+    pub mode: Mode,
+    /// Free-text description.
+    pub description: String,
+    /// RFC 3339 timestamp written to the capture.
+    pub timestamp: String,
+    /// Camera and laser planes.
+    pub calibration: Calibration,
+    /// The scene (camera frame of the laser-on frame).
+    pub objects: Vec<Object>,
+    /// Everything else.
+    pub params: SimParams,
+}
+
+/// Why a simulation could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum SimError {
+    /// The scene is invalid.
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    /// A parameter is out of range.
+    #[error("simulation parameter: {0}")]
+    Param(String),
+    /// The result could not be assembled as a capture.
+    #[error("capture: {0}")]
+    Capture(String),
+}
+
+/// Output of [`simulate`] besides the capture: numbers useful in reports and tests.
+#[derive(Debug, Clone)]
+pub struct SimReport {
+    /// Exposure used (seconds).
+    pub exposure_s: f64,
+    /// Electron rate per unit `ρ·E` (e⁻/s per W/m²), [`SensorParams::electrons_per_s`].
+    pub electrons_per_w_m2_s: f64,
+    /// Speckle cells per pixel `M` ([`sensor::speckle_cells`]).
+    pub speckle_cells: f64,
+}
+
+fn rng_for(seed: u64, stream: u64, row: u64) -> Pcg64 {
+    Pcg64::seed_from_u64(splitmix(seed ^ splitmix(stream.wrapping_mul(0x1_0000_0001) ^ (row << 20))))
+}
+
+impl SimSpec {
+    /// The spec that produced a synthetic capture (its `[simulation]` table, objects and
+    /// calibration), for re-simulation (e.g. with another seed).
+    pub fn from_capture(capture: &Capture) -> Result<Self, SimError> {
+        let meta = &capture.meta;
+        let table = meta
+            .simulation
+            .clone()
+            .ok_or_else(|| SimError::Param("the capture has no [simulation] table".into()))?;
+        let params = SimParams::deserialize(table).map_err(|e| SimError::Param(e.to_string()))?;
+        Ok(SimSpec {
+            mode: meta.mode,
+            description: meta.description.clone(),
+            timestamp: meta.timestamp.to_string(),
+            calibration: capture.calibration.clone(),
+            objects: meta.truth.as_ref().map(|t| t.objects.clone()).unwrap_or_default(),
+            params,
+        })
+    }
+}
+
+/// Renders a capture (frames + exact truth) from a spec. Deterministic for a given spec.
+pub fn simulate(spec: &SimSpec) -> Result<(Capture, SimReport), SimError> {
+    let p = &spec.params;
+    let cal = &spec.calibration;
+    cal.validate().map_err(|e| SimError::Param(e.to_string()))?;
+    let nplanes = cal.planes.len();
+    if p.lit_planes.is_empty() || p.lit_planes.iter().any(|&i| i >= nplanes) {
+        return Err(SimError::Param(format!("lit_planes {:?} must name planes 0..{nplanes}", p.lit_planes)));
+    }
+    if !(1..=16).contains(&p.sensor.bit_depth) || !(p.gain > 0.0) || p.supersampling == 0 {
+        return Err(SimError::Param("bit_depth 1..=16, gain > 0 and supersampling ≥ 1 required".into()));
+    }
+    let scene = Scene::new(&spec.objects, p.seed)?;
+    let setup = RenderSetup {
+        calibration: cal,
+        scene: &scene,
+        lighting: &p.lighting,
+        laser: &p.laser,
+        vignetting: p.optics.vignetting,
+        supersampling: p.supersampling,
+    };
+    let mut lit = [false; MAX_PLANES];
+    p.lit_planes.iter().for_each(|&i| lit[i] = true);
+    let (w, h) = (cal.camera.width as usize, cal.camera.height as usize);
+
+    let mut on = setup.render(None, &lit);
+    let mut off_ambient = match &p.hand_motion {
+        Some(m) => setup.render(Some(m), &[false; MAX_PLANES]).ambient,
+        None => on.ambient.clone(),
+    };
+    let sigma = p.optics.psf_sigma_px;
+    sensor::gaussian_blur(&mut on.ambient, w, h, sigma);
+    sensor::gaussian_blur(&mut off_ambient, w, h, sigma);
+    for &i in &p.lit_planes {
+        sensor::gaussian_blur(&mut on.lasers[i], w, h, sigma);
+    }
+
+    let k = p.sensor.electrons_per_s(&p.optics, p.laser.wavelength_m);
+    let exposure_s = match p.exposure {
+        Exposure::Fixed { seconds } if seconds > 0.0 => seconds,
+        Exposure::Fixed { .. } => return Err(SimError::Param("exposure must be positive".into())),
+        Exposure::Auto { peak_fraction, max_s } => {
+            let peak = (0..w * h)
+                .map(|j| on.ambient[j] + p.lit_planes.iter().map(|&i| on.lasers[i][j]).sum::<f64>())
+                .fold(0.0, f64::max)
+                * k;
+            if peak > 0.0 {
+                (peak_fraction * p.sensor.full_well_e / (p.gain * peak)).clamp(20e-6, max_s)
+            } else {
+                max_s
+            }
+        }
+    };
+
+    let cells = sensor::speckle_cells(
+        p.sensor.pixel_pitch_m,
+        sensor::speckle_correlation_m(p.laser.wavelength_m, p.optics.f_number),
+    );
+    // Speckle: one factor per pixel and laser (independent lasers, independent patterns).
+    let speckle: Vec<Vec<f64>> = (0..nplanes)
+        .map(|i| {
+            if !(p.speckle && lit[i]) {
+                return Vec::new();
+            }
+            (0..h)
+                .into_par_iter()
+                .flat_map_iter(|row| {
+                    let mut rng = rng_for(p.seed, 100 + i as u64, row as u64);
+                    (0..w).map(move |_| sensor::speckle_factor(cells, &mut rng)).collect::<Vec<_>>()
+                })
+                .collect()
+        })
+        .collect();
+
+    let frame_sets: Vec<Vec<usize>> = if p.separate_frames {
+        p.lit_planes.iter().map(|&i| vec![i]).collect()
+    } else {
+        vec![p.lit_planes.clone()]
+    };
+    let expose = |stream: u64, planes: &[usize], ambient: &[f64]| -> Vec<u16> {
+        (0..h)
+            .into_par_iter()
+            .flat_map_iter(|row| {
+                let mut rng = rng_for(p.seed, stream, row as u64);
+                let mut out = Vec::with_capacity(w);
+                for col in 0..w {
+                    let j = row * w + col;
+                    let mut rate = ambient[j];
+                    for &i in planes {
+                        let s = speckle.get(i).and_then(|v| v.get(j)).copied().unwrap_or(1.0);
+                        rate += on.lasers[i][j] * s;
+                    }
+                    out.push(p.sensor.expose_pixel(rate * k * exposure_s, p.gain, &mut rng));
+                }
+                out
+            })
+            .collect()
+    };
+    let to_pgm = |data: Vec<u16>| -> Result<Pgm, SimError> {
+        let maxval = p.sensor.max_dn();
+        let r = if maxval <= 255 {
+            Pgm::from_u8(w, h, maxval as u8, data.into_iter().map(|v| v as u8).collect())
+        } else {
+            Pgm::from_u16(w, h, maxval, data)
+        };
+        r.map_err(|e| SimError::Capture(e.to_string()))
+    };
+
+    let mut frames = vec![to_pgm(expose(0, &[], &off_ambient))?];
+    let mut entries = vec![FrameEntry { file: "off.pgm".into(), lasers_on: vec![] }];
+    for (n, set) in frame_sets.iter().enumerate() {
+        frames.push(to_pgm(expose(1 + n as u64, set, &on.ambient))?);
+        let file = if frame_sets.len() == 1 {
+            "on.pgm".to_string()
+        } else {
+            format!("on-{}.pgm", set.iter().map(|i| i.to_string()).collect::<Vec<_>>().join("-"))
+        };
+        entries.push(FrameEntry { file, lasers_on: set.clone() });
+    }
+
+    let truth_curve = render::truth_curve(&setup, &p.lit_planes);
+    let timestamp = spec
+        .timestamp
+        .parse::<toml::value::Datetime>()
+        .map_err(|e| SimError::Param(format!("timestamp: {e}")))?;
+    let calibration = toml::Value::try_from(CalibrationToml::from_calibration(cal))
+        .map_err(|e| SimError::Capture(e.to_string()))?;
+    let simulation = toml::Value::try_from(p).map_err(|e| SimError::Capture(e.to_string()))?;
+    let meta = CaptureMeta {
+        format_version: FORMAT_VERSION,
+        sensor: p.sensor.name.clone(),
+        width: cal.camera.width,
+        height: cal.camera.height,
+        bit_depth: p.sensor.bit_depth,
+        exposure_s,
+        gain: p.gain,
+        mode: spec.mode,
+        timestamp,
+        description: spec.description.clone(),
+        frames: entries,
+        calibration,
+        truth: Some(Truth { truth_curve: Some("truth-curve.csv".into()), objects: spec.objects.clone() }),
+        simulation: Some(simulation),
+    };
+    let capture = Capture { meta, calibration: cal.clone(), frames, truth_curve: Some(truth_curve) };
+    Ok((capture, SimReport { exposure_s, electrons_per_w_m2_s: k, speckle_cells: cells }))
+}

@@ -1,0 +1,541 @@
+//! Scene objects, ray intersection and surface reflectance (`docs/simulator.md`, "Scene").
+//!
+//! Every object is given in the camera frame of the laser-on frame (metres). The serde form
+//! of [`Object`] is also the `[[truth.objects]]` entry of `capture.toml`
+//! (`docs/formats.md`), so the truth of a capture is exactly what was rendered.
+
+use serde::{Deserialize, Serialize};
+use tangent_core::real::Vec3;
+
+/// Procedural reflectance pattern of a surface (multiplies the albedo; geometry unaffected).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Texture {
+    /// Uniform albedo.
+    #[default]
+    None,
+    /// Bark: furrows along the axis (cylinders) — elongated value noise, darker grooves.
+    Bark,
+    /// Isotropic multi-scale noise (stone, concrete, plaster).
+    Stone,
+    /// Fine-grained isotropic noise (asphalt aggregate, ~5 mm grains).
+    Asphalt,
+}
+
+fn default_albedo() -> f64 {
+    0.3
+}
+
+fn default_contrast() -> f64 {
+    0.5
+}
+
+/// A (possibly elliptic, possibly finite) cylinder: a stem or a branch.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Cylinder {
+    /// A point on the axis (metres).
+    pub axis_point_m: [f64; 3],
+    /// Axis direction (normalised on use).
+    pub axis_direction: [f64; 3],
+    /// Radius of a circular section (metres). Give either this or `semi_axes_m`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub radius_m: Option<f64>,
+    /// Semi-axes `(a, b)` of an elliptic section (metres); `a` lies along
+    /// `major_axis_direction`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub semi_axes_m: Option<[f64; 2]>,
+    /// Direction of the semi-axis `a` (made perpendicular to the axis on use). Required with
+    /// `semi_axes_m`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub major_axis_direction: Option<[f64; 3]>,
+    /// Axial extent `[s0, s1]` (metres along the axis from `axis_point_m`); absent = infinite.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub extent_m: Option<[f64; 2]>,
+    /// Lambertian albedo at 650 nm (0–1).
+    #[serde(default = "default_albedo")]
+    pub albedo: f64,
+    /// Reflectance pattern.
+    #[serde(default)]
+    pub texture: Texture,
+    /// Depth of the pattern (0 = uniform, 1 = grooves black).
+    #[serde(default = "default_contrast")]
+    pub texture_contrast: f64,
+}
+
+/// A sphere.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Sphere {
+    /// Centre (metres).
+    pub centre_m: [f64; 3],
+    /// Radius (metres).
+    pub radius_m: f64,
+    /// Lambertian albedo at 650 nm.
+    #[serde(default = "default_albedo")]
+    pub albedo: f64,
+    /// Reflectance pattern.
+    #[serde(default)]
+    pub texture: Texture,
+    /// Depth of the pattern.
+    #[serde(default = "default_contrast")]
+    pub texture_contrast: f64,
+}
+
+/// An infinite plane (a wall, the ground).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Plane {
+    /// A point of the plane (metres).
+    pub point_m: [f64; 3],
+    /// Normal (normalised on use; either sign).
+    pub normal: [f64; 3],
+    /// Lambertian albedo at 650 nm.
+    #[serde(default = "default_albedo")]
+    pub albedo: f64,
+    /// Reflectance pattern.
+    #[serde(default)]
+    pub texture: Texture,
+    /// Depth of the pattern.
+    #[serde(default = "default_contrast")]
+    pub texture_contrast: f64,
+}
+
+/// One sinusoidal component of a road profile.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Wave {
+    /// Amplitude (metres).
+    pub amplitude_m: f64,
+    /// Wavelength (metres).
+    pub wavelength_m: f64,
+    /// Phase (radians).
+    pub phase_rad: f64,
+    /// Direction of the wave vector in the `x–y` plane, from `x` towards `y` (radians).
+    pub direction_rad: f64,
+}
+
+/// A road surface facing the camera: `z = distance_m + Σ A·sin(2π(x cos φ + y sin φ)/λ + φ0)`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Road {
+    /// Mean distance of the surface along the optical axis (metres).
+    pub distance_m: f64,
+    /// The profile's components.
+    pub waves: Vec<Wave>,
+    /// Lambertian albedo at 650 nm.
+    #[serde(default = "default_albedo")]
+    pub albedo: f64,
+    /// Reflectance pattern.
+    #[serde(default)]
+    pub texture: Texture,
+    /// Depth of the pattern.
+    #[serde(default = "default_contrast")]
+    pub texture_contrast: f64,
+}
+
+/// A scene object (`kind = "cylinder" | "sphere" | "plane" | "road"` in TOML).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Object {
+    /// A stem or branch.
+    Cylinder(Cylinder),
+    /// A sphere.
+    Sphere(Sphere),
+    /// A plane.
+    Plane(Plane),
+    /// A road surface.
+    Road(Road),
+}
+
+/// Why a scene is invalid.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SceneError {
+    /// Object `index` has an impossible parameter.
+    #[error("scene object {index}: {message}")]
+    Invalid {
+        /// Index of the object.
+        index: usize,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+fn v3(a: [f64; 3]) -> Vec3 {
+    Vec3::new(a[0], a[1], a[2])
+}
+
+fn unit(a: [f64; 3]) -> Option<Vec3> {
+    let v = v3(a);
+    let n = v.norm();
+    (n.is_finite() && n > 1e-12).then(|| v / n)
+}
+
+/// A ray–surface hit.
+#[derive(Debug, Clone, Copy)]
+pub struct Hit {
+    /// Ray parameter (`point = origin + t·direction`).
+    pub t: f64,
+    /// The point (metres, scene frame).
+    pub point: Vec3,
+    /// Unit surface normal, on the side the ray came from.
+    pub normal: Vec3,
+    /// Index of the object.
+    pub object: usize,
+}
+
+#[derive(Debug, Clone)]
+enum Shape {
+    Cylinder { c: Vec3, axis: Vec3, m: Vec3, k: Vec3, a: f64, b: f64, extent: Option<[f64; 2]> },
+    Sphere { c: Vec3, r: f64 },
+    Plane { p: Vec3, n: Vec3, u: Vec3, w: Vec3 },
+    Road { z0: f64, waves: Vec<Wave>, amp: f64, min_wavelength: f64 },
+}
+
+#[derive(Debug, Clone)]
+struct Prepared {
+    shape: Shape,
+    albedo: f64,
+    texture: Texture,
+    contrast: f64,
+    seed: u64,
+}
+
+/// A validated scene, ready for ray casting.
+#[derive(Debug, Clone)]
+pub struct Scene {
+    objects: Vec<Prepared>,
+}
+
+/// Smallest ray parameter accepted as a hit (metres for unit directions): avoids a shadow
+/// ray re-hitting the surface it starts on (1 µm ≫ rounding of 1 m coordinates, 1e-16 m).
+pub const T_MIN: f64 = 1e-6;
+
+impl Scene {
+    /// Validates and prepares `objects`; `seed` varies the textures.
+    pub fn new(objects: &[Object], seed: u64) -> Result<Self, SceneError> {
+        let mut out = Vec::with_capacity(objects.len());
+        for (index, o) in objects.iter().enumerate() {
+            let bad = |message: &str| SceneError::Invalid { index, message: message.to_string() };
+            let (albedo, texture, contrast) = match o {
+                Object::Cylinder(c) => (c.albedo, c.texture, c.texture_contrast),
+                Object::Sphere(s) => (s.albedo, s.texture, s.texture_contrast),
+                Object::Plane(p) => (p.albedo, p.texture, p.texture_contrast),
+                Object::Road(r) => (r.albedo, r.texture, r.texture_contrast),
+            };
+            if !(0.0..=1.0).contains(&albedo) || !(0.0..=1.0).contains(&contrast) {
+                return Err(bad("albedo and texture_contrast must be in [0, 1]"));
+            }
+            let shape = match o {
+                Object::Cylinder(c) => {
+                    let axis = unit(c.axis_direction).ok_or_else(|| bad("zero axis direction"))?;
+                    let (a, b, major) = match (c.radius_m, c.semi_axes_m) {
+                        (Some(r), None) => {
+                            // Any perpendicular direction will do for a circle.
+                            let helper = if axis.x.abs() < 0.9 { Vec3::x() } else { Vec3::y() };
+                            (r, r, helper)
+                        }
+                        (None, Some([a, b])) => {
+                            let m = c
+                                .major_axis_direction
+                                .ok_or_else(|| bad("semi_axes_m needs major_axis_direction"))?;
+                            (a, b, v3(m))
+                        }
+                        _ => return Err(bad("give exactly one of radius_m and semi_axes_m")),
+                    };
+                    if !(a.is_finite() && b.is_finite() && a > 0.0 && b > 0.0) {
+                        return Err(bad("radius / semi-axes must be positive"));
+                    }
+                    let m = major - axis * axis.dot(&major);
+                    let mn = m.norm();
+                    if !(mn > 1e-9) {
+                        return Err(bad("major_axis_direction is parallel to the axis"));
+                    }
+                    let m = m / mn;
+                    let k = axis.cross(&m);
+                    Shape::Cylinder { c: v3(c.axis_point_m), axis, m, k, a, b, extent: c.extent_m }
+                }
+                Object::Sphere(s) => {
+                    if !(s.radius_m.is_finite() && s.radius_m > 0.0) {
+                        return Err(bad("radius must be positive"));
+                    }
+                    Shape::Sphere { c: v3(s.centre_m), r: s.radius_m }
+                }
+                Object::Plane(p) => {
+                    let n = unit(p.normal).ok_or_else(|| bad("zero normal"))?;
+                    let helper = if n.y.abs() < 0.9 { Vec3::y() } else { Vec3::x() };
+                    let u = helper.cross(&n).normalize();
+                    let w = n.cross(&u);
+                    Shape::Plane { p: v3(p.point_m), n, u, w }
+                }
+                Object::Road(r) => {
+                    if !(r.distance_m.is_finite() && r.distance_m > 0.0) {
+                        return Err(bad("distance_m must be positive"));
+                    }
+                    if r.waves.iter().any(|w| !(w.wavelength_m > 0.0 && w.amplitude_m.is_finite())) {
+                        return Err(bad("wave wavelengths must be positive"));
+                    }
+                    let amp = r.waves.iter().map(|w| w.amplitude_m.abs()).sum();
+                    let min_wavelength =
+                        r.waves.iter().map(|w| w.wavelength_m).fold(f64::INFINITY, f64::min);
+                    Shape::Road { z0: r.distance_m, waves: r.waves.clone(), amp, min_wavelength }
+                }
+            };
+            out.push(Prepared {
+                shape,
+                albedo,
+                texture,
+                contrast,
+                seed: splitmix(seed ^ (index as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)),
+            });
+        }
+        Ok(Scene { objects: out })
+    }
+
+    /// Nearest hit of the ray `origin + t·dir` with `t ∈ (T_MIN, t_max)`.
+    pub fn intersect(&self, origin: Vec3, dir: Vec3, t_max: f64) -> Option<Hit> {
+        let mut best: Option<Hit> = None;
+        for (i, o) in self.objects.iter().enumerate() {
+            let limit = best.map_or(t_max, |h| h.t);
+            if let Some((t, normal)) = o.shape.intersect(origin, dir, limit) {
+                let n = if normal.dot(&dir) > 0.0 { -normal } else { normal };
+                best = Some(Hit { t, point: origin + dir * t, normal: n, object: i });
+            }
+        }
+        best
+    }
+
+    /// True when something lies on the segment `from → to` (excluding its ends).
+    pub fn occluded(&self, from: Vec3, to: Vec3) -> bool {
+        let d = to - from;
+        // t runs over (T_MIN, 1 − 1e-6): the far end (a light source) is not an occluder.
+        self.objects
+            .iter()
+            .any(|o| o.shape.intersect(from, d, 1.0 - 1e-6).is_some_and(|(t, _)| t * d.norm() > T_MIN))
+    }
+
+    /// Albedo of object `object` at `point`, texture included.
+    pub fn albedo(&self, object: usize, point: Vec3) -> f64 {
+        let Some(o) = self.objects.get(object) else { return 0.0 };
+        if o.texture == Texture::None || o.contrast == 0.0 {
+            return o.albedo;
+        }
+        let (s1, s2) = o.shape.surface_coords(point);
+        let pattern = match o.texture {
+            Texture::None => 0.0,
+            // Furrows: features 8 cm long along the axis, 1.5 cm across, plus fine detail.
+            Texture::Bark => {
+                let coarse = fbm(s1 / 0.08, s2 / 0.015, o.seed, 3);
+                let ridges = (1.0 - (2.0 * coarse - 1.0).abs()).powi(3);
+                0.75 * ridges + 0.25 * fbm(s1 / 0.01, s2 / 0.004, o.seed ^ 1, 2)
+            }
+            Texture::Stone => fbm(s1 / 0.05, s2 / 0.05, o.seed, 4),
+            Texture::Asphalt => fbm(s1 / 0.005, s2 / 0.005, o.seed, 2),
+        };
+        o.albedo * (1.0 - o.contrast * pattern.clamp(0.0, 1.0))
+    }
+}
+
+impl Shape {
+    fn intersect(&self, o: Vec3, d: Vec3, t_max: f64) -> Option<(f64, Vec3)> {
+        let accept = |t: f64| t.is_finite() && t > T_MIN / d.norm().max(1e-300) && t < t_max;
+        match self {
+            Shape::Cylinder { c, axis, m, k, a, b, extent } => {
+                let rel = o - c;
+                let (ox, oy, os) = (rel.dot(m) / a, rel.dot(k) / b, rel.dot(axis));
+                let (dx, dy, ds) = (d.dot(m) / a, d.dot(k) / b, d.dot(axis));
+                // (ox + t dx)² + (oy + t dy)² = 1, scaled to the unit circle.
+                let qa = dx * dx + dy * dy;
+                if qa <= 0.0 {
+                    return None;
+                }
+                let qb = ox * dx + oy * dy;
+                let qc = ox * ox + oy * oy - 1.0;
+                let disc = qb * qb - qa * qc;
+                if disc < 0.0 {
+                    return None;
+                }
+                let sq = disc.sqrt();
+                // Stable roots: q = −(qb + sign(qb)·√disc), t = q/qa and qc/q.
+                let q = -(qb + qb.signum() * sq);
+                let (mut t0, mut t1) = (q / qa, if q != 0.0 { qc / q } else { -qb / qa });
+                if t0 > t1 {
+                    std::mem::swap(&mut t0, &mut t1);
+                }
+                for t in [t0, t1] {
+                    if !accept(t) {
+                        continue;
+                    }
+                    let s = os + t * ds;
+                    if extent.is_some_and(|[s0, s1]| s < s0 || s > s1) {
+                        continue;
+                    }
+                    let (x, y) = (ox + t * dx, oy + t * dy);
+                    let n = (*m * (x / a) + *k * (y / b)).normalize();
+                    return Some((t, n));
+                }
+                None
+            }
+            Shape::Sphere { c, r } => {
+                let rel = o - c;
+                let qa = d.dot(&d);
+                let qb = rel.dot(&d);
+                let qc = rel.dot(&rel) - r * r;
+                let disc = qb * qb - qa * qc;
+                if disc < 0.0 {
+                    return None;
+                }
+                let sq = disc.sqrt();
+                let q = -(qb + qb.signum() * sq);
+                let (mut t0, mut t1) = (q / qa, if q != 0.0 { qc / q } else { -qb / qa });
+                if t0 > t1 {
+                    std::mem::swap(&mut t0, &mut t1);
+                }
+                [t0, t1].into_iter().find(|&t| accept(t)).map(|t| (t, (o + d * t - c) / *r))
+            }
+            Shape::Plane { p, n, .. } => {
+                let den = n.dot(&d);
+                if den.abs() < 1e-15 {
+                    return None;
+                }
+                let t = n.dot(&(p - o)) / den;
+                accept(t).then_some((t, *n))
+            }
+            Shape::Road { z0, waves, amp, min_wavelength } => {
+                // g(t) = z(t) − surface(x(t), y(t)); the surface lies within z0 ± amp, so the
+                // first root is in the t-range where z crosses that slab. March with steps
+                // of ≤ λ_min/16 of lateral travel (so no crest is skipped), then bisect.
+                if d.z <= 0.0 {
+                    return None;
+                }
+                let g = |t: f64| {
+                    let p = o + d * t;
+                    p.z - z0 - road_height(waves, p.x, p.y)
+                };
+                let t_lo = ((z0 - amp - 1e-9 - o.z) / d.z).max(0.0);
+                let t_hi = (z0 + amp + 1e-9 - o.z) / d.z;
+                if t_hi <= t_lo || t_lo >= t_max {
+                    return None;
+                }
+                let lateral = (d.x * d.x + d.y * d.y).sqrt() * (t_hi - t_lo);
+                let depth = d.z * (t_hi - t_lo);
+                let steps = ((lateral / (min_wavelength / 16.0)).max(depth / (amp.max(1e-9) / 8.0)))
+                    .ceil()
+                    .clamp(1.0, 100_000.0) as usize;
+                let dt = (t_hi - t_lo) / steps as f64;
+                let (mut ta, mut ga) = (t_lo, g(t_lo));
+                if ga >= 0.0 {
+                    return None; // ray starts behind the surface
+                }
+                for i in 1..=steps {
+                    let tb = t_lo + dt * i as f64;
+                    let gb = g(tb);
+                    if gb >= 0.0 {
+                        let (mut lo, mut hi) = (ta, tb);
+                        for _ in 0..60 {
+                            let mid = 0.5 * (lo + hi);
+                            if g(mid) >= 0.0 {
+                                hi = mid;
+                            } else {
+                                lo = mid;
+                            }
+                        }
+                        let t = 0.5 * (lo + hi);
+                        if !accept(t) {
+                            return None;
+                        }
+                        let p = o + d * t;
+                        let (hx, hy) = road_gradient(waves, p.x, p.y);
+                        return Some((t, Vec3::new(hx, hy, -1.0).normalize()));
+                    }
+                    ta = tb;
+                    ga = gb;
+                }
+                let _ = ga;
+                None
+            }
+        }
+    }
+
+    fn surface_coords(&self, p: Vec3) -> (f64, f64) {
+        match self {
+            Shape::Cylinder { c, axis, m, k, a, b, .. } => {
+                let rel = p - c;
+                let ang = (rel.dot(k) / b).atan2(rel.dot(m) / a);
+                (rel.dot(axis), ang * 0.5 * (a + b))
+            }
+            Shape::Sphere { c, r } => {
+                let rel = (p - c) / *r;
+                (rel.y.clamp(-1.0, 1.0).asin() * r, rel.z.atan2(rel.x) * r)
+            }
+            Shape::Plane { p: p0, u, w, .. } => {
+                let rel = p - p0;
+                (rel.dot(u), rel.dot(w))
+            }
+            Shape::Road { .. } => (p.x, p.y),
+        }
+    }
+}
+
+/// Height of a road profile at `(x, y)` (metres).
+pub fn road_height(waves: &[Wave], x: f64, y: f64) -> f64 {
+    waves
+        .iter()
+        .map(|w| {
+            let (s, c) = w.direction_rad.sin_cos();
+            w.amplitude_m
+                * (2.0 * std::f64::consts::PI * (x * c + y * s) / w.wavelength_m + w.phase_rad).sin()
+        })
+        .sum()
+}
+
+fn road_gradient(waves: &[Wave], x: f64, y: f64) -> (f64, f64) {
+    waves.iter().fold((0.0, 0.0), |(gx, gy), w| {
+        let (s, c) = w.direction_rad.sin_cos();
+        let k = 2.0 * std::f64::consts::PI / w.wavelength_m;
+        let d = w.amplitude_m * k * (k * (x * c + y * s) + w.phase_rad).cos();
+        (gx + d * c, gy + d * s)
+    })
+}
+
+/// SplitMix64: a bijective 64-bit mixer (Steele et al. 2014), used to derive independent
+/// seeds and lattice hashes.
+pub fn splitmix(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+fn lattice(ix: i64, iy: i64, seed: u64) -> f64 {
+    let h = splitmix(seed ^ splitmix((ix as u64).wrapping_mul(0x1000_0000_01B3) ^ (iy as u64).rotate_left(32)));
+    (h >> 11) as f64 / (1u64 << 53) as f64
+}
+
+/// Value noise in `[0, 1)`: smooth (C¹) interpolation of hashed lattice values.
+pub fn value_noise(x: f64, y: f64, seed: u64) -> f64 {
+    let (fx, fy) = (x.floor(), y.floor());
+    let (ix, iy) = (fx as i64, fy as i64);
+    let (tx, ty) = (x - fx, y - fy);
+    let s = |t: f64| t * t * (3.0 - 2.0 * t);
+    let (sx, sy) = (s(tx), s(ty));
+    let a = lattice(ix, iy, seed);
+    let b = lattice(ix + 1, iy, seed);
+    let c = lattice(ix, iy + 1, seed);
+    let d = lattice(ix + 1, iy + 1, seed);
+    let top = a + (b - a) * sx;
+    let bottom = c + (d - c) * sx;
+    top + (bottom - top) * sy
+}
+
+/// Fractal sum of `octaves` value-noise octaves, normalised to `[0, 1)`.
+pub fn fbm(x: f64, y: f64, seed: u64, octaves: u32) -> f64 {
+    let (mut sum, mut norm, mut amp, mut freq) = (0.0, 0.0, 1.0, 1.0);
+    for o in 0..octaves {
+        sum += amp * value_noise(x * freq, y * freq, seed.wrapping_add(o as u64));
+        norm += amp;
+        amp *= 0.5;
+        freq *= 2.0;
+    }
+    sum / norm
+}

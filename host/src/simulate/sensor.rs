@@ -1,0 +1,193 @@
+//! Optics and sensor: radiometry, PSF, speckle statistics, shot/read noise, gain,
+//! quantisation, saturation (`docs/simulator.md`, "Optics" and "Sensor").
+
+use rand::{Rng, RngExt};
+use rand_distr::{Distribution, Gamma, Poisson, StandardNormal};
+use serde::{Deserialize, Serialize};
+
+/// Planck constant × speed of light (J·m), for the photon energy `hc/λ`.
+const HC: f64 = 6.626_070_15e-34 * 299_792_458.0;
+
+/// Lens and filter.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OpticsParams {
+    /// Aperture f-number `N`.
+    pub f_number: f64,
+    /// Transmission of the 650 nm band-pass filter (and lens) in its band.
+    pub filter_transmission: f64,
+    /// Standard deviation of the lens PSF (pixels), lumping aberrations and defocus;
+    /// modelled as a Gaussian blur of the irradiance before sampling by the pixels.
+    pub psf_sigma_px: f64,
+    /// Natural `cos⁴θ` vignetting on or off.
+    pub vignetting: bool,
+}
+
+impl Default for OpticsParams {
+    /// An f/2.4 M12 lens with a 90 %-transmission interference filter and a 0.5 px PSF.
+    fn default() -> Self {
+        OpticsParams { f_number: 2.4, filter_transmission: 0.9, psf_sigma_px: 0.5, vignetting: true }
+    }
+}
+
+/// The image sensor.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SensorParams {
+    /// Name written to `capture.toml`.
+    pub name: String,
+    /// Pixel pitch (metres).
+    pub pixel_pitch_m: f64,
+    /// Quantum efficiency at the laser wavelength.
+    pub quantum_efficiency: f64,
+    /// Full-well capacity (electrons): the signal saturates there.
+    pub full_well_e: f64,
+    /// Read noise (electrons RMS).
+    pub read_noise_e: f64,
+    /// Output bit depth (8 or 10 for the MT9V034).
+    pub bit_depth: u8,
+    /// Black level (digital numbers at unity gain, added before quantisation).
+    pub black_level_dn: f64,
+}
+
+impl Default for SensorParams {
+    /// MT9V034: 6 µm pixels; maximum SNR 42 dB ⇒ full well `10^(42/20)² ≈ 16 000 e⁻`;
+    /// dynamic range 55 dB ⇒ read noise `16 000 / 10^(55/20) ≈ 28 e⁻`; QE ≈ 0.4 at 650 nm;
+    /// 8-bit output with a black level of 2 DN (`docs/simulator.md`).
+    fn default() -> Self {
+        SensorParams {
+            name: "simulated MT9V034".into(),
+            pixel_pitch_m: 6e-6,
+            quantum_efficiency: 0.4,
+            full_well_e: 16_000.0,
+            read_noise_e: 28.0,
+            bit_depth: 8,
+            black_level_dn: 2.0,
+        }
+    }
+}
+
+impl SensorParams {
+    /// Largest digital number, `2^bits − 1`.
+    pub fn max_dn(&self) -> u16 {
+        ((1u32 << self.bit_depth.clamp(1, 16)) - 1) as u16
+    }
+
+    /// Electron rate (e⁻/s) per unit "albedo × irradiance" (W/m²) of a Lambertian surface
+    /// seen on the optical axis:
+    ///
+    /// ```text
+    /// K = A_pix · QE · T · λ / (4 N² h c)
+    /// ```
+    ///
+    /// (radiance `ρE/π`, image irradiance `π L / (4 N²)`, photons `λ/(hc)` per joule;
+    /// `docs/simulator.md`, "Radiometry").
+    pub fn electrons_per_s(&self, optics: &OpticsParams, wavelength_m: f64) -> f64 {
+        let a_pix = self.pixel_pitch_m * self.pixel_pitch_m;
+        a_pix * self.quantum_efficiency * optics.filter_transmission * wavelength_m
+            / (4.0 * optics.f_number * optics.f_number * HC)
+    }
+
+    /// Converts a mean electron count into a digital number: Poisson shot noise, clipping at
+    /// the full well, Gaussian read noise, gain, black level, rounding and clipping to
+    /// `[0, max_dn]`.
+    pub fn expose_pixel<R: Rng + ?Sized>(&self, mean_e: f64, gain: f64, rng: &mut R) -> u16 {
+        let electrons = if mean_e > 0.0 {
+            Poisson::new(mean_e).map(|p| p.sample(rng)).unwrap_or(0.0)
+        } else {
+            0.0
+        };
+        let electrons = electrons.min(self.full_well_e);
+        let read: f64 = rng.sample(StandardNormal);
+        let dn_per_e = gain * self.max_dn() as f64 / self.full_well_e;
+        let dn = self.black_level_dn + dn_per_e * (electrons + self.read_noise_e * read);
+        dn.round().clamp(0.0, self.max_dn() as f64) as u16
+    }
+
+    /// Predicted mean and variance (DN, DN²) of [`SensorParams::expose_pixel`] away from
+    /// clipping: `μ = b + g·μₑ`, `σ² = g²(μₑ + σ_r²) + 1/12` with `g` = DN per electron
+    /// (the 1/12 is uniform quantisation noise).
+    pub fn predicted_stats(&self, mean_e: f64, gain: f64) -> (f64, f64) {
+        let g = gain * self.max_dn() as f64 / self.full_well_e;
+        (
+            self.black_level_dn + g * mean_e,
+            g * g * (mean_e + self.read_noise_e * self.read_noise_e) + 1.0 / 12.0,
+        )
+    }
+}
+
+/// Speckle intensity-correlation width on the sensor (metres): `σ_c = 0.594·λ·N`.
+///
+/// The lens's intensity PSF is approximated by a Gaussian of σ = 0.42 λN (the Airy core);
+/// its amplitude PSF then has σ_h = √2·0.42 λN, and the speckle intensity correlation
+/// `|μ(Δ)|² = exp(−Δ²/(2σ_h²))`, so σ_c = σ_h (`docs/simulator.md`, "Speckle").
+pub fn speckle_correlation_m(wavelength_m: f64, f_number: f64) -> f64 {
+    std::f64::consts::SQRT_2 * 0.42 * wavelength_m * f_number
+}
+
+/// Number of speckle "cells" `M` integrated by a square pixel of side `pitch` (Goodman,
+/// *Speckle Phenomena in Optics*, §5.6): `1/M = [ (1/L)∫_{−L}^{L} (1 − |x|/L)·|μ(x)|² dx ]²`
+/// for a separable Gaussian `|μ|²` of width σ_c. The integrated intensity is then
+/// Gamma-distributed with shape `M` (contrast `1/√M`).
+pub fn speckle_cells(pitch_m: f64, sigma_c_m: f64) -> f64 {
+    if !(sigma_c_m > 0.0) {
+        return f64::INFINITY;
+    }
+    // Midpoint rule with 2000 intervals on a smooth integrand: error ≪ 1e-6.
+    let n = 2000;
+    let l = pitch_m;
+    let dx = 2.0 * l / n as f64;
+    let integral: f64 = (0..n)
+        .map(|i| {
+            let x = -l + (i as f64 + 0.5) * dx;
+            (1.0 - x.abs() / l) * (-x * x / (2.0 * sigma_c_m * sigma_c_m)).exp() * dx
+        })
+        .sum();
+    let one_d = integral / l;
+    1.0 / (one_d * one_d)
+}
+
+/// One multiplicative speckle factor (mean 1, variance `1/M`) for a pixel.
+pub fn speckle_factor<R: Rng + ?Sized>(cells: f64, rng: &mut R) -> f64 {
+    if !cells.is_finite() {
+        return 1.0;
+    }
+    Gamma::new(cells, 1.0 / cells).map(|g| g.sample(rng)).unwrap_or(1.0)
+}
+
+/// Separable Gaussian blur (σ in pixels, kernel ±⌈3σ⌉, edges clamped) of a `w × h` image.
+pub fn gaussian_blur(img: &mut [f64], w: usize, h: usize, sigma: f64) {
+    if !(sigma > 0.0) || w == 0 || h == 0 {
+        return;
+    }
+    let r = (3.0 * sigma).ceil() as isize;
+    let kernel: Vec<f64> = (-r..=r).map(|i| (-(i * i) as f64 / (2.0 * sigma * sigma)).exp()).collect();
+    let sum: f64 = kernel.iter().sum();
+    let kernel: Vec<f64> = kernel.iter().map(|k| k / sum).collect();
+    let mut tmp = vec![0.0; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let mut acc = 0.0;
+            for (k, kv) in kernel.iter().enumerate() {
+                let xx = (x as isize + k as isize - r).clamp(0, w as isize - 1) as usize;
+                acc += kv * img[y * w + xx];
+            }
+            tmp[y * w + x] = acc;
+        }
+    }
+    for y in 0..h {
+        for x in 0..w {
+            let mut acc = 0.0;
+            for (k, kv) in kernel.iter().enumerate() {
+                let yy = (y as isize + k as isize - r).clamp(0, h as isize - 1) as usize;
+                acc += kv * tmp[yy * w + x];
+            }
+            img[y * w + x] = acc;
+        }
+    }
+}
+
+/// A uniform draw in `[0, 1)` (helper for callers holding a generic RNG).
+pub fn uniform<R: Rng + ?Sized>(rng: &mut R) -> f64 {
+    rng.random::<f64>()
+}

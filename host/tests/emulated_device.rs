@@ -1,0 +1,373 @@
+//! The emulated firmware (QEMU mps2-an500) as a real serial peer: protocol round trips,
+//! frame dumps, calibration storage, link fault tolerance, and — the CI check of the
+//! firmware issue — on-device measurements equal to the host's on the same frames.
+//!
+//! Needs `qemu-system-arm` (CI installs it; without it each test prints why it is skipped)
+//! and builds the emulated firmware (`cargo firmware-qemu`) on first use.
+
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc::{self, Receiver};
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
+
+use tangent_core::calibration::Calibration;
+use tangent_core::protocol::{
+    self, calibration_record, DeviceError, ErrorCode, FrameSel, FromDevice, Request, Response,
+    ToDevice, WireCalibration, FRAME_CHUNK_MAX, PROTOCOL_VERSION,
+};
+
+fn repo_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// Builds the emulated firmware once per test process; `None` (with the reason printed)
+/// when QEMU is missing.
+fn firmware_elf() -> Option<PathBuf> {
+    static ELF: OnceLock<Option<PathBuf>> = OnceLock::new();
+    ELF.get_or_init(|| {
+        if Command::new("qemu-system-arm").arg("--version").output().is_err() {
+            eprintln!(
+                "SKIPPED: qemu-system-arm is not installed (apt-get install qemu-system-arm); \
+                 the emulated-firmware tests did not run"
+            );
+            return None;
+        }
+        let root = repo_root();
+        let status = Command::new(env!("CARGO"))
+            .current_dir(&root)
+            .args([
+                "build",
+                "--manifest-path",
+                "firmware/Cargo.toml",
+                "--release",
+                "--target",
+                "thumbv7em-none-eabihf",
+                "--no-default-features",
+                "--features",
+                "qemu",
+                "--bin",
+                "tangent-qemu",
+            ])
+            .status()
+            .expect("run cargo to build the emulated firmware");
+        assert!(status.success(), "building the emulated firmware failed");
+        Some(root.join("firmware/target/thumbv7em-none-eabihf/release/tangent-qemu"))
+    })
+    .clone()
+}
+
+/// A running emulated device, its UART on our pipes.
+struct Device {
+    child: Child,
+    stdin: std::process::ChildStdin,
+    rx: Receiver<Vec<u8>>,
+    pending: Vec<u8>,
+    next_tag: u16,
+    log: PathBuf,
+    _dir: tempfile::TempDir,
+}
+
+impl Device {
+    /// Boots the firmware on `pairs` of (off, on) PGM files, with `calibration` stored.
+    fn boot(elf: &Path, pairs: &[(PathBuf, PathBuf)], calibration: Option<&Calibration>) -> Device {
+        let dir = tempfile::tempdir().unwrap();
+        let mut args = String::from("tangent-qemu");
+        if let Some(cal) = calibration {
+            let mut rec = [0u8; calibration_record::MAX_RECORD];
+            let n = calibration_record::encode(&WireCalibration::from(cal), &mut rec).unwrap();
+            let path = dir.path().join("calib.bin");
+            std::fs::write(&path, &rec[..n]).unwrap();
+            args += &format!(" --calib {}", path.display());
+        }
+        for (off, on) in pairs {
+            args += &format!(" {} {}", off.display(), on.display());
+        }
+        let log = dir.path().join("semihosting.log");
+        let mut child = Command::new("qemu-system-arm")
+            .args(["-M", "mps2-an500", "-display", "none", "-monitor", "none", "-nodefaults"])
+            .args(["-net", "none", "-serial", "stdio"])
+            .arg("-chardev")
+            .arg(format!("file,id=sh,path={}", log.display()))
+            .args(["-semihosting-config", "enable=on,target=native,chardev=sh"])
+            .arg("-kernel")
+            .arg(elf)
+            .arg("-append")
+            .arg(&args)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("start qemu-system-arm");
+        let stdin = child.stdin.take().unwrap();
+        let mut stdout = child.stdout.take().unwrap();
+        let (tx, rx) = mpsc::channel();
+        std::thread::spawn(move || {
+            let mut buf = [0u8; 4096];
+            while let Ok(n) = stdout.read(&mut buf) {
+                if n == 0 || tx.send(buf[..n].to_vec()).is_err() {
+                    break;
+                }
+            }
+        });
+        Device {
+            child,
+            stdin,
+            rx,
+            pending: Vec::new(),
+            next_tag: 1,
+            log,
+            _dir: dir,
+        }
+    }
+
+    fn log_text(&self) -> String {
+        std::fs::read_to_string(&self.log).unwrap_or_default()
+    }
+
+    fn send_raw(&mut self, bytes: &[u8]) {
+        self.stdin.write_all(bytes).unwrap();
+        self.stdin.flush().unwrap();
+    }
+
+    /// Sends a request; returns its tag.
+    fn send(&mut self, request: Request) -> u16 {
+        let tag = self.next_tag;
+        self.next_tag += 1;
+        let mut enc = protocol::FrameEncoder::new();
+        let frame = enc.encode(&ToDevice { tag, request }).unwrap().to_vec();
+        self.send_raw(&frame);
+        tag
+    }
+
+    /// The next frame's COBS bytes (without the delimiter).
+    fn next_frame(&mut self, timeout: Duration) -> Vec<u8> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if let Some(i) = self.pending.iter().position(|&b| b == 0) {
+                let frame: Vec<u8> = self.pending.drain(..=i).collect();
+                if frame.len() > 1 {
+                    return frame[..frame.len() - 1].to_vec();
+                }
+                continue;
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            match self.rx.recv_timeout(left) {
+                Ok(bytes) => self.pending.extend_from_slice(&bytes),
+                Err(_) => panic!(
+                    "no frame from the device within {timeout:?}; firmware log:\n{}",
+                    self.log_text()
+                ),
+            }
+        }
+    }
+
+    /// Waits for the next message with `tag` and hands it to `f` (skipping others).
+    fn expect<T>(&mut self, tag: u16, f: impl FnOnce(Response<'_>) -> T) -> T {
+        loop {
+            let mut frame = self.next_frame(Duration::from_secs(20));
+            let msg: FromDevice = protocol::decode(&mut frame).expect("device frame decodes");
+            if msg.tag == tag {
+                return f(msg.response);
+            }
+        }
+    }
+
+    fn request<T>(&mut self, request: Request, f: impl FnOnce(Response<'_>) -> T) -> T {
+        let tag = self.send(request);
+        self.expect(tag, f)
+    }
+}
+
+impl Drop for Device {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Writes an 8-bit binary PGM.
+fn write_pgm(path: &Path, width: usize, height: usize, data: &[u8]) {
+    let mut bytes = format!("P5\n{width} {height}\n255\n").into_bytes();
+    bytes.extend_from_slice(data);
+    std::fs::write(path, bytes).unwrap();
+}
+
+/// A deterministic frame pair of the sensor's size: a textured background (xorshift) and a
+/// bright horizontal band in the on frame.
+fn synthetic_pair(dir: &Path, name: &str) -> (PathBuf, PathBuf, Vec<u8>, Vec<u8>) {
+    let (w, h) = (752, 480);
+    let mut x = 0x9E37_79B9u32 ^ name.len() as u32;
+    let off: Vec<u8> = (0..w * h)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            (x % 40) as u8
+        })
+        .collect();
+    let mut on = off.clone();
+    for col in 0..w {
+        on[(300 + col % 3) * w + col] = 220;
+    }
+    let off_path = dir.join(format!("{name}-off.pgm"));
+    let on_path = dir.join(format!("{name}-on.pgm"));
+    write_pgm(&off_path, w, h, &off);
+    write_pgm(&on_path, w, h, &on);
+    (off_path, on_path, off, on)
+}
+
+#[test]
+fn boot_banner_info_and_calibration_round_trip() {
+    let Some(elf) = firmware_elf() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let (off, on, _, _) = synthetic_pair(dir.path(), "a");
+    let cal = Calibration::reference_design();
+    let mut dev = Device::boot(&elf, &[(off, on)], Some(&cal));
+
+    // The unsolicited banner names the protocol and the stored calibration.
+    dev.expect(protocol::UNSOLICITED, |r| match r {
+        Response::Info(i) => {
+            assert_eq!(i.protocol_version, PROTOCOL_VERSION);
+            assert_eq!(i.board, protocol::Board::Emulated);
+            assert_eq!(i.calib_id, Some(cal.id));
+            assert_eq!((i.frame_width, i.frame_height), (752, 480));
+        }
+        other => panic!("expected the boot banner, got {other:?}"),
+    });
+
+    let wire = dev.request(Request::ReadCalibration, |r| match r {
+        Response::Calibration(c) => c,
+        other => panic!("{other:?}"),
+    });
+    assert_eq!(wire, WireCalibration::from(&cal));
+    // The device computes in f32: what it returns is the f32 rounding of what it got.
+    assert_eq!(wire.to_calibration().unwrap().id, cal.id);
+
+    let mut new = cal.clone();
+    new.id = 4242;
+    new.camera.cx = 371.25;
+    dev.request(Request::WriteCalibration(WireCalibration::from(&new)), |r| {
+        assert_eq!(r, Response::Ack)
+    });
+    let back = dev.request(Request::ReadCalibration, |r| match r {
+        Response::Calibration(c) => c,
+        other => panic!("{other:?}"),
+    });
+    assert_eq!(back.id, 4242);
+    assert_eq!(back.intrinsics[2], 371.25);
+
+    // An invalid calibration is refused and the previous one stays active.
+    let mut bad = WireCalibration::from(&new);
+    bad.intrinsics[0] = f64::NAN;
+    dev.request(Request::WriteCalibration(bad), |r| match r {
+        Response::Error(DeviceError { code, .. }) => assert_eq!(code, ErrorCode::InvalidCalibration),
+        other => panic!("{other:?}"),
+    });
+    dev.request(Request::DeviceInfo, |r| match r {
+        Response::Info(i) => assert_eq!(i.calib_id, Some(4242)),
+        other => panic!("{other:?}"),
+    });
+}
+
+#[test]
+fn frame_dump_equals_the_source_frames() {
+    let Some(elf) = firmware_elf() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let (off_path, on_path, off, on) = synthetic_pair(dir.path(), "dump");
+    let mut dev = Device::boot(&elf, &[(off_path, on_path)], None);
+    let info = dev.request(Request::CaptureFrames, |r| match r {
+        Response::FramesReady(i) => i,
+        other => panic!("{other:?}"),
+    });
+    assert_eq!((info.width, info.height, info.bit_depth), (752, 480, 8));
+    assert_ne!(info.laser_mask, 0);
+    for (sel, want) in [(FrameSel::Off, &off), (FrameSel::On, &on)] {
+        let mut got = Vec::new();
+        while got.len() < want.len() {
+            let request = Request::ReadFrameChunk {
+                capture: info.capture,
+                frame: sel,
+                offset: got.len() as u32,
+                max_len: FRAME_CHUNK_MAX as u16,
+            };
+            dev.request(request, |r| match r {
+                Response::FrameChunk { offset, total, data, .. } => {
+                    assert_eq!(offset as usize, got.len());
+                    assert_eq!(total as usize, want.len());
+                    assert!(!data.is_empty() && data.len() <= FRAME_CHUNK_MAX);
+                    got.extend_from_slice(data);
+                }
+                other => panic!("{other:?}"),
+            });
+        }
+        assert!(got == *want, "{sel:?} frame differs from its source");
+    }
+    // Past the end, and a capture that no longer exists.
+    let request = Request::ReadFrameChunk { capture: info.capture, frame: FrameSel::On, offset: off.len() as u32, max_len: 16 };
+    dev.request(request, |r| assert!(matches!(r, Response::Error(DeviceError { code: ErrorCode::OutOfRange, .. }))));
+    let request = Request::ReadFrameChunk { capture: info.capture + 1, frame: FrameSel::On, offset: 0, max_len: 16 };
+    dev.request(request, |r| assert!(matches!(r, Response::Error(DeviceError { code: ErrorCode::StaleCapture, .. }))));
+}
+
+#[test]
+fn garbage_corruption_oversize_and_other_versions_are_counted_not_fatal() {
+    let Some(elf) = firmware_elf() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let (off, on, _, _) = synthetic_pair(dir.path(), "g");
+    let mut dev = Device::boot(&elf, &[(off, on)], None);
+    dev.expect(protocol::UNSOLICITED, |_| ());
+
+    // 1. Line noise then a delimiter: one malformed frame.
+    dev.send_raw(&[0x13, 0x37, 0xFF, 0x42, 0x00]);
+    // 2. A valid frame with one corrupted byte: malformed (CRC).
+    let mut enc = protocol::FrameEncoder::new();
+    let mut frame = enc.encode(&ToDevice { tag: 99, request: Request::DeviceInfo }).unwrap().to_vec();
+    frame[3] ^= 0x10;
+    if frame[3] == 0 {
+        frame[3] = 0x77;
+    }
+    dev.send_raw(&frame);
+    // 3. An oversize frame (no delimiter for 5000 bytes).
+    dev.send_raw(&vec![0x5Au8; 5000]);
+    dev.send_raw(&[0x00]);
+    // 4. A frame of protocol version 2: answered with UnsupportedVersion.
+    let mut scratch = [0u8; protocol::MAX_RAW_LEN];
+    let raw = protocol::encode_raw(&ToDevice { tag: 7, request: Request::DeviceInfo }, 2, &mut scratch).unwrap();
+    let mut out = [0u8; protocol::MAX_FRAME_LEN];
+    let n = protocol::cobs_frame(raw, &mut out).unwrap();
+    dev.send_raw(&out[..n]);
+    dev.expect(protocol::UNSOLICITED, |r| match r {
+        Response::Error(DeviceError { code, detail }) => {
+            assert_eq!(code, ErrorCode::UnsupportedVersion);
+            assert_eq!(detail, 2);
+        }
+        other => panic!("{other:?}"),
+    });
+    // The device still answers, and counted each fault once.
+    dev.request(Request::DeviceInfo, |r| match r {
+        Response::Info(i) => {
+            assert_eq!(i.link.malformed, 2, "{:?}", i.link);
+            assert_eq!(i.link.oversize, 1, "{:?}", i.link);
+            assert_eq!(i.link.version_mismatch, 1, "{:?}", i.link);
+            assert_eq!(i.link.frames_ok, 1, "{:?}", i.link);
+        }
+        other => panic!("{other:?}"),
+    });
+}
+
+#[test]
+fn measure_without_calibration_is_a_clear_error() {
+    let Some(elf) = firmware_elf() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let (off, on, _, _) = synthetic_pair(dir.path(), "nc");
+    let mut dev = Device::boot(&elf, &[(off, on)], None);
+    dev.request(Request::Measure, |r| match r {
+        Response::Error(DeviceError { code, .. }) => assert_eq!(code, ErrorCode::NoCalibration),
+        other => panic!("{other:?}"),
+    });
+    dev.request(Request::History { after_seq: 0 }, |r| {
+        assert_eq!(r, Response::HistoryEnd { last_seq: 0 })
+    });
+}

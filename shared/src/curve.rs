@@ -1,0 +1,621 @@
+//! Column-wise extraction of the laser curve(s) from a difference frame and its segmentation
+//! labels, and smoothing of the extracted curve (thesis §5.7).
+//!
+//! For every column and every selected object (label), the extraction finds the brightest
+//! pixel of that object in the column, takes the difference-frame profile around it — wider
+//! than the labelled pixels, because the threshold that produced the labels cut the stripe's
+//! tails, which the estimator needs — and locates the stripe centre with a
+//! [`crate::peaks`] estimator. Several lit laser planes give several curves per column.
+//! Derivations: `docs/subpixel.md` (§8 for the extraction and the smoothing).
+
+use core::fmt;
+
+use crate::image::{Frame, FrameError, Pixel};
+use crate::peaks::{self, Estimator, DEFAULT_ESTIMATOR, MAX_HALF_WINDOW};
+use crate::real::Real;
+
+/// Most curves (selected labels) extracted at once; bounds the per-column state on the stack.
+pub const MAX_CURVES: usize = 8;
+
+/// Largest half window of [`smooth`].
+pub const MAX_SMOOTH_HALF_WINDOW: u8 = 8;
+
+/// Profile buffer length: the largest window [`extract`] hands to an estimator.
+const PROFILE_CAP: usize = 2 * MAX_HALF_WINDOW as usize + 1;
+
+/// One point of a laser curve.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CurvePoint {
+    /// Column (image `u`).
+    pub column: u16,
+    /// Subpixel row of the stripe centre (image `v`, pixel centres at integers).
+    pub row: Real,
+    /// Stripe amplitude from the estimator (difference-frame units), see
+    /// [`peaks::Peak::amplitude`].
+    pub amplitude: Real,
+    /// Curve index: the position of the point's label in the `selected` slice.
+    pub curve: u8,
+    /// A sample the estimator read was at or above the saturation level.
+    pub saturated: bool,
+}
+
+/// Parameters of [`extract`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ExtractParams {
+    /// Subpixel estimator.
+    pub estimator: Estimator,
+    /// Difference-frame samples taken on each side of the column maximum (`1..=`
+    /// [`MAX_HALF_WINDOW`]); must cover the estimator's window.
+    pub half_window: u8,
+    /// Difference-frame level at or above which a sample counts as saturated. `None` uses the
+    /// frame's full scale ([`Frame::max_value`]). A laser-on pixel that clipped at full scale
+    /// shows in the difference frame as full scale minus its laser-off level, so a caller that
+    /// knows the laser-off level (a few DN behind a band-pass filter) should pass
+    /// `full scale − that level`.
+    pub saturation: Option<u32>,
+}
+
+impl Default for ExtractParams {
+    fn default() -> Self {
+        ExtractParams {
+            estimator: DEFAULT_ESTIMATOR,
+            half_window: MAX_HALF_WINDOW,
+            saturation: None,
+        }
+    }
+}
+
+/// Parameters of [`smooth`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SmoothParams {
+    /// Half window of the quadratic Savitzky–Golay filter (`0..=`[`MAX_SMOOTH_HALF_WINDOW`];
+    /// 0 and 1 leave the curve unchanged).
+    pub half_window: u8,
+    /// Largest row step between adjacent columns inside one run; a larger step (an occlusion
+    /// edge, a trunk's silhouette) starts a new run, which smoothing does not cross.
+    pub max_row_jump: Real,
+}
+
+impl Default for SmoothParams {
+    fn default() -> Self {
+        SmoothParams {
+            half_window: 3,
+            max_row_jump: 2.0,
+        }
+    }
+}
+
+/// Why curves could not be extracted or smoothed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum CurveError {
+    /// The difference and label frames differ in size.
+    Frame(FrameError),
+    /// More labels selected than [`MAX_CURVES`].
+    TooManyCurves {
+        /// Labels selected.
+        selected: usize,
+    },
+    /// The half window is outside its range.
+    WindowOutOfRange {
+        /// The half window asked for.
+        half_window: u8,
+    },
+    /// `out` filled up before the frame was scanned; it holds `capacity` valid points.
+    OutputFull {
+        /// Length of `out`.
+        capacity: usize,
+    },
+    /// No column gave a point of any selected curve.
+    NoCurve,
+}
+
+impl fmt::Display for CurveError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            CurveError::Frame(e) => write!(f, "frames: {e}"),
+            CurveError::TooManyCurves { selected } => {
+                write!(f, "{selected} labels selected, at most {MAX_CURVES}")
+            }
+            CurveError::WindowOutOfRange { half_window } => {
+                write!(f, "half window {half_window} out of range")
+            }
+            CurveError::OutputFull { capacity } => {
+                write!(f, "curve buffer of {capacity} points is full")
+            }
+            CurveError::NoCurve => write!(f, "no laser curve found"),
+        }
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for CurveError {}
+
+impl From<FrameError> for CurveError {
+    fn from(e: FrameError) -> Self {
+        CurveError::Frame(e)
+    }
+}
+
+/// Extracts the laser curves: for each column (left to right) and each label of `selected`
+/// (in order; the index is [`CurvePoint::curve`]), one point at the subpixel row of the
+/// stripe. Writes into `out` and returns the number of points.
+///
+/// A column where an object has no pixel gives no point for that curve; a column where the
+/// estimator fails (stripe at the frame border, flat profile) is skipped, since one missing
+/// column costs the solvers less than a wrong point. When a label has several runs in a
+/// column, its brightest pixel decides.
+///
+/// Cost: one pass over the label column (a compare per pixel, plus a lookup in `selected`
+/// for labelled pixels) and one estimator call per curve per column, so the work is
+/// dominated by the scan of `height` labels per column.
+pub fn extract<P: Pixel>(
+    diff: &Frame<'_, P>,
+    labels: &Frame<'_, u16>,
+    selected: &[u16],
+    params: &ExtractParams,
+    out: &mut [CurvePoint],
+) -> Result<usize, CurveError> {
+    diff.check_same_size(labels)?;
+    if selected.len() > MAX_CURVES {
+        return Err(CurveError::TooManyCurves {
+            selected: selected.len(),
+        });
+    }
+    let hw = params.half_window;
+    if hw == 0 || hw > MAX_HALF_WINDOW {
+        return Err(CurveError::WindowOutOfRange { half_window: hw });
+    }
+    let hw = hw as usize;
+    let saturation = params.saturation.unwrap_or(diff.max_value()) as Real;
+    let (width, height) = (diff.width(), diff.height());
+    let mut n = 0usize;
+    let mut profile = [0.0 as Real; PROFILE_CAP];
+    for x in 0..width {
+        // Brightest labelled pixel of each selected object in this column.
+        let mut best: [Option<(usize, u32)>; MAX_CURVES] = [None; MAX_CURVES];
+        for y in 0..height {
+            let label = labels.get(x, y).unwrap_or(0);
+            if label == 0 {
+                continue;
+            }
+            let Some(k) = selected.iter().position(|&s| s == label) else {
+                continue;
+            };
+            let v: u32 = diff.get(x, y).map_or(0, Into::into);
+            if let Some(slot) = best.get_mut(k) {
+                match slot {
+                    Some((_, bv)) if *bv >= v => {}
+                    _ => *slot = Some((y, v)),
+                }
+            }
+        }
+        for (k, slot) in best.iter().enumerate().take(selected.len()) {
+            let Some((row, _)) = *slot else { continue };
+            let lo = row.saturating_sub(hw);
+            let hi = (row + hw).min(height - 1);
+            let len = hi - lo + 1;
+            let Some(buf) = profile.get_mut(..len) else {
+                continue;
+            };
+            for (j, s) in buf.iter_mut().enumerate() {
+                *s = diff
+                    .get(x, lo + j)
+                    .map_or(0.0, |p| Into::<u32>::into(p) as Real);
+            }
+            // The labelled maximum may sit on a shoulder of a brighter unlabelled neighbour
+            // (a speckle filter or a multi-level threshold can leave that); climb to the
+            // local maximum of the profile, at most `hw` steps.
+            let mut peak = row - lo;
+            for _ in 0..hw {
+                let here = buf.get(peak).copied().unwrap_or(0.0);
+                let up = buf.get(peak + 1).copied().unwrap_or(Real::NEG_INFINITY);
+                let down = if peak > 0 {
+                    buf.get(peak - 1).copied()
+                } else {
+                    None
+                };
+                let down = down.unwrap_or(Real::NEG_INFINITY);
+                if up > here && up >= down {
+                    peak += 1;
+                } else if down > here {
+                    peak -= 1;
+                } else {
+                    break;
+                }
+            }
+            let peak = peaks::plateau_centre(buf, peak);
+            let Ok(p) = peaks::locate_with_saturation(buf, peak, params.estimator, saturation)
+            else {
+                continue;
+            };
+            let Some(slot) = out.get_mut(n) else {
+                return Err(CurveError::OutputFull {
+                    capacity: out.len(),
+                });
+            };
+            *slot = CurvePoint {
+                column: x.min(u16::MAX as usize) as u16,
+                row: lo as Real + p.position,
+                amplitude: p.amplitude,
+                curve: k as u8,
+                saturated: p.saturated,
+            };
+            n += 1;
+        }
+    }
+    if n == 0 {
+        Err(CurveError::NoCurve)
+    } else {
+        Ok(n)
+    }
+}
+
+/// Coefficient `j` of the quadratic Savitzky–Golay smoothing filter of half window `m`:
+/// `c_j = 3(3m² + 3m − 1 − 5j²) / ((2m+1)(4m² + 4m − 3))` (`docs/subpixel.md` §8).
+fn savitzky_golay(m: usize, j: isize) -> Real {
+    let m = m as Real;
+    let j = j as Real;
+    3.0 * (3.0 * m * m + 3.0 * m - 1.0 - 5.0 * j * j)
+        / ((2.0 * m + 1.0) * (4.0 * m * m + 4.0 * m - 3.0))
+}
+
+/// Index of the next point of curve `c` after `i`.
+fn next_of(points: &[CurvePoint], c: u8, i: usize) -> Option<usize> {
+    points
+        .get(i + 1..)?
+        .iter()
+        .position(|p| p.curve == c)
+        .map(|k| i + 1 + k)
+}
+
+/// Smooths the rows of each curve along the columns, in place, with a quadratic
+/// Savitzky–Golay filter (`docs/subpixel.md` §8), which removes speckle jitter while keeping
+/// the curve's slope and curvature (a moving average would flatten the curvature near a
+/// trunk's edge by `m(m+1)/6` times the second difference).
+///
+/// The points are those of [`extract`]: each curve's points in increasing column order
+/// (curves may be interleaved). A curve is cut into runs at a missing column, a column that
+/// does not increase, or a row step larger than `max_row_jump`; each run is filtered on its
+/// own, with the window shrunk symmetrically near the ends of the run (so a straight or
+/// parabolic run stays exact up to its ends). Points of curves `≥ MAX_CURVES` are left alone.
+pub fn smooth(points: &mut [CurvePoint], params: &SmoothParams) -> Result<(), CurveError> {
+    if params.half_window > MAX_SMOOTH_HALF_WINDOW {
+        return Err(CurveError::WindowOutOfRange {
+            half_window: params.half_window,
+        });
+    }
+    let h = params.half_window as usize;
+    if h < 2 {
+        return Ok(());
+    }
+    for c in 0..MAX_CURVES as u8 {
+        let mut start = points.iter().position(|p| p.curve == c);
+        while let Some(s) = start {
+            // The run: s, then successors while the columns are contiguous and rows close.
+            let mut end = s;
+            let mut count = 1usize;
+            let mut next = next_of(points, c, s);
+            while let (Some(j), Some(a)) = (next, points.get(end)) {
+                let Some(b) = points.get(j) else { break };
+                let contiguous = b.column as u32 == a.column as u32 + 1;
+                if !contiguous || !((b.row - a.row).abs() <= params.max_row_jump) {
+                    break;
+                }
+                end = j;
+                count += 1;
+                next = next_of(points, c, j);
+            }
+            smooth_run(points, c, s, count, h);
+            start = next;
+        }
+    }
+    Ok(())
+}
+
+/// Filters the `n` points of curve `c` starting at index `start` (one run).
+fn smooth_run(points: &mut [CurvePoint], c: u8, start: usize, n: usize, h: usize) {
+    // Ring of the run's original rows and indices: element k lives at slot k % RING; the
+    // filter at k reads k-h..=k+h, and loading k+h overwrites k+h-RING < k-h.
+    const RING: usize = 2 * MAX_SMOOTH_HALF_WINDOW as usize + 1;
+    let mut idx = [0usize; RING];
+    let mut val = [0.0 as Real; RING];
+    let Some(first) = points.get(start) else {
+        return;
+    };
+    idx[0] = start;
+    val[0] = first.row;
+    let mut loaded = 1usize;
+    let mut cursor = start;
+    for k in 0..n {
+        let half = h.min(k).min(n - 1 - k);
+        while loaded <= k + half {
+            let Some(j) = next_of(points, c, cursor) else {
+                return;
+            };
+            cursor = j;
+            let slot = loaded % RING;
+            idx[slot] = j;
+            val[slot] = points.get(j).map_or(0.0, |p| p.row);
+            loaded += 1;
+        }
+        if half < 2 {
+            // The quadratic through 3 points is the points themselves: nothing to do.
+            continue;
+        }
+        let mut acc = 0.0 as Real;
+        for j in -(half as isize)..=half as isize {
+            let slot = ((k as isize + j) as usize) % RING;
+            acc += savitzky_golay(half, j) * val[slot];
+        }
+        if let Some(p) = points.get_mut(idx[k % RING]) {
+            p.row = acc;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const W: usize = 40;
+    const H: usize = 48;
+    const SIGMA: f64 = 1.2;
+    const AMP: f64 = 800.0; // 10-bit sensor
+
+    /// Pixel-integrated Gaussian across rows (exact, erf) with unit centre pixel at σ.
+    fn integrated(y: usize, mu: f64, amp: f64) -> f64 {
+        let k = SIGMA * core::f64::consts::SQRT_2;
+        let v = libm::erf((y as f64 + 0.5 - mu) / k) - libm::erf((y as f64 - 0.5 - mu) / k);
+        amp * v / (2.0 * libm::erf(0.5 / k))
+    }
+
+    /// Stripe rows as a function of the column: a sinusoid (known analytically).
+    fn row_a(x: usize) -> f64 {
+        14.0 + 4.5 * libm::sin(2.0 * core::f64::consts::PI * x as f64 / 23.0)
+    }
+    fn row_b(x: usize) -> f64 {
+        33.3 + 0.05 * x as f64
+    }
+
+    /// Renders the stripes (10-bit, rounded) and labels pixels above 10 % with their label.
+    fn scene(stripes: &[(u16, fn(usize) -> f64, f64)]) -> ([u16; W * H], [u16; W * H]) {
+        let mut diff = [0u16; W * H];
+        let mut labels = [0u16; W * H];
+        for y in 0..H {
+            for x in 0..W {
+                for &(label, row, amp) in stripes {
+                    let v = integrated(y, row(x), amp);
+                    let q = libm::round(v).min(1023.0) as u16;
+                    diff[y * W + x] = diff[y * W + x].saturating_add(q).min(1023);
+                    if v > 0.1 * AMP {
+                        labels[y * W + x] = label;
+                    }
+                }
+            }
+        }
+        (diff, labels)
+    }
+
+    fn frames<'a>(d: &'a [u16], l: &'a [u16]) -> (Frame<'a, u16>, Frame<'a, u16>) {
+        (
+            Frame::new(d, W, H, W).unwrap().with_bit_depth(10).unwrap(),
+            Frame::new(l, W, H, W).unwrap(),
+        )
+    }
+
+    // Tolerance of a row: the default estimator's bias on a noise-free pixel-integrated
+    // Gaussian (≤ 0.005 px, peaks tests) plus the quantisation: rounding to 1 DN is noise
+    // of 1/√12 DN ≈ 0.29 DN on an 800 DN stripe, which moves a Gaussian fit by about
+    // σ·(0.29/800)·√(2/N) ≈ 3e-4 px; 0.01 px leaves a wide margin for f32 rounding.
+    const TOL: Real = 0.01;
+
+    #[test]
+    fn extracts_a_sinusoidal_stripe_at_its_analytic_rows() {
+        let (d, l) = scene(&[(7, row_a, AMP)]);
+        let (diff, labels) = frames(&d, &l);
+        let mut out = [CurvePoint {
+            column: 0,
+            row: 0.0,
+            amplitude: 0.0,
+            curve: 0,
+            saturated: false,
+        }; 64];
+        let n = extract(&diff, &labels, &[7], &ExtractParams::default(), &mut out).unwrap();
+        assert_eq!(n, W);
+        for (x, p) in out[..n].iter().enumerate() {
+            assert_eq!(p.column as usize, x);
+            assert_eq!(p.curve, 0);
+            assert!(!p.saturated);
+            assert!(
+                (p.row - row_a(x) as Real).abs() < TOL,
+                "column {x}: {p:?} vs {}",
+                row_a(x)
+            );
+            assert!(
+                (p.amplitude - AMP as Real).abs() < 0.02 * AMP as Real,
+                "{p:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn extracts_two_curves_per_column_in_selection_order() {
+        let (d, l) = scene(&[(3, row_a, AMP), (5, row_b, 0.6 * AMP)]);
+        let (diff, labels) = frames(&d, &l);
+        let mut out = [CurvePoint {
+            column: 0,
+            row: 0.0,
+            amplitude: 0.0,
+            curve: 0,
+            saturated: false,
+        }; 128];
+        // Label 5 first: curve 0 is the lower stripe.
+        let n = extract(&diff, &labels, &[5, 3], &ExtractParams::default(), &mut out).unwrap();
+        assert_eq!(n, 2 * W);
+        for x in 0..W {
+            let (p0, p1) = (out[2 * x], out[2 * x + 1]);
+            assert_eq!((p0.column as usize, p0.curve), (x, 0));
+            assert_eq!((p1.column as usize, p1.curve), (x, 1));
+            // The stripes are ≥ 10σ apart, so each profile holds one stripe.
+            assert!((p0.row - row_b(x) as Real).abs() < TOL, "{p0:?}");
+            assert!((p1.row - row_a(x) as Real).abs() < TOL, "{p1:?}");
+        }
+    }
+
+    #[test]
+    fn flags_saturated_columns_and_still_locates_them() {
+        fn row_c(x: usize) -> f64 {
+            20.0 + 0.137 * x as f64
+        }
+        let (d, l) = scene(&[(1, row_c, 1.5 * 1023.0)]);
+        let (diff, labels) = frames(&d, &l);
+        let mut out = [CurvePoint {
+            column: 0,
+            row: 0.0,
+            amplitude: 0.0,
+            curve: 0,
+            saturated: false,
+        }; 64];
+        let n = extract(&diff, &labels, &[1], &ExtractParams::default(), &mut out).unwrap();
+        assert_eq!(n, W);
+        for (x, p) in out[..n].iter().enumerate() {
+            assert!(p.saturated, "{p:?}");
+            // Saturated-peak bound of the peaks tests (0.01 px) plus quantisation (as TOL).
+            assert!(
+                (p.row - row_c(x) as Real).abs() < 0.01 + TOL,
+                "{p:?} vs {}",
+                row_c(x)
+            );
+        }
+    }
+
+    #[test]
+    fn error_cases() {
+        let (d, l) = scene(&[(7, row_a, AMP)]);
+        let (diff, labels) = frames(&d, &l);
+        let params = ExtractParams::default();
+        let mut small = [CurvePoint {
+            column: 0,
+            row: 0.0,
+            amplitude: 0.0,
+            curve: 0,
+            saturated: false,
+        }; 5];
+        assert_eq!(
+            extract(&diff, &labels, &[7], &params, &mut small),
+            Err(CurveError::OutputFull { capacity: 5 })
+        );
+        // The points written before the buffer filled are valid.
+        assert!((small[4].row - row_a(4) as Real).abs() < TOL);
+        let mut out = [small[0]; 64];
+        assert_eq!(
+            extract(&diff, &labels, &[8], &params, &mut out),
+            Err(CurveError::NoCurve)
+        );
+        assert_eq!(
+            extract(&diff, &labels, &[], &params, &mut out),
+            Err(CurveError::NoCurve)
+        );
+        assert_eq!(
+            extract(
+                &diff,
+                &labels,
+                &[1, 2, 3, 4, 5, 6, 7, 8, 9],
+                &params,
+                &mut out
+            ),
+            Err(CurveError::TooManyCurves { selected: 9 })
+        );
+        let bad = ExtractParams {
+            half_window: 0,
+            ..params
+        };
+        assert_eq!(
+            extract(&diff, &labels, &[7], &bad, &mut out),
+            Err(CurveError::WindowOutOfRange { half_window: 0 })
+        );
+        let small_labels = Frame::new(&l[..W * 10], W, 10, W).unwrap();
+        assert!(matches!(
+            extract(&diff, &small_labels, &[7], &params, &mut out),
+            Err(CurveError::Frame(FrameError::SizeMismatch { .. }))
+        ));
+        assert_eq!(
+            smooth(
+                &mut out,
+                &SmoothParams {
+                    half_window: MAX_SMOOTH_HALF_WINDOW + 1,
+                    max_row_jump: 1.0
+                }
+            ),
+            Err(CurveError::WindowOutOfRange {
+                half_window: MAX_SMOOTH_HALF_WINDOW + 1
+            })
+        );
+    }
+
+    fn pt(column: u16, row: Real, curve: u8) -> CurvePoint {
+        CurvePoint {
+            column,
+            row,
+            amplitude: 1.0,
+            curve,
+            saturated: false,
+        }
+    }
+
+    #[test]
+    fn smoothing_keeps_parabolas_removes_jitter_and_respects_gaps() {
+        // Two interleaved curves: curve 0 a parabola with ±0.1 px alternating jitter over
+        // columns 0..30, curve 1 a constant row 5 for columns 0..10 and 20 for 11..20 (a
+        // jump: two runs).
+        let mut pts = [pt(0, 0.0, 0); 51];
+        let parabola = |x: Real| 10.0 + 0.3 * x - 0.01 * x * x;
+        let mut k = 0;
+        for x in 0..31u16 {
+            let jitter = if x % 2 == 0 { 0.1 } else { -0.1 };
+            pts[k] = pt(x, parabola(x as Real) + jitter, 0);
+            k += 1;
+            if x < 20 {
+                pts[k] = pt(x, if x <= 10 { 5.0 } else { 20.0 }, 1);
+                k += 1;
+            }
+        }
+        assert_eq!(k, 51);
+        smooth(
+            &mut pts,
+            &SmoothParams {
+                half_window: 4,
+                max_row_jump: 2.0,
+            },
+        )
+        .unwrap();
+        for p in &pts {
+            if p.curve == 1 {
+                // A quadratic filter reproduces constants exactly; a filter that crossed the
+                // jump would pull the rows next to it toward the other level.
+                let want = if p.column <= 10 { 5.0 } else { 20.0 };
+                assert!((p.row - want).abs() < 1e-4, "{p:?}");
+            } else {
+                let x = p.column as Real;
+                // Savitzky–Golay keeps the parabola exactly; the ±0.1 alternation is scaled by
+                // |Σ_j c_j (−1)^j| of the window used: with c_j = 3(3m²+3m−1−5j²) /
+                // ((2m+1)(4m²+4m−3)) this is 41/231 for m = 4, 25/105 for m = 3, 13/35 for
+                // m = 2, and 1 (unfiltered) for m ≤ 1, the window shrinking at the run's ends.
+                let last = 30u16;
+                let m = 4.min(p.column).min(last - p.column);
+                let gain: Real = match m {
+                    4 => 41.0 / 231.0,
+                    3 => 25.0 / 105.0,
+                    2 => 13.0 / 35.0,
+                    _ => 1.0,
+                };
+                let bound = 0.1 * gain;
+                assert!(
+                    (p.row - parabola(x)).abs() <= bound + 1e-4,
+                    "{p:?} vs {}",
+                    parabola(x)
+                );
+            }
+        }
+    }
+}

@@ -1,0 +1,531 @@
+//! Predicted uncertainty of a reading (thesis chapter 7; derivations in
+//! `docs/error-model.md`).
+//!
+//! A laser-curve point comes from one image column `u` (exact: an integer) and a subpixel row
+//! `v` (noisy). Its error is therefore one vector per point, `∂X/∂v·δv`
+//! ([`displacement_per_pixel`]), which lies in the laser plane along the line from the
+//! point to where the column's plane meets the source — radial from the source for the
+//! reference geometry. `δv` has two independent parts ([`NoiseModel`]): the subpixel
+//! estimator's noise and laser speckle. Calibration errors (`e`, `f`, `δ`) move every point
+//! coherently ([`calibration_displacements`]).
+//!
+//! [`predict_diameter_sigma`] propagates all of it to the diameter of a transversal stem for
+//! both methods of [`crate::solvers::cylinder`], sampling the lit and visible arc one point
+//! per image column, as the pipeline does.
+
+use core::fmt;
+
+#[allow(unused_imports)]
+use crate::real::Float;
+use crate::real::{Mat3, Real, Vec2, Vec3, PI};
+
+use crate::camera::Camera;
+use crate::laser_plane::LaserPlane;
+use crate::solvers::circle::{self, Circle, LmParams};
+use crate::solvers::cylinder::{self, ThreeTangentParams};
+use crate::solvers::SolveError;
+use nalgebra::{SMatrix, SVector};
+
+/// Why a prediction could not be made.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ErrorModelError {
+    /// The point is not in front of the camera, or the plane/ray geometry is degenerate.
+    InvalidGeometry,
+    /// The stem is not seen (no lit and visible column), or too few columns.
+    NotVisible,
+    /// The scratch buffer is too short (needs `2 × camera width`).
+    ScratchTooSmall,
+    /// A solver failed on the simulated points.
+    Solve(SolveError),
+}
+
+impl fmt::Display for ErrorModelError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            ErrorModelError::InvalidGeometry => f.write_str("invalid geometry for the error model"),
+            ErrorModelError::NotVisible => f.write_str("stem not visible to the camera"),
+            ErrorModelError::ScratchTooSmall => f.write_str("scratch buffer too small"),
+            ErrorModelError::Solve(e) => write!(f, "error model: {e}"),
+        }
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for ErrorModelError {}
+
+impl From<SolveError> for ErrorModelError {
+    fn from(e: SolveError) -> Self {
+        ErrorModelError::Solve(e)
+    }
+}
+
+/// The noise sources of a reading (`docs/error-model.md`, "Noise sources"). All 1σ.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NoiseModel {
+    /// Subpixel estimator noise of the stripe centre along `v` (pixels), from sensor noise
+    /// and quantisation.
+    pub subpixel_px: Real,
+    /// Speckle contrast `C` (1 = fully developed speckle on rough bark; a speckle filter or
+    /// averaging lowers the effective value).
+    pub speckle_contrast: Real,
+    /// Laser wavelength (metres).
+    pub wavelength: Real,
+    /// Lens f-number `N` (the observation aperture `sin u' ≈ 1/(2N)`).
+    pub f_number: Real,
+    /// Pixel pitch (metres).
+    pub pixel_pitch: Real,
+    /// Uncertainty of the grazing-ray column at each end of the curve (pixels).
+    pub edge_px: Real,
+    /// Calibration uncertainty of the baseline `e` (metres).
+    pub baseline: Real,
+    /// Calibration uncertainty of the focal length (pixels).
+    pub focal_px: Real,
+    /// Calibration uncertainty of the plane tilt `δ` (radians).
+    pub tilt: Real,
+}
+
+impl NoiseModel {
+    /// The reference device (`docs/error-model.md`, "Reference values"): 0.05 px subpixel
+    /// noise, fully developed speckle at 650 nm through f/2 with 6 µm pixels, 0.5 px edge
+    /// uncertainty, calibration to 0.2 mm in `e`, 1 px in `f`, 0.2 mrad in `δ`.
+    pub fn reference() -> Self {
+        NoiseModel {
+            subpixel_px: 0.05,
+            speckle_contrast: 1.0,
+            wavelength: 650e-9,
+            f_number: 2.0,
+            pixel_pitch: 6e-6,
+            edge_px: 0.5,
+            baseline: 2e-4,
+            focal_px: 1.0,
+            tilt: 2e-4,
+        }
+    }
+
+    /// Speckle-induced σ of the stripe centre (pixels): `C·λ/(2π·sin u')` with
+    /// `sin u' = 1/(2N)`, i.e. `C·λ·N/(π·pitch)` (Dorsch, Häusler & Herrmann 1994;
+    /// `docs/error-model.md`, "Speckle").
+    pub fn speckle_px(&self) -> Real {
+        if !(self.pixel_pitch > 0.0) {
+            return 0.0;
+        }
+        self.speckle_contrast * self.wavelength * self.f_number / (PI * self.pixel_pitch)
+    }
+
+    /// Total random σ of the stripe centre (pixels): subpixel and speckle in quadrature.
+    pub fn image_px(&self) -> Real {
+        let s = self.speckle_px();
+        (self.subpixel_px * self.subpixel_px + s * s).sqrt()
+    }
+
+    /// σ of one grazing-ray angle (radians): `edge_px / f` (a column is `1/f` rad near the
+    /// optical axis).
+    pub fn edge_angle_sigma(&self, focal_px: Real) -> Real {
+        if focal_px > 0.0 {
+            self.edge_px / focal_px
+        } else {
+            Real::INFINITY
+        }
+    }
+}
+
+/// `∂X/∂v`: how the triangulated point `x` (on `plane`, camera frame) moves per pixel of
+/// stripe position along the image column (`docs/error-model.md`, "One point"):
+///
+/// ```text
+/// X = d·r/(n·r),  r = (x_n, y_n, 1),  ∂r/∂v = (0, 1/f_y, 0)
+/// ∂X/∂v = z·∂r/∂v − (z/d)·(n_y/f_y)·X
+/// ```
+pub fn displacement_per_pixel(
+    plane: &LaserPlane,
+    focal_px: Real,
+    x: Vec3,
+) -> Result<Vec3, ErrorModelError> {
+    if !(x.z > 0.0 && x.z.is_finite() && focal_px > 0.0 && plane.offset > 0.0) {
+        return Err(ErrorModelError::InvalidGeometry);
+    }
+    let dr = Vec3::new(0.0, 1.0 / focal_px, 0.0);
+    Ok(dr * x.z - x * (x.z / plane.offset * plane.normal.y / focal_px))
+}
+
+/// 1σ errors of the coordinates of one point (metres).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PointSigma {
+    /// σ of `x`.
+    pub x: Real,
+    /// σ of `y`.
+    pub y: Real,
+    /// σ of `z`.
+    pub z: Real,
+}
+
+/// σ of `x, y, z` of a point from `sigma_px` of stripe-centre noise (thesis §7.2–7.3).
+pub fn point_sigma(
+    plane: &LaserPlane,
+    focal_px: Real,
+    x: Vec3,
+    sigma_px: Real,
+) -> Result<PointSigma, ErrorModelError> {
+    let g = displacement_per_pixel(plane, focal_px, x)? * sigma_px;
+    Ok(PointSigma {
+        x: g.x.abs(),
+        y: g.y.abs(),
+        z: g.z.abs(),
+    })
+}
+
+/// Displacements of the triangulated point `x` when the calibration is off by 1σ in `e`,
+/// `f` and `δ` (in that order; thesis §7.4): the pixel is kept, the point re-triangulated
+/// with the perturbed plane (`e + σ_e` or `δ + σ_δ`, same roll) or focal length
+/// (`f(1 + σ_f/f)` on both axes, principal point fixed). Exact, not linearised.
+pub fn calibration_displacements(
+    plane: &LaserPlane,
+    focal_px: Real,
+    x: Vec3,
+    noise: &NoiseModel,
+) -> Result<[Vec3; 3], ErrorModelError> {
+    let (pe, pf, pd) = perturbed(plane, focal_px, noise)?;
+    Ok([
+        retriangulate(x, &pe, 1.0)? - x,
+        retriangulate(x, plane, pf)? - x,
+        retriangulate(x, &pd, 1.0)? - x,
+    ])
+}
+
+/// The perturbed planes (`e + σ_e`, `δ + σ_δ`) and focal scale `1/(1 + σ_f/f)`.
+fn perturbed(
+    plane: &LaserPlane,
+    focal_px: Real,
+    noise: &NoiseModel,
+) -> Result<(LaserPlane, Real, LaserPlane), ErrorModelError> {
+    let (e, delta) = plane.baseline_tilt();
+    let roll = plane.roll();
+    if !(e.is_finite() && focal_px > 0.0) {
+        return Err(ErrorModelError::InvalidGeometry);
+    }
+    let pe = LaserPlane::from_baseline_tilt_roll(e + noise.baseline, delta, roll)
+        .map_err(|_| ErrorModelError::InvalidGeometry)?;
+    let pd = LaserPlane::from_baseline_tilt_roll(e, delta + noise.tilt, roll)
+        .map_err(|_| ErrorModelError::InvalidGeometry)?;
+    Ok((pe, 1.0 / (1.0 + noise.focal_px / focal_px), pd))
+}
+
+/// The point seen at the same pixel as `x`, with normalised coordinates scaled by
+/// `ray_scale` (a focal-length error), triangulated on `plane`.
+fn retriangulate(x: Vec3, plane: &LaserPlane, ray_scale: Real) -> Result<Vec3, ErrorModelError> {
+    if !(x.z > 0.0) {
+        return Err(ErrorModelError::InvalidGeometry);
+    }
+    let r = Vec3::new(x.x / x.z * ray_scale, x.y / x.z * ray_scale, 1.0);
+    plane
+        .intersect_ray(r)
+        .map_err(|_| ErrorModelError::InvalidGeometry)
+}
+
+/// Relative 1σ of a radius measured around `centre` (camera frame, on `plane`) from the
+/// calibration uncertainties: the calibration errors map the plane onto itself by a smooth
+/// transformation whose local scale along the two in-plane axes changes by `Δs_a`, `Δs_b`;
+/// a circle's radius changes by their mean (`docs/error-model.md`, "Calibration errors").
+/// Local scales by central differences over ±5 cm. Returns 0 on degenerate geometry.
+pub fn calibration_relative_sigma(
+    plane: &LaserPlane,
+    centre: Vec3,
+    noise: &NoiseModel,
+    focal_px: Real,
+) -> Real {
+    let Ok((pe, pf, pd)) = perturbed(plane, focal_px, noise) else {
+        return 0.0;
+    };
+    let (a, b) = plane.plane_axes();
+    let h: Real = 0.05;
+    let mut total = 0.0;
+    for k in 0..3 {
+        let map = |x: Vec3| -> Option<Vec2> {
+            let (pl, s) = match k {
+                0 => (&pe, 1.0),
+                1 => (plane, pf),
+                _ => (&pd, 1.0),
+            };
+            retriangulate(x, pl, s).ok().map(|y| pl.to_plane_coords(y))
+        };
+        let pts = [centre + a * h, centre - a * h, centre + b * h, centre - b * h];
+        let mut m = [Vec2::zeros(); 4];
+        for (o, p) in m.iter_mut().zip(pts) {
+            match map(p) {
+                Some(v) => *o = v,
+                None => return 0.0,
+            }
+        }
+        let sa = (m[0] - m[1]).norm() / (2.0 * h) - 1.0;
+        let sb = (m[2] - m[3]).norm() / (2.0 * h) - 1.0;
+        let rel = 0.5 * (sa + sb);
+        total += rel * rel;
+    }
+    total.sqrt()
+}
+
+/// σ of the radius of a geometric circle fit (unweighted least squares, as
+/// [`circle::fit_geometric`]) when each point `qᵢ` has an independent error along the
+/// vector `gᵢ` (1σ): the sandwich `A⁻¹BA⁻¹`, `A = ΣJJᵀ`, `B = Σ(nᵢ·gᵢ)²JJᵀ`,
+/// `J = (−nᵢ, −1)` (`docs/error-model.md`, "Circle fit"). Infinite if `A` is singular.
+pub fn circle_radius_sigma<I: Iterator<Item = (Vec2, Vec2)>>(c: &Circle, points: I) -> Real {
+    let mut a = Mat3::zeros();
+    let mut b = Mat3::zeros();
+    for (q, g) in points {
+        let d = q - c.centre;
+        let n = d.norm();
+        if !(n > 0.0) {
+            continue;
+        }
+        let nn = d / n;
+        let j = Vec3::new(-nn.x, -nn.y, -1.0);
+        let jj = j * j.transpose();
+        let s = nn.dot(&g);
+        a += jj;
+        b += jj * (s * s);
+    }
+    match a.try_inverse() {
+        Some(inv) => {
+            let cov = inv * b * inv;
+            cov[(2, 2)].max(0.0).sqrt()
+        }
+        None => Real::INFINITY,
+    }
+}
+
+/// A transversal stem for [`predict_diameter_sigma`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StemGeometry {
+    /// In-plane distance from the laser source to the nearest point of the stem, which lies
+    /// straight ahead along the plane's depth axis `b` (metres).
+    pub distance: Real,
+    /// Diameter (metres).
+    pub diameter: Real,
+}
+
+/// 1σ of a diameter by one method, by source (metres).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MethodSigma {
+    /// From the random stripe-centre noise (subpixel + speckle) of all points.
+    pub random: Real,
+    /// From the grazing-ray columns (three-tangent only; 0 for the fit).
+    pub edges: Real,
+    /// From the calibration uncertainties (`e`, `f`, `δ` in quadrature; systematic for one
+    /// device, random over devices).
+    pub calibration: Real,
+    /// All in quadrature.
+    pub total: Real,
+}
+
+/// Prediction for one stem and both methods.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DiameterPrediction {
+    /// Three-tangent method; `None` when a grazing ray is outside the image.
+    pub three_tangent: Option<MethodSigma>,
+    /// Geometric circle fit.
+    pub circle_fit: Option<MethodSigma>,
+    /// Columns that see the stem.
+    pub points: usize,
+    /// Angle of the lit and visible arc, seen from the stem's centre (radians).
+    pub arc_angle: Real,
+    /// σ of one point at the stem's nearest point (random noise).
+    pub point: PointSigma,
+}
+
+/// Samples the lit and visible arc of the circle (in-plane coordinates of `plane`, a
+/// transversal stem: axis along the plane normal) at one point per image column, as a
+/// column-wise stripe extraction does. Writes into `out`; returns
+/// `(count, cut)` where `cut` says the arc reaches the image border (an end is not a
+/// grazing ray). Uses the pinhole part of `camera` (`fx`, `cx`, width).
+pub fn sample_columns(
+    plane: &LaserPlane,
+    camera: &Camera,
+    c: &Circle,
+    out: &mut [Vec2],
+) -> Result<(usize, bool), ErrorModelError> {
+    let (a, b) = plane.plane_axes();
+    let s = plane.source;
+    let cam = plane.camera_centre_in_plane();
+    let mut n = 0;
+    let mut cut = false;
+    let w = camera.width;
+    for col in 0..w {
+        let xn = (col as Real - camera.cx) / camera.fx;
+        let m = Vec3::new(1.0, 0.0, -xn);
+        let g = Vec2::new(m.dot(&a), m.dot(&b));
+        let gn2 = g.norm_squared();
+        if !(gn2 > 0.0) {
+            continue;
+        }
+        let h = -m.dot(&s);
+        let q0 = g * (h / gn2);
+        let dir = Vec2::new(-g.y, g.x) / gn2.sqrt();
+        let rel = q0 - c.centre;
+        let bb = dir.dot(&rel);
+        let cc = rel.norm_squared() - c.radius * c.radius;
+        let disc = bb * bb - cc;
+        if !(disc >= 0.0) {
+            continue;
+        }
+        let sq = disc.sqrt();
+        for t in [-bb - sq, -bb + sq] {
+            let q = q0 + dir * t;
+            let nrm = q - c.centre;
+            let lit = nrm.dot(&q) < 0.0;
+            let visible = nrm.dot(&(cam - q)) > 0.0 && plane.from_plane_coords(q).z > 0.0;
+            if lit && visible {
+                let slot = out.get_mut(n).ok_or(ErrorModelError::ScratchTooSmall)?;
+                *slot = q;
+                n += 1;
+                if col == 0 || col + 1 == w {
+                    cut = true;
+                }
+                break;
+            }
+        }
+    }
+    Ok((n, cut))
+}
+
+/// Predicts the 1σ diameter error of a transversal stem for the three-tangent method and the
+/// geometric circle fit (`docs/error-model.md`, "Diameter"): random noise by linear
+/// propagation (exact for small noise), edges from `edge_px`, calibration by re-solving the
+/// exactly re-triangulated points with the perturbed calibration.
+///
+/// `scratch` needs `2 × camera.width` entries.
+pub fn predict_diameter_sigma(
+    plane: &LaserPlane,
+    camera: &Camera,
+    stem: &StemGeometry,
+    noise: &NoiseModel,
+    scratch: &mut [Vec2],
+) -> Result<DiameterPrediction, ErrorModelError> {
+    let r = 0.5 * stem.diameter;
+    if !(r > 0.0 && stem.distance > 0.0 && r.is_finite() && stem.distance.is_finite()) {
+        return Err(ErrorModelError::InvalidGeometry);
+    }
+    let w = camera.width as usize;
+    if scratch.len() < 2 * w {
+        return Err(ErrorModelError::ScratchTooSmall);
+    }
+    let (pts, rest) = scratch.split_at_mut(w);
+    let c = Circle::new(Vec2::new(0.0, stem.distance + r), r);
+    let (n, cut) = sample_columns(plane, camera, &c, pts)?;
+    if n < 8 {
+        return Err(ErrorModelError::NotVisible);
+    }
+    let pts = &pts[..n];
+    let (a, b) = plane.plane_axes();
+    let sigma_v = noise.image_px();
+    let fy = camera.fy;
+    let noise_of = |q: Vec2| -> Vec2 {
+        let x = plane.from_plane_coords(q);
+        match displacement_per_pixel(plane, fy, x) {
+            Ok(g) => Vec2::new(g.dot(&a), g.dot(&b)) * sigma_v,
+            Err(_) => Vec2::zeros(),
+        }
+    };
+    let near = Vec2::new(0.0, stem.distance);
+    let point = point_sigma(plane, fy, plane.from_plane_coords(near), sigma_v)?;
+    // Arc angle seen from the centre.
+    let ang = |q: &Vec2| (q.x - c.centre.x).atan2(-(q.y - c.centre.y));
+    let (mut lo, mut hi) = (Real::INFINITY, Real::NEG_INFINITY);
+    for q in pts {
+        lo = lo.min(ang(q));
+        hi = hi.max(ang(q));
+    }
+    let arc_angle = hi - lo;
+
+    // --- circle fit: random part by the sandwich formula.
+    let fit_random = circle_radius_sigma(&c, pts.iter().map(|q| (*q, noise_of(*q))));
+
+    // --- three-tangent: α from the end columns, D from the window parabola.
+    let u_c = Vec2::new(0.0, 1.0);
+    let tt_random_edges = if cut {
+        None
+    } else {
+        let psi = |q: Vec2| q.x.atan2(q.y);
+        let dpsi_first = (psi(pts[1]) - psi(pts[0])).abs();
+        let dpsi_last = (psi(pts[n - 1]) - psi(pts[n - 2])).abs();
+        let s_alpha =
+            0.5 * noise.edge_px * (dpsi_first * dpsi_first + dpsi_last * dpsi_last).sqrt();
+        let win = ThreeTangentParams::default().nearest_window * r;
+        let mut xtx = SMatrix::<Real, 3, 3>::zeros();
+        let mut xsx = SMatrix::<Real, 3, 3>::zeros();
+        for q in pts {
+            let t = q.x;
+            if t.abs() > win {
+                continue;
+            }
+            let tau = t / win;
+            let xv = SVector::<Real, 3>::new(1.0, tau, tau * tau);
+            let s = noise_of(*q).dot(&u_c);
+            xtx += xv * xv.transpose();
+            xsx += xv * xv.transpose() * (s * s);
+        }
+        let inv = xtx.try_inverse().ok_or(ErrorModelError::NotVisible)?;
+        let s_d = (inv * xsx * inv)[(0, 0)].max(0.0).sqrt();
+        let sin_a = r / (stem.distance + r);
+        let alpha = sin_a.asin();
+        let k = 1.0 - sin_a;
+        let dr_da = stem.distance * alpha.cos() / (k * k);
+        let dr_dd = sin_a / k;
+        Some((dr_dd * s_d, dr_da * s_alpha))
+    };
+
+    // --- calibration: re-triangulate, re-solve, difference.
+    let base_tt = if cut {
+        None
+    } else {
+        cylinder::three_tangent(pts, &ThreeTangentParams::default())
+            .ok()
+            .map(|t| t.radius)
+    };
+    let fit_of = |p: &[Vec2]| -> Result<Real, ErrorModelError> {
+        let init = circle::fit_hyper(p)?;
+        Ok(circle::fit_geometric(p, init, &LmParams::default())?.circle.radius)
+    };
+    let base_fit = fit_of(pts)?;
+    let (pe, pf, pd) = perturbed(plane, camera.fx, noise)?;
+    let (mut cal_tt, mut cal_fit) = (0.0, 0.0);
+    let moved = &mut rest[..n];
+    for k in 0..3 {
+        let (pl, s) = match k {
+            0 => (&pe, 1.0),
+            1 => (plane, pf),
+            _ => (&pd, 1.0),
+        };
+        for (o, q) in moved.iter_mut().zip(pts) {
+            let x = retriangulate(plane.from_plane_coords(*q), pl, s)?;
+            *o = pl.to_plane_coords(x);
+        }
+        if let Some(r0) = base_tt {
+            if let Ok(t) = cylinder::three_tangent(moved, &ThreeTangentParams::default()) {
+                cal_tt += (t.radius - r0).powi(2);
+            }
+        }
+        cal_fit += (fit_of(moved)? - base_fit).powi(2);
+    }
+    let fit = MethodSigma {
+        random: 2.0 * fit_random,
+        edges: 0.0,
+        calibration: 2.0 * cal_fit.sqrt(),
+        total: 2.0 * (fit_random * fit_random + cal_fit).sqrt(),
+    };
+    let tt = match (tt_random_edges, base_tt) {
+        (Some((rnd, edg)), Some(_)) => Some(MethodSigma {
+            random: 2.0 * rnd,
+            edges: 2.0 * edg,
+            calibration: 2.0 * cal_tt.sqrt(),
+            total: 2.0 * (rnd * rnd + edg * edg + cal_tt).sqrt(),
+        }),
+        _ => None,
+    };
+    Ok(DiameterPrediction {
+        three_tangent: tt,
+        circle_fit: Some(fit),
+        points: n,
+        arc_angle,
+        point,
+    })
+}

@@ -1,0 +1,768 @@
+//! Segmentation into connected objects with the thesis's 2×2 mask, and object features
+//! (thesis §5.4–5.5; derivation and connectivity discussion in `docs/image-processing.md`,
+//! sections "Segmentation" and "Object features").
+//!
+//! Two-pass connected-component labelling:
+//!
+//! 1. **Scan.** A 2×2 window slides in raster order; its bottom-right pixel is the current one.
+//!    A foreground pixel takes the provisional label of a foreground neighbour already scanned,
+//!    or a new label; when two differently labelled neighbours meet (the two arms of a "U"),
+//!    their labels are recorded as equivalent in a union–find table (`table[l]` = parent of `l`,
+//!    always `<= l`, so the root of a class is its smallest label).
+//! 2. **Resolve and relabel.** The table is flattened in one ascending sweep into a map from
+//!    provisional to compact labels `1..=n` (objects numbered in raster order of their first
+//!    pixel), then a second scan rewrites the label frame and accumulates each object's
+//!    [`ObjectFeatures`] from the intensity frame.
+//!
+//! [`Connectivity::Eight`] (the default) joins every pair of foreground pixels that share a 2×2
+//! window — that is full 8-connectivity. [`Connectivity::ThesisSix`] is the literal reading of
+//! the thesis's mask (the current pixel joins its left, upper and upper-left neighbours only),
+//! which never joins a pixel to its upper-right neighbour: a 6-connectivity that splits thin
+//! curves rising to the right ("/") into fragments. See docs/image-processing.md.
+
+use core::fmt;
+
+use super::{Frame, FrameError, FrameMut, Pixel};
+use crate::real::Real;
+
+/// Which pixel pairs the segmentation considers connected.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Connectivity {
+    /// 8-connectivity: horizontal, vertical and both diagonal neighbours (every pair of pixels
+    /// in a common 2×2 window). Symmetric under mirroring; the default.
+    #[default]
+    Eight,
+    /// The thesis's mask read literally: a pixel joins its left, upper and upper-left
+    /// neighbours. Horizontal, vertical and "\" diagonal neighbours are connected, "/" diagonal
+    /// ones are not (6-connectivity on a sheared hexagonal grid).
+    ThesisSix,
+}
+
+/// Why a frame cannot be segmented.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SegmentError {
+    /// The intensity and label frames differ in size (or are malformed).
+    Frame(FrameError),
+    /// Object coordinates are stored as `u16` and counts as `u32`: the frame must be at most
+    /// 65 536 pixels wide and high and have fewer than 2^32 pixels.
+    FrameTooLarge {
+        /// Frame width in pixels.
+        width: usize,
+        /// Frame height in pixels.
+        height: usize,
+    },
+    /// The scan needed more provisional labels than the equivalence table holds
+    /// (`table.len() - 1`, at most 65 535).
+    TooManyLabels {
+        /// Provisional labels the table can hold.
+        capacity: usize,
+    },
+    /// The frame has more objects than the feature table holds.
+    TooManyObjects {
+        /// Objects the feature table can hold.
+        capacity: usize,
+    },
+}
+
+impl From<FrameError> for SegmentError {
+    fn from(e: FrameError) -> Self {
+        SegmentError::Frame(e)
+    }
+}
+
+impl fmt::Display for SegmentError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            SegmentError::Frame(e) => write!(f, "{e}"),
+            SegmentError::FrameTooLarge { width, height } => {
+                write!(f, "frame {width}x{height} too large to segment")
+            }
+            SegmentError::TooManyLabels { capacity } => write!(
+                f,
+                "segmentation needs more than {capacity} provisional labels (image too cluttered)"
+            ),
+            SegmentError::TooManyObjects { capacity } => {
+                write!(
+                    f,
+                    "image has more than {capacity} objects (image too cluttered)"
+                )
+            }
+        }
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for SegmentError {}
+
+/// Features of one object (thesis §5.5), accumulated exactly in integers during the
+/// relabelling scan. Coordinates are pixel indices (`x` column, `y` row).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ObjectFeatures {
+    /// Compact label of the object in the label frame (`1..=n`).
+    pub label: u16,
+    /// Number of pixels.
+    pub pixel_count: u32,
+    /// Leftmost column.
+    pub min_x: u16,
+    /// Rightmost column.
+    pub max_x: u16,
+    /// Top row.
+    pub min_y: u16,
+    /// Bottom row.
+    pub max_y: u16,
+    /// `Σ I` over the object's pixels (`I` = intensity-frame value).
+    pub intensity_sum: u64,
+    /// `Σ I·x`.
+    pub intensity_x_sum: u64,
+    /// `Σ I·y`.
+    pub intensity_y_sum: u64,
+    /// `Σ x` (for the geometric centroid).
+    pub x_sum: u64,
+    /// `Σ y`.
+    pub y_sum: u64,
+    /// Largest intensity in the object.
+    pub peak_intensity: u32,
+}
+
+impl ObjectFeatures {
+    /// Features of an object with no pixel yet (identity element of the accumulation).
+    pub const fn empty(label: u16) -> Self {
+        ObjectFeatures {
+            label,
+            pixel_count: 0,
+            min_x: u16::MAX,
+            max_x: 0,
+            min_y: u16::MAX,
+            max_y: 0,
+            intensity_sum: 0,
+            intensity_x_sum: 0,
+            intensity_y_sum: 0,
+            x_sum: 0,
+            y_sum: 0,
+            peak_intensity: 0,
+        }
+    }
+
+    #[inline]
+    fn add(&mut self, x: u16, y: u16, intensity: u32) {
+        self.pixel_count += 1;
+        self.min_x = self.min_x.min(x);
+        self.max_x = self.max_x.max(x);
+        self.min_y = self.min_y.min(y);
+        self.max_y = self.max_y.max(y);
+        let i = intensity as u64;
+        self.intensity_sum += i;
+        self.intensity_x_sum += i * x as u64;
+        self.intensity_y_sum += i * y as u64;
+        self.x_sum += x as u64;
+        self.y_sum += y as u64;
+        self.peak_intensity = self.peak_intensity.max(intensity);
+    }
+
+    /// Bounding-box width in pixels, `max_x - min_x + 1` (0 for an empty object).
+    pub fn width(&self) -> u32 {
+        if self.pixel_count == 0 {
+            0
+        } else {
+            self.max_x as u32 - self.min_x as u32 + 1
+        }
+    }
+
+    /// Bounding-box height in pixels, `max_y - min_y + 1` (0 for an empty object).
+    pub fn height(&self) -> u32 {
+        if self.pixel_count == 0 {
+            0
+        } else {
+            self.max_y as u32 - self.min_y as u32 + 1
+        }
+    }
+
+    /// Height-to-width ratio of the bounding box (thesis §5.6.2). A laser curve across a
+    /// trunk in Tangent's images is wide and short (ratio well below 1). `0` for an empty
+    /// object.
+    pub fn height_to_width_ratio(&self) -> Real {
+        let w = self.width();
+        if w == 0 {
+            0.0
+        } else {
+            self.height() as Real / w as Real
+        }
+    }
+
+    /// Geometric centroid `(Σx/n, Σy/n)` in pixel coordinates, `None` for an empty object.
+    pub fn geometric_centroid(&self) -> Option<(Real, Real)> {
+        if self.pixel_count == 0 {
+            return None;
+        }
+        let n = self.pixel_count as f64;
+        Some((
+            (self.x_sum as f64 / n) as Real,
+            (self.y_sum as f64 / n) as Real,
+        ))
+    }
+
+    /// Intensity-weighted centroid `(ΣIx/ΣI, ΣIy/ΣI)` in pixel coordinates; the geometric
+    /// centroid if every intensity is zero; `None` for an empty object. The sums are exact
+    /// integers; the division is done in `f64` so that sums beyond 2^24 keep their precision
+    /// before the result is rounded to [`Real`].
+    pub fn centroid(&self) -> Option<(Real, Real)> {
+        if self.intensity_sum == 0 {
+            return self.geometric_centroid();
+        }
+        let s = self.intensity_sum as f64;
+        Some((
+            (self.intensity_x_sum as f64 / s) as Real,
+            (self.intensity_y_sum as f64 / s) as Real,
+        ))
+    }
+}
+
+/// Result of a segmentation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Segmentation {
+    /// Number of objects `n`: the label frame holds `1..=n`, `features[..n]` their features
+    /// (`features[i].label == i + 1`).
+    pub objects: usize,
+    /// Provisional labels the scan used (what the equivalence table must hold; useful to size
+    /// it).
+    pub provisional_labels: usize,
+}
+
+/// Worst-case number of provisional labels for a `width × height` frame, i.e. the table length
+/// minus one that can never overflow (capped by the `u16` label range, 65 535):
+/// with 8-connectivity a new label needs its four scanned neighbours empty, so new-label pixels
+/// are at least 2 apart in both directions: `⌈w/2⌉·⌈h/2⌉`. With [`Connectivity::ThesisSix`]
+/// pixels on the anti-diagonals `x + y ≡ 0 (mod 3)` each start a label: `⌈w·h/3⌉` bounds it.
+pub fn worst_case_labels(width: usize, height: usize, connectivity: Connectivity) -> usize {
+    match connectivity {
+        Connectivity::Eight => width.div_ceil(2).saturating_mul(height.div_ceil(2)),
+        Connectivity::ThesisSix => width.saturating_mul(height).div_ceil(3),
+    }
+}
+
+/// Root of label `x` in the equivalence table, with path halving. The table invariant
+/// `table[l] <= l` makes the walk strictly decreasing, so it terminates on any table content.
+#[inline]
+fn find(table: &mut [u16], mut x: u16) -> u16 {
+    loop {
+        let p = match table.get(x as usize) {
+            Some(&p) if p < x => p,
+            _ => return x,
+        };
+        let gp = match table.get(p as usize) {
+            Some(&gp) if gp < p => gp,
+            _ => return p,
+        };
+        if let Some(slot) = table.get_mut(x as usize) {
+            *slot = gp;
+        }
+        x = gp;
+    }
+}
+
+/// Records that labels `a` and `b` are the same object; returns the common root (the smaller).
+#[inline]
+fn union(table: &mut [u16], a: u16, b: u16) -> u16 {
+    let ra = find(table, a);
+    let rb = find(table, b);
+    let (lo, hi) = if ra < rb { (ra, rb) } else { (rb, ra) };
+    if lo != hi {
+        if let Some(slot) = table.get_mut(hi as usize) {
+            *slot = lo;
+        }
+    }
+    lo
+}
+
+/// Scan state of the first pass: the equivalence table and its fill level.
+struct Labeller<'t> {
+    table: &'t mut [u16],
+    next: u16,
+    capacity: usize,
+}
+
+impl Labeller<'_> {
+    #[inline]
+    fn new_label(&mut self) -> Result<u16, SegmentError> {
+        if self.next as usize >= self.capacity {
+            return Err(SegmentError::TooManyLabels {
+                capacity: self.capacity,
+            });
+        }
+        self.next += 1;
+        if let Some(slot) = self.table.get_mut(self.next as usize) {
+            *slot = self.next;
+        }
+        Ok(self.next)
+    }
+}
+
+/// Segments `image` into connected objects of pixels with `value > threshold`, writes compact
+/// labels (`0` = background, objects `1..=n`) into `labels` and the objects' features into
+/// `features[..n]`.
+///
+/// - `image`: the difference image (the threshold is applied on the fly, which saves the
+///   mask frame and one pass), or a binary mask from
+///   [`threshold_mask`](super::threshold::threshold_mask) with `threshold = 0`. The values are
+///   also the intensities `I` of the features.
+/// - `labels`: same size as `image`; fully overwritten.
+/// - `table`: equivalence table, `table.len() - 1` provisional labels (at most 65 535);
+///   [`worst_case_labels`] gives a size that never overflows. A few thousand entries are
+///   plenty for laser images; clutter beyond that is reported, not truncated.
+/// - `features`: one entry per object.
+///
+/// Errors: [`SegmentError::TooManyLabels`] / [`SegmentError::TooManyObjects`] when a table is
+/// full. These are errors rather than a silent truncation because truncation would drop the
+/// objects scanned last (the bottom of the image) whatever they are — possibly the laser
+/// curve — and return a plausible but wrong measurement; an error lets the pipeline tell the
+/// user the scene is too cluttered or the threshold too low. On error `labels` holds partial
+/// provisional labels and must not be used.
+pub fn segment<P: Pixel>(
+    image: &Frame<'_, P>,
+    threshold: u32,
+    labels: &mut FrameMut<'_, u16>,
+    table: &mut [u16],
+    features: &mut [ObjectFeatures],
+    connectivity: Connectivity,
+) -> Result<Segmentation, SegmentError> {
+    image.check_same_size(&labels.as_frame())?;
+    let (width, height) = (image.width(), image.height());
+    if width > 1 << 16 || height > 1 << 16 || width.saturating_mul(height) > u32::MAX as usize {
+        return Err(SegmentError::FrameTooLarge { width, height });
+    }
+    let capacity = table.len().saturating_sub(1).min(u16::MAX as usize);
+    if let Some(t0) = table.first_mut() {
+        *t0 = 0;
+    }
+    let mut lab = Labeller {
+        table,
+        next: 0,
+        capacity,
+    };
+    let mut first_row = usize::MAX;
+    let mut last_row = 0usize;
+
+    // ---- Pass 1: provisional labels and equivalences. ----
+    // Row 0 has no upper neighbours: a run of foreground pixels shares one label.
+    {
+        let mut left = 0u16;
+        let mut any = false;
+        for (c, &p) in labels.row_mut(0).iter_mut().zip(image.row(0)) {
+            let v: u32 = p.into();
+            left = if v > threshold {
+                any = true;
+                if left != 0 {
+                    left
+                } else {
+                    lab.new_label()?
+                }
+            } else {
+                0
+            };
+            *c = left;
+        }
+        if any {
+            first_row = 0;
+        }
+    }
+    for y in 1..height {
+        let Some((prev, cur)) = labels.previous_and_row_mut(y) else {
+            break; // unreachable: 1 <= y < height
+        };
+        let row = image.row(y);
+        // Left and upper-left labels are carried in registers; the upper-right one comes from a
+        // one-step look-ahead on the previous row (0 past the right edge), so the loop has no
+        // indexing at all.
+        let mut left = 0u16;
+        let mut up_left = 0u16;
+        let mut any = false;
+        let up_right_iter = prev.iter().skip(1).chain(core::iter::once(&0u16));
+        for ((c, &p), (&up, &up_right)) in
+            cur.iter_mut().zip(row).zip(prev.iter().zip(up_right_iter))
+        {
+            let v: u32 = p.into();
+            let l = if v <= threshold {
+                0
+            } else {
+                any = true;
+                match connectivity {
+                    // Decision tree of Wu, Otoo & Suzuki (2005): the upper neighbour is adjacent
+                    // to all the others, so when it is set no equivalence can be new.
+                    Connectivity::Eight => {
+                        if up != 0 {
+                            up
+                        } else if up_left != 0 {
+                            if up_right != 0 {
+                                union(lab.table, up_left, up_right)
+                            } else {
+                                up_left
+                            }
+                        } else if up_right != 0 {
+                            if left != 0 {
+                                union(lab.table, up_right, left)
+                            } else {
+                                up_right
+                            }
+                        } else if left != 0 {
+                            left
+                        } else {
+                            lab.new_label()?
+                        }
+                    }
+                    // Upper-left is adjacent to both upper and left in this connectivity.
+                    Connectivity::ThesisSix => {
+                        if up_left != 0 {
+                            up_left
+                        } else if up != 0 {
+                            if left != 0 {
+                                union(lab.table, up, left)
+                            } else {
+                                up
+                            }
+                        } else if left != 0 {
+                            left
+                        } else {
+                            lab.new_label()?
+                        }
+                    }
+                }
+            };
+            *c = l;
+            left = l;
+            up_left = up;
+        }
+        if any {
+            first_row = first_row.min(y);
+            last_row = y;
+        }
+    }
+    let provisional = lab.next as usize;
+    let table = lab.table;
+
+    // ---- Resolve: provisional label -> compact label, in place. ----
+    // Ascending sweep: a root (table[l] == l) gets the next compact number; any other label's
+    // parent p < l has already been replaced by its compact number, which is its own.
+    let mut objects = 0usize;
+    for l in 1..=provisional {
+        let p = table.get(l).copied().unwrap_or(0) as usize;
+        let compact = if p == l {
+            objects += 1;
+            objects as u16
+        } else {
+            table.get(p).copied().unwrap_or(0)
+        };
+        if let Some(slot) = table.get_mut(l) {
+            *slot = compact;
+        }
+    }
+    if objects > features.len() {
+        return Err(SegmentError::TooManyObjects {
+            capacity: features.len(),
+        });
+    }
+    for (i, f) in features.iter_mut().take(objects).enumerate() {
+        *f = ObjectFeatures::empty(i as u16 + 1);
+    }
+
+    // ---- Pass 2: relabel and accumulate features (only rows holding foreground). ----
+    if first_row <= last_row {
+        for y in first_row..=last_row {
+            let row = image.row(y);
+            let yy = y as u16; // y < 2^16 checked above
+            for (x, (c, &p)) in labels.row_mut(y).iter_mut().zip(row).enumerate() {
+                if *c == 0 {
+                    continue;
+                }
+                let compact = table.get(*c as usize).copied().unwrap_or(0);
+                *c = compact;
+                if let Some(f) = features.get_mut((compact as usize).wrapping_sub(1)) {
+                    f.add(x as u16, yy, p.into());
+                }
+            }
+        }
+    }
+    Ok(Segmentation {
+        objects,
+        provisional_labels: provisional,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use super::*;
+    use std::vec;
+    use std::vec::Vec;
+
+    /// Parses a drawing ('#' foreground, '.' background) into a row-major u8 mask.
+    fn parse(rows: &[&str]) -> (Vec<u8>, usize, usize) {
+        let w = rows[0].len();
+        let data = rows
+            .iter()
+            .flat_map(|r| r.bytes().map(|b| (b == b'#') as u8))
+            .collect();
+        (data, w, rows.len())
+    }
+
+    struct Out {
+        labels: Vec<u16>,
+        features: Vec<ObjectFeatures>,
+        seg: Segmentation,
+    }
+
+    fn run(mask: &[u8], w: usize, h: usize, conn: Connectivity) -> Out {
+        let img = Frame::new(mask, w, h, w).unwrap();
+        let mut labels = vec![0xFFFFu16; w * h];
+        let mut table = vec![0u16; worst_case_labels(w, h, conn) + 1];
+        let mut features = vec![ObjectFeatures::empty(0); w * h];
+        let mut lf = FrameMut::new(&mut labels, w, h, w).unwrap();
+        let seg = segment(&img, 0, &mut lf, &mut table, &mut features, conn).unwrap();
+        features.truncate(seg.objects);
+        Out {
+            labels,
+            features,
+            seg,
+        }
+    }
+
+    /// Independent ground truth: breadth-first flood fill from each unlabelled foreground pixel
+    /// in raster order, so components are numbered by their first pixel like `segment`.
+    fn flood(mask: &[u8], w: usize, h: usize, conn: Connectivity) -> Vec<u16> {
+        let mut nb: Vec<(isize, isize)> = vec![(-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (1, 1)];
+        if conn == Connectivity::Eight {
+            nb.extend([(1, -1), (-1, 1)]);
+        }
+        let mut out = vec![0u16; w * h];
+        let mut n = 0u16;
+        for start in 0..w * h {
+            if mask[start] == 0 || out[start] != 0 {
+                continue;
+            }
+            n += 1;
+            out[start] = n;
+            let mut queue = std::collections::VecDeque::from([start]);
+            while let Some(i) = queue.pop_front() {
+                let (x, y) = ((i % w) as isize, (i / w) as isize);
+                for (dx, dy) in &nb {
+                    let (u, v) = (x + dx, y + dy);
+                    if u < 0 || v < 0 || u >= w as isize || v >= h as isize {
+                        continue;
+                    }
+                    let j = v as usize * w + u as usize;
+                    if mask[j] != 0 && out[j] == 0 {
+                        out[j] = n;
+                        queue.push_back(j);
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn l_shape_is_one_object_with_known_features() {
+        let (m, w, h) = parse(&["#....", "#....", "#....", "####."]);
+        let o = run(&m, w, h, Connectivity::Eight);
+        assert_eq!(o.seg.objects, 1);
+        let f = o.features[0];
+        assert_eq!((f.label, f.pixel_count), (1, 7));
+        assert_eq!((f.min_x, f.max_x, f.min_y, f.max_y), (0, 3, 0, 3));
+        assert_eq!((f.width(), f.height()), (4, 4));
+        // Mask values are 1: geometric = weighted centroid = ((0+0+0+0+1+2+3)/7, (0+1+2+3*4)/7).
+        // Tolerance: one f64 -> Real rounding of values < 4 (f32: 2.4e-7).
+        let (cx, cy) = f.centroid().unwrap();
+        assert!((cx - 6.0 / 7.0).abs() < 1e-6 && (cy - 15.0 / 7.0).abs() < 1e-6);
+        assert_eq!(o.labels, flood(&m, w, h, Connectivity::Eight));
+    }
+
+    #[test]
+    fn u_shape_merges_late_and_labels_are_compact() {
+        // Two arms get provisional labels 1 and 2 (3 for the lone pixel at the top right);
+        // the bottom bar merges 1 and 2 in the last row. Compact labels: U = 1, dot = 2.
+        let (m, w, h) = parse(&["#..#..#", "#..#...", "#..#...", "####..."]);
+        let o = run(&m, w, h, Connectivity::Eight);
+        assert_eq!(o.seg.provisional_labels, 3);
+        assert_eq!(o.seg.objects, 2);
+        assert_eq!(o.labels, flood(&m, w, h, Connectivity::Eight));
+        assert_eq!(o.labels[0], 1);
+        assert_eq!(o.labels[3], 1);
+        assert_eq!(o.labels[6], 2);
+        assert_eq!(o.features[0].pixel_count, 10);
+        assert_eq!(o.features[1].pixel_count, 1);
+    }
+
+    #[test]
+    fn comb_needs_chained_equivalences() {
+        // Five teeth, labelled 1..5 in row 0, joined only by the fourth row: the union-find
+        // must resolve 1~2~3~4~5 into a single object (the pixel below the bar belongs to it).
+        let (m, w, h) = parse(&[
+            "#.#.#.#.#",
+            "#.#.#.#.#",
+            "#.#.#.#.#",
+            "#########",
+            "........#",
+        ]);
+        let o = run(&m, w, h, Connectivity::Eight);
+        assert_eq!(o.seg.provisional_labels, 5);
+        assert_eq!(o.seg.objects, 1);
+        // Staircase merging from the right ("W" pattern), where the left arm arrives last.
+        let (m, w, h) = parse(&["....#.#", "...##.#", "..#..##", ".#.....", "#......"]);
+        let o = run(&m, w, h, Connectivity::Eight);
+        assert_eq!(o.labels, flood(&m, w, h, Connectivity::Eight));
+        assert_eq!(o.seg.objects, 1);
+    }
+
+    #[test]
+    fn diagonal_touching_and_connectivity() {
+        // "\" diagonal: one object in both connectivities.
+        let (m, w, h) = parse(&["#...", ".#..", "..#.", "...#"]);
+        assert_eq!(run(&m, w, h, Connectivity::Eight).seg.objects, 1);
+        assert_eq!(run(&m, w, h, Connectivity::ThesisSix).seg.objects, 1);
+        // "/" diagonal: one object with 8-connectivity, four with the literal 2x2 mask.
+        let (m, w, h) = parse(&["...#", "..#.", ".#..", "#..."]);
+        assert_eq!(run(&m, w, h, Connectivity::Eight).seg.objects, 1);
+        let o = run(&m, w, h, Connectivity::ThesisSix);
+        assert_eq!(o.seg.objects, 4);
+        assert_eq!(o.labels, flood(&m, w, h, Connectivity::ThesisSix));
+    }
+
+    #[test]
+    fn single_pixel_objects() {
+        let (m, w, h) = parse(&["#.#.#", ".....", "#.#.#"]);
+        let o = run(&m, w, h, Connectivity::Eight);
+        assert_eq!(o.seg.objects, 6);
+        for (i, f) in o.features.iter().enumerate() {
+            assert_eq!(f.label as usize, i + 1);
+            assert_eq!((f.pixel_count, f.width(), f.height()), (1, 1, 1));
+            let x = 2 * (i % 3) as u16;
+            let y = 2 * (i / 3) as u16;
+            assert_eq!((f.min_x, f.min_y), (x, y));
+        }
+        // This is exactly the worst case for 8-connectivity: ceil(5/2)*ceil(3/2) = 6 labels.
+        assert_eq!(
+            o.seg.provisional_labels,
+            worst_case_labels(5, 3, Connectivity::Eight)
+        );
+    }
+
+    #[test]
+    fn matches_flood_fill_on_random_masks() {
+        // Pseudo-random masks at several densities (LCG, fixed seed), both connectivities.
+        let mut s: u32 = 12345;
+        for &density in &[20u32, 45, 60] {
+            for conn in [Connectivity::Eight, Connectivity::ThesisSix] {
+                let (w, h) = (37, 23);
+                let m: Vec<u8> = (0..w * h)
+                    .map(|_| {
+                        s = s.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                        ((s >> 24) % 100 < density) as u8
+                    })
+                    .collect();
+                let o = run(&m, w, h, conn);
+                let truth = flood(&m, w, h, conn);
+                assert_eq!(o.labels, truth, "density {density} {conn:?}");
+                for f in &o.features {
+                    let n = truth.iter().filter(|&&l| l == f.label).count();
+                    assert_eq!(f.pixel_count as usize, n);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn intensity_features_on_a_known_shape() {
+        // 3x2 block at x = 2..=4, y = 1..=2 with intensity 10*x + y (threshold 5 excludes the
+        // background value 3). Weighted centroid: Σ I x / Σ I computed by hand.
+        let (w, h) = (6, 4);
+        let mut img = vec![3u16; w * h];
+        let (mut si, mut six, mut siy) = (0u64, 0u64, 0u64);
+        for y in 1..=2 {
+            for x in 2..=4 {
+                let v = 10 * x as u64 + y as u64;
+                img[y * w + x] = v as u16;
+                si += v;
+                six += v * x as u64;
+                siy += v * y as u64;
+            }
+        }
+        let fi = Frame::new(&img, w, h, w).unwrap();
+        let mut labels = vec![0u16; w * h];
+        let mut lf = FrameMut::new(&mut labels, w, h, w).unwrap();
+        let mut table = [0u16; 8];
+        let mut feats = [ObjectFeatures::empty(0); 2];
+        let seg = segment(&fi, 5, &mut lf, &mut table, &mut feats, Connectivity::Eight).unwrap();
+        assert_eq!(seg.objects, 1);
+        let f = feats[0];
+        assert_eq!((f.pixel_count, f.peak_intensity), (6, 42));
+        assert_eq!(
+            (f.intensity_sum, f.intensity_x_sum, f.intensity_y_sum),
+            (si, six, siy)
+        );
+        let ratio = f.height_to_width_ratio();
+        assert!((ratio - 2.0 / 3.0).abs() < 1e-6);
+        let (cx, cy) = f.centroid().unwrap();
+        // Tolerance: one rounding of an f64 quotient to Real (f32: 2^-24 relative of ~3).
+        assert!((cx - (six as f64 / si as f64) as Real).abs() < 1e-6);
+        assert!((cy - (siy as f64 / si as f64) as Real).abs() < 1e-6);
+        let (gx, gy) = f.geometric_centroid().unwrap();
+        assert!((gx - 3.0).abs() < 1e-6 && (gy - 1.5).abs() < 1e-6);
+    }
+
+    #[test]
+    fn full_tables_are_errors() {
+        let (m, w, h) = parse(&["#.#.#", ".....", "#.#.#"]);
+        let img = Frame::new(&m, w, h, w).unwrap();
+        let mut labels = vec![0u16; w * h];
+        let mut lf = FrameMut::new(&mut labels, w, h, w).unwrap();
+        let mut feats = [ObjectFeatures::empty(0); 6];
+        // 6 provisional labels needed; a table of 6 entries holds 5.
+        let mut table = [0u16; 6];
+        assert_eq!(
+            segment(
+                &img,
+                0,
+                &mut lf,
+                &mut table,
+                &mut feats,
+                Connectivity::Eight
+            )
+            .unwrap_err(),
+            SegmentError::TooManyLabels { capacity: 5 }
+        );
+        // Enough labels but room for only 4 objects' features.
+        let mut table = [0u16; 7];
+        assert_eq!(
+            segment(
+                &img,
+                0,
+                &mut lf,
+                &mut table,
+                &mut feats[..4],
+                Connectivity::Eight
+            )
+            .unwrap_err(),
+            SegmentError::TooManyObjects { capacity: 4 }
+        );
+        // Exactly enough of both succeeds.
+        let seg = segment(
+            &img,
+            0,
+            &mut lf,
+            &mut table,
+            &mut feats,
+            Connectivity::Eight,
+        )
+        .unwrap();
+        assert_eq!(seg.objects, 6);
+        // An empty table cannot label anything, but an empty image needs no label.
+        assert_eq!(
+            segment(&img, 0, &mut lf, &mut [], &mut feats, Connectivity::Eight).unwrap_err(),
+            SegmentError::TooManyLabels { capacity: 0 }
+        );
+        let dark = [0u8; 15];
+        let img = Frame::new(&dark, w, h, w).unwrap();
+        let seg = segment(&img, 0, &mut lf, &mut [], &mut [], Connectivity::Eight).unwrap();
+        assert_eq!(seg.objects, 0);
+        assert!(labels.iter().all(|&l| l == 0));
+    }
+}

@@ -1,0 +1,62 @@
+//! Solvers: from the 3-D points of one capture to a dimension (thesis chapter 9 onwards).
+//!
+//! * [`circle`]: algebraic (Kåsa, Taubin, Hyper) and geometric (Levenberg–Marquardt,
+//!   robust) circle fits on 2-D points (`docs/cylinder.md`, "Circle fits").
+//! * [`cylinder`]: the stem diameter — three-tangent method, full-arc fits, tilted
+//!   cylinders from two parallel planes, elliptic sections, method choice
+//!   (`docs/cylinder.md`).
+//!
+//! Every solver works on caller-owned slices, never allocates and returns a [`SolveError`]
+//! instead of a made-up number when the data cannot support an answer.
+
+use core::fmt;
+
+pub mod circle;
+pub mod cylinder;
+// pub mod ellipse;
+
+/// Why a solver could not produce a trustworthy answer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SolveError {
+    /// Fewer points than the model needs (3 for a circle, 5 for an ellipse or a cylinder,
+    /// more for the local fits of the three-tangent method).
+    TooFewPoints,
+    /// An input point or parameter is NaN or infinite.
+    NonFinite,
+    /// The points do not determine the model: collinear or coincident points, a singular
+    /// normal matrix, a source inside the section.
+    Degenerate,
+    /// An iterative fit did not converge within its iteration budget.
+    NotConverged,
+    /// A caller-provided scratch buffer is shorter than the number of points.
+    ScratchTooSmall,
+    /// The lit and visible arc is too short (in angle seen from its centre) for the radius
+    /// to be trusted (see `docs/cylinder.md`, "Choosing the method").
+    ArcTooShort,
+    /// The solved radius is outside the plausible range given in the parameters.
+    RadiusOutOfRange,
+    /// A parameter is out of its documented domain (negative tolerance, zero iterations, …).
+    InvalidParameter,
+    /// The input has no or too many laser planes for the requested solution.
+    PlaneCount,
+}
+
+impl fmt::Display for SolveError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let s = match self {
+            SolveError::TooFewPoints => "too few points for the model",
+            SolveError::NonFinite => "non-finite point or parameter",
+            SolveError::Degenerate => "points do not determine the model (collinear or singular)",
+            SolveError::NotConverged => "iterative fit did not converge",
+            SolveError::ScratchTooSmall => "scratch buffer shorter than the point count",
+            SolveError::ArcTooShort => "visible arc too short for a trustworthy radius",
+            SolveError::RadiusOutOfRange => "radius outside the plausible range",
+            SolveError::InvalidParameter => "solver parameter out of range",
+            SolveError::PlaneCount => "wrong number of laser planes for this solution",
+        };
+        f.write_str(s)
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for SolveError {}

@@ -1,0 +1,66 @@
+#!/usr/bin/env bash
+# Runs every test of Tangent from a fresh clone and prints one summary line:
+#   "tests: N passed, N failed"
+# It installs what the tests need first (the thumbv7em target through rustup, which reads
+# rust-toolchain.toml; qemu-system-arm through apt when running as root).
+set -uo pipefail
+cd "$(dirname "$0")/.."
+
+passed=0
+failed=0
+failed_steps=()
+log_dir=$(mktemp -d)
+
+note() { printf '\n=== %s ===\n' "$*"; }
+
+# --- prerequisites -----------------------------------------------------------------
+note "prerequisites"
+rustup show active-toolchain >/dev/null 2>&1 || true   # installs the pinned toolchain if missing
+rustup target add thumbv7em-none-eabihf >/dev/null 2>&1 || echo "warning: could not add the thumbv7em-none-eabihf target"
+if ! command -v qemu-system-arm >/dev/null 2>&1; then
+  if [ "$(id -u)" = 0 ]; then
+    echo "installing qemu-system-arm (apt)"
+    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq qemu-system-arm) >"$log_dir/apt.log" 2>&1 \
+      || { echo "warning: apt-get install qemu-system-arm failed"; tail -5 "$log_dir/apt.log"; }
+  else
+    echo "warning: qemu-system-arm missing and not root: emulated-firmware tests will fail"
+  fi
+fi
+command -v qemu-system-arm >/dev/null 2>&1 && qemu-system-arm --version | head -1
+
+# run_cargo_tests NAME CMD... : runs a cargo test command and adds its counts.
+run_cargo_tests() {
+  local name=$1; shift
+  note "$name: $*"
+  local out="$log_dir/$name.log"
+  "$@" 2>&1 | tee "$out"
+  local status=${PIPESTATUS[0]}
+  local p f
+  read -r p f < <(awk '/^test result:/ { for (i = 1; i <= NF; i++) { if ($i ~ /^passed;?$/) p += $(i-1); if ($i ~ /^failed;?$/) f += $(i-1) } } END { print p + 0, f + 0 }' "$out")
+  passed=$((passed + ${p:-0}))
+  failed=$((failed + ${f:-0}))
+  if [ "$status" -ne 0 ]; then
+    failed_steps+=("$name")
+    # A build failure runs no test: count the step itself as one failure.
+    [ "${f:-0}" -eq 0 ] && failed=$((failed + 1))
+  fi
+}
+
+# run_step NAME CMD... : a non-test step (a build); counts as one pass or one failure.
+run_step() {
+  local name=$1; shift
+  note "$name: $*"
+  if "$@"; then passed=$((passed + 1)); else failed=$((failed + 1)); failed_steps+=("$name"); fi
+}
+
+run_cargo_tests host-and-core cargo test --workspace --release
+run_cargo_tests core-f32 cargo test -p tangent-core --features f32 --release
+
+# --- summary -----------------------------------------------------------------------
+echo
+if [ ${#failed_steps[@]} -gt 0 ]; then
+  echo "failed steps: ${failed_steps[*]}"
+fi
+echo "tests: $passed passed, $failed failed"
+rm -rf "$log_dir"
+[ "$failed" -eq 0 ]
