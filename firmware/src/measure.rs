@@ -5,7 +5,13 @@
 //! behaviour and the pipeline's working memory stays owned by the board's `main`.
 
 use tangent_core::calibration::Calibration;
+use tangent_core::curve::CurvePoint;
+use tangent_core::image::segment::ObjectFeatures;
+use tangent_core::image::Frame;
+use tangent_core::pipeline::{self, PipelineConfig, PipelineError, Workspace};
 use tangent_core::protocol::Method;
+use tangent_core::real::{Real, Vec2, Vec3};
+use tangent_core::solvers::cylinder::CylinderParams;
 
 /// A captured frame pair, 8-bit, row-major, `width` bytes per row.
 #[derive(Debug, Clone, Copy)]
@@ -48,30 +54,159 @@ pub trait Measurer {
     fn measure(&mut self, pair: &FramePair<'_>, calibration: &Calibration) -> Result<Outcome, u32>;
 }
 
-/// Detail code of a measurement the firmware could not attempt because the shared
-/// pipeline is not linked in yet.
-pub const PIPELINE_UNAVAILABLE: u32 = 0xFFFF;
 
-/// The shared pipeline (`tangent_core::pipeline`) with its working memory.
-pub struct PipelineMeasurer {
-    _private: (),
+/// Label-table entries of the workspace (`pipeline::WorkspaceSizes::new`).
+pub const LABEL_TABLE: usize = 4096;
+/// Object-feature entries of the workspace.
+pub const OBJECTS: usize = 1024;
+/// Histogram bins for 8-bit frames.
+pub const HISTOGRAM: usize = 256;
+
+/// Curve/point entries for `width` columns and `planes` planes
+/// (`pipeline::WorkspaceSizes::new`: two per column and plane).
+pub const fn points_for(width: usize, planes: usize) -> usize {
+    width * planes * 2
 }
 
-impl PipelineMeasurer {
-    /// A measurer.
-    pub fn new() -> Self {
-        PipelineMeasurer { _private: () }
+/// The pipeline's small buffers (everything but the two per-pixel ones), const-constructible
+/// so a board can place them in a static of its choice.
+pub struct SmallBuffers<const POINTS: usize> {
+    /// Histogram.
+    pub histogram: [u32; HISTOGRAM],
+    /// Segmentation equivalence table.
+    pub label_table: [u16; LABEL_TABLE],
+    /// Object features.
+    pub objects: [ObjectFeatures; OBJECTS],
+    /// Curve points.
+    pub curve: [CurvePoint; POINTS],
+    /// 3-D points.
+    pub points: [Vec3; POINTS],
+    /// Solver scratch (2-D).
+    pub scratch_points: [Vec2; POINTS],
+    /// Solver scratch (values).
+    pub scratch_values: [Real; POINTS],
+}
+
+impl<const POINTS: usize> SmallBuffers<POINTS> {
+    /// Zeroed buffers.
+    pub const fn new() -> Self {
+        const ZERO_POINT: CurvePoint = CurvePoint {
+            column: 0,
+            row: 0.0,
+            amplitude: 0.0,
+            curve: 0,
+            saturated: false,
+        };
+        SmallBuffers {
+            histogram: [0; HISTOGRAM],
+            label_table: [0; LABEL_TABLE],
+            objects: [ObjectFeatures::empty(0); OBJECTS],
+            curve: [ZERO_POINT; POINTS],
+            points: [Vec3::new(0.0, 0.0, 0.0); POINTS],
+            scratch_points: [Vec2::new(0.0, 0.0); POINTS],
+            scratch_values: [0.0; POINTS],
+        }
     }
 }
 
-impl Default for PipelineMeasurer {
+impl<const POINTS: usize> Default for SmallBuffers<POINTS> {
     fn default() -> Self {
         Self::new()
     }
 }
 
-impl Measurer for PipelineMeasurer {
-    fn measure(&mut self, _pair: &FramePair<'_>, _calibration: &Calibration) -> Result<Outcome, u32> {
-        Err(PIPELINE_UNAVAILABLE)
+/// Assembles a [`Workspace`] from a board's buffers.
+pub fn workspace<'w, const POINTS: usize>(
+    diff: &'w mut [u8],
+    labels: &'w mut [u16],
+    small: &'w mut SmallBuffers<POINTS>,
+) -> Workspace<'w, u8> {
+    Workspace {
+        diff,
+        labels,
+        histogram: &mut small.histogram,
+        label_table: &mut small.label_table,
+        objects: &mut small.objects,
+        curve: &mut small.curve,
+        points: &mut small.points,
+        scratch_points: &mut small.scratch_points,
+        scratch_values: &mut small.scratch_values,
+    }
+}
+
+/// The shared pipeline (`tangent_core::pipeline::measure_stem`) with its working memory.
+pub struct PipelineMeasurer<'w> {
+    ws: Workspace<'w, u8>,
+    /// Image-chain parameters.
+    pub config: PipelineConfig,
+    /// Cylinder-solver parameters.
+    pub params: CylinderParams,
+}
+
+impl<'w> PipelineMeasurer<'w> {
+    /// A measurer with the default parameters (those the host uses).
+    pub fn new(ws: Workspace<'w, u8>) -> Self {
+        PipelineMeasurer {
+            ws,
+            config: PipelineConfig::default(),
+            params: CylinderParams::default(),
+        }
+    }
+}
+
+/// The calibration of a window of rows: the same camera with the principal point moved up
+/// by `row_offset` and the height of the window, so that frame row `r` is sensor row
+/// `r + row_offset` (the pinhole model is invariant to this shift of the image origin).
+pub fn window_calibration(cal: &Calibration, row_offset: usize, height: usize) -> Calibration {
+    let mut c = cal.clone();
+    c.camera.cy -= row_offset as Real;
+    c.camera.height = height as u32;
+    c
+}
+
+/// Detail code of a [`PipelineError`] for [`tangent_core::protocol::ErrorCode::MeasurementFailed`]
+/// (the variant's position in the enum, `docs/protocol.md`).
+pub fn error_code(e: &PipelineError) -> u32 {
+    match e {
+        PipelineError::Frame(_) => 1,
+        PipelineError::FrameSizeMismatch { .. } => 2,
+        PipelineError::WorkspaceTooSmall { .. } => 3,
+        PipelineError::NoLaserLight { .. } => 4,
+        PipelineError::AmbientSaturated { .. } => 5,
+        PipelineError::Threshold(_) => 6,
+        PipelineError::Segment(_) => 7,
+        PipelineError::NoCurve => 8,
+        PipelineError::CurveTooShort { .. } => 9,
+        PipelineError::Curve(_) => 10,
+        PipelineError::Calibration => 11,
+        PipelineError::Triangulation(_) => 12,
+        PipelineError::OutsideFrame => 13,
+        PipelineError::Solve(_) => 14,
+    }
+}
+
+impl Measurer for PipelineMeasurer<'_> {
+    fn measure(&mut self, pair: &FramePair<'_>, calibration: &Calibration) -> Result<Outcome, u32> {
+        let frame = |data| Frame::new(data, pair.width, pair.height, pair.width).map_err(|_| 1u32);
+        let off = frame(pair.off)?;
+        let on = frame(pair.on)?;
+        let windowed;
+        let cal = if pair.row_offset == 0 && calibration.camera.height as usize == pair.height {
+            calibration
+        } else {
+            windowed = window_calibration(calibration, pair.row_offset, pair.height);
+            &windowed
+        };
+        let m = pipeline::measure_stem(&off, &on, cal, &self.config, &self.params, &mut self.ws)
+            .map_err(|e| error_code(&e))?;
+        let s = m.solution;
+        Ok(Outcome {
+            method: s.method.into(),
+            diameter_m: s.diameter as f32,
+            uncertainty_m: s.uncertainty as f32,
+            distance_m: s.distance as f32,
+            tilt_rad: s.tilt.map(|t| t.total as f32).unwrap_or(0.0),
+            flags: s.flags.0,
+        })
     }
 }

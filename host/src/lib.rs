@@ -8,7 +8,9 @@
 
 pub mod calibrate;
 pub mod calibration_file;
+pub mod measure;
 pub mod capture;
 pub mod pgm;
+pub mod plot;
 pub mod simulate;
 pub mod study;

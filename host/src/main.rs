@@ -18,6 +18,8 @@ enum Command {
     // Each variant: `Name(cli::name::Args)`; keep one per line, alphabetical.
     /// A PNG of a capture: frames, difference, true and extracted laser curves.
     Inspect(cli::inspect::Args),
+    /// Replay captures and print the stem diameter, uncertainty, method, tilt and flags.
+    Measure(cli::measure::Args),
     /// Render synthetic captures (one stem, random stems, or the test corpus).
     Simulate(cli::simulate::Args),
     /// Studies that generate the tables in docs/ (e.g. `study subpixel`).
@@ -29,6 +31,7 @@ fn main() -> std::process::ExitCode {
     let result: anyhow::Result<std::process::ExitCode> = match cli.command {
         // Each arm: `Command::Name(args) => cli::name::run(args),`
         Command::Inspect(args) => cli::inspect::run(args),
+        Command::Measure(args) => cli::measure::run(args),
         Command::Simulate(args) => cli::simulate::run(args),
         Command::Study(args) => cli::study::run(args),
     };

@@ -1,21 +1,29 @@
-//! Calibration tests (scratch; replaced below).
+//! scratch
 use std::path::PathBuf;
-use tangent_host::calibrate::{corners, refine, Board};
+use tangent_host::calibrate::{corners, refine, Board, Corner, View};
+use tangent_core::real::Vec2;
 
 #[test]
 fn opencv_left() {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../tests/data/opencv-left");
     let board = Board::parse("9x6", "25mm").unwrap();
-    let mut files: Vec<_> = std::fs::read_dir(&dir).unwrap().filter_map(|e| e.ok()).map(|e| e.path()).filter(|p| p.extension().map_or(false, |e| e == "jpg")).collect();
-    files.sort();
-    let mut views = vec![];
-    for f in &files {
-        let img = image::open(f).unwrap().to_luma8();
-        match corners::detect(&img, &board, &f.display().to_string()) {
-            Ok(v) => { println!("{}: {} corners", f.display(), v.corners.len()); views.push(v) }
-            Err(e) => println!("{}: {e}", f.display()),
-        }
+    let csv = std::fs::read_to_string(dir.join("opencv_corners.csv")).unwrap();
+    let mut cv: Vec<View> = vec![];
+    for line in csv.lines().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        if cv.last().map_or(true, |v| v.name != f[0]) { cv.push(View { name: f[0].into(), width: 640, height: 480, corners: vec![] }); }
+        cv.last_mut().unwrap().corners.push(Corner { i: f[1].parse().unwrap(), j: f[2].parse().unwrap(), pixel: Vec2::new(f[3].parse().unwrap(), f[4].parse().unwrap()) });
     }
-    let c = refine::calibrate_camera(&views, &board).unwrap();
-    println!("{:?}\ninitial {:?}\nrms {} sigma {} std {:?} iters {} per view {:?} outliers {:?}", c.camera, c.initial, c.rms, c.sigma, c.std_dev, c.iterations, c.per_view_rms, c.outlier_views);
+    let c = refine::calibrate_camera(&cv, &board).unwrap();
+    let k = c.camera;
+    println!("ON OPENCV CORNERS: fx {:.3} fy {:.3} cx {:.3} cy {:.3} k {:?} rms {:.4} std {:.3?} views {:.2?}", k.fx, k.fy, k.cx, k.cy, k.distortion, c.rms, &c.std_dev, c.per_view_rms);
+    for v in &cv {
+        let img = image::open(dir.join(&v.name)).unwrap().to_luma8();
+        let ours = corners::detect(&img, &board, &v.name).unwrap();
+        // match by nearest
+        let mut d = vec![];
+        for o in &ours.corners { let m = v.corners.iter().map(|c| (c.pixel - o.pixel).norm()).fold(f64::MAX, f64::min); d.push(m); }
+        d.sort_by(|a,b| a.total_cmp(b));
+        println!("{}: n {} median {:.3} max {:.3}", v.name, d.len(), d[d.len()/2], d[d.len()-1]);
+    }
 }

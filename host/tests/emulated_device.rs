@@ -73,7 +73,8 @@ impl Device {
     /// Boots the firmware on `pairs` of (off, on) PGM files, with `calibration` stored.
     fn boot(elf: &Path, pairs: &[(PathBuf, PathBuf)], calibration: Option<&Calibration>) -> Device {
         let dir = tempfile::tempdir().unwrap();
-        let mut args = String::from("tangent-qemu");
+        // QEMU passes "<kernel file> <append>" as the semihosting command line.
+        let mut args = String::new();
         if let Some(cal) = calibration {
             let mut rec = [0u8; calibration_record::MAX_RECORD];
             let n = calibration_record::encode(&WireCalibration::from(cal), &mut rec).unwrap();

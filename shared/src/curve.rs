@@ -7,6 +7,8 @@
 //! tails, which the estimator needs — and locates the stripe centre with a
 //! [`crate::peaks`] estimator. Several lit laser planes give several curves per column.
 //! Derivations: `docs/subpixel.md` (§8 for the extraction and the smoothing).
+// `!(x > 0.0)` is deliberate throughout: a NaN must fail the check, as `x <= 0.0` would not.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 use core::fmt;
 
@@ -354,6 +356,8 @@ fn smooth_run(points: &mut [CurvePoint], c: u8, start: usize, n: usize, h: usize
 }
 
 #[cfg(test)]
+// Casts between `Real` and f64 are no-ops in f64 builds but needed with `--features f32`.
+#[allow(clippy::unnecessary_cast, clippy::type_complexity)]
 mod tests {
     use super::*;
 

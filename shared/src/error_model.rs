@@ -13,6 +13,10 @@
 //! both methods of [`crate::solvers::cylinder`], sampling the lit and visible arc one point
 //! per image column, as the pipeline does.
 
+// `!(x > 0.0)` is deliberate throughout: it also rejects NaN, which `x <= 0.0` would let
+// through (no panics or made-up numbers on bad data).
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use core::fmt;
 
 #[allow(unused_imports)]
@@ -248,7 +252,12 @@ pub fn calibration_relative_sigma(
             };
             retriangulate(x, pl, s).ok().map(|y| pl.to_plane_coords(y))
         };
-        let pts = [centre + a * h, centre - a * h, centre + b * h, centre - b * h];
+        let pts = [
+            centre + a * h,
+            centre - a * h,
+            centre + b * h,
+            centre - b * h,
+        ];
         let mut m = [Vec2::zeros(); 4];
         for (o, p) in m.iter_mut().zip(pts) {
             match map(p) {
@@ -483,7 +492,9 @@ pub fn predict_diameter_sigma(
     };
     let fit_of = |p: &[Vec2]| -> Result<Real, ErrorModelError> {
         let init = circle::fit_hyper(p)?;
-        Ok(circle::fit_geometric(p, init, &LmParams::default())?.circle.radius)
+        Ok(circle::fit_geometric(p, init, &LmParams::default())?
+            .circle
+            .radius)
     };
     let base_fit = fit_of(pts)?;
     let (pe, pf, pd) = perturbed(plane, camera.fx, noise)?;
@@ -528,4 +539,193 @@ pub fn predict_diameter_sigma(
         arc_angle,
         point,
     })
+}
+
+#[cfg(test)]
+#[allow(clippy::unnecessary_cast)]
+mod tests {
+    extern crate std;
+    use super::*;
+    use crate::calibration::Calibration;
+    use crate::solvers::circle::tests::Rng;
+    use std::println;
+
+    fn reference() -> (LaserPlane, Camera) {
+        let cal = Calibration::reference_design();
+        (cal.planes[0], cal.camera)
+    }
+
+    #[test]
+    fn displacement_matches_finite_difference() {
+        let (plane, cam) = reference();
+        for (u, v) in [(375.5, 250.0), (100.0, 245.0), (700.0, 260.0)] {
+            let (u, v): (Real, Real) = (u, v);
+            let tri = |v: Real| {
+                plane
+                    .intersect_ray(cam.pixel_to_ray(Vec2::new(u, v)).unwrap())
+                    .unwrap()
+            };
+            let x = tri(v);
+            let g = displacement_per_pixel(&plane, cam.fy, x).unwrap();
+            // Central difference with h = 0.01 px: truncation h²·X''' ~ 1e-4·|g|·(h·f_y…)
+            // is ≤ 1e-6 relative; rounding ε·|X|/h. Tolerance 1e-5·|g| + 10ε|X|/h.
+            let h: Real = 0.01;
+            let fd = (tri(v + h) - tri(v - h)) / (2.0 * h);
+            let tol = 1e-5 * g.norm() + 10.0 * Real::EPSILON * x.norm() / h;
+            assert!((fd - g).norm() < tol, "{fd} {g}");
+            // Thesis §7.2: σ_z = z²·σ_v/(e·f) on the optical axis (x = 0, zero roll).
+            if u == 375.5 {
+                let (e, _) = plane.baseline_tilt();
+                let want = x.z * x.z / (e * cam.fy);
+                assert!((g.z.abs() - want).abs() < 1e-4 * want);
+            }
+        }
+    }
+
+    #[test]
+    fn baseline_error_scales_points() {
+        // e enters X = e·r/(y_n + tan δ) linearly: ΔX = X·σ_e/e exactly.
+        let (plane, cam) = reference();
+        let noise = NoiseModel::reference();
+        let (e, _) = plane.baseline_tilt();
+        let x = plane
+            .intersect_ray(cam.pixel_to_ray(Vec2::new(500.0, 250.0)).unwrap())
+            .unwrap();
+        let d = calibration_displacements(&plane, cam.fx, x, &noise).unwrap();
+        let want = x * (noise.baseline / e);
+        assert!((d[0] - want).norm() < 1e-6 * want.norm() + 100.0 * Real::EPSILON * x.norm());
+        let rel = calibration_relative_sigma(&plane, x, &noise, cam.fx);
+        assert!(rel >= noise.baseline / e * 0.999, "{rel}");
+    }
+
+    /// Prediction vs Monte-Carlo spread of both methods (the check: within a
+    /// factor 1.5). Noise is injected exactly as the model assumes: along ∂X/∂v of each
+    /// column's point, Gaussian with σ = image_px.
+    #[test]
+    fn prediction_matches_monte_carlo() {
+        let (plane, cam) = reference();
+        let noise = NoiseModel::reference();
+        let mut scratch = std::vec![Vec2::zeros(); 2 * cam.width as usize];
+        let mut rng = Rng::new(2024);
+        for (dist, diam) in [(1.5, 0.3), (1.0, 0.1), (2.5, 0.6)] {
+            let stem = StemGeometry {
+                distance: dist,
+                diameter: diam,
+            };
+            let pred = predict_diameter_sigma(&plane, &cam, &stem, &noise, &mut scratch).unwrap();
+            let c = Circle::new(Vec2::new(0.0, dist + diam / 2.0), diam / 2.0);
+            let mut base = std::vec![Vec2::zeros(); cam.width as usize];
+            let (n, _) = sample_columns(&plane, &cam, &c, &mut base).unwrap();
+            let (a, b) = plane.plane_axes();
+            let mut pts = std::vec![Vec2::zeros(); n];
+            let trials = 300;
+            let (mut st, mut st2, mut sf, mut sf2) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+            for _ in 0..trials {
+                for (p, q) in pts.iter_mut().zip(&base[..n]) {
+                    let x = plane.from_plane_coords(*q);
+                    let g = displacement_per_pixel(&plane, cam.fy, x).unwrap();
+                    *p = q + Vec2::new(g.dot(&a), g.dot(&b))
+                        * (noise.image_px() * rng.gauss() as Real);
+                }
+                let t = cylinder::three_tangent(&pts, &ThreeTangentParams::default())
+                    .unwrap()
+                    .radius as f64;
+                let f = circle::fit_geometric(
+                    &pts,
+                    circle::fit_hyper(&pts).unwrap(),
+                    &LmParams::default(),
+                )
+                .unwrap()
+                .circle
+                .radius as f64;
+                st += t;
+                st2 += t * t;
+                sf += f;
+                sf2 += f * f;
+            }
+            let m = trials as f64;
+            let sd_t = 2.0 * (st2 / m - (st / m).powi(2)).max(0.0).sqrt();
+            let sd_f = 2.0 * (sf2 / m - (sf / m).powi(2)).max(0.0).sqrt();
+            let pt = pred.three_tangent.unwrap().random as f64;
+            let pf = pred.circle_fit.unwrap().random as f64;
+            println!("d={dist} D={diam}: 3T obs {sd_t:.2e} pred {pt:.2e}; fit obs {sd_f:.2e} pred {pf:.2e}");
+            assert!(sd_t / pt < 1.5 && pt / sd_t < 1.5, "3T {sd_t} vs {pt}");
+            assert!(sd_f / pf < 1.5 && pf / sd_f < 1.5, "fit {sd_f} vs {pf}");
+        }
+    }
+
+    /// Prints the tables of docs/error-model.md (`cargo test -p tangent-core --lib
+    /// error_model::tests::tables -- --nocapture`). Checks only that every prediction in
+    /// the field of view exists and is positive.
+    #[test]
+    fn tables() {
+        let (plane, cam) = reference();
+        let noise = NoiseModel::reference();
+        println!(
+            "speckle σ = {:.3} px, total image σ = {:.3} px",
+            noise.speckle_px(),
+            noise.image_px()
+        );
+        println!("| z (m) | σx sub (mm) | σy sub | σz sub | σz speckle | Δz e | Δz f | Δz δ | Δx e | Δx f | Δx δ |");
+        println!("|---|---|---|---|---|---|---|---|---|---|---|");
+        for z in [0.5, 1.0, 1.5, 2.0, 3.0] {
+            let z: Real = z;
+            // Point at x_n = 0.2 (image column ≈ 576), on the plane at depth z.
+            let ray = Vec3::new(0.2, 0.0, 1.0);
+            let (e, d) = plane.baseline_tilt();
+            let yn = e / z - d.tan();
+            let x = plane.intersect_ray(Vec3::new(ray.x, yn, 1.0)).unwrap();
+            let s = point_sigma(&plane, cam.fy, x, noise.subpixel_px).unwrap();
+            let sp = point_sigma(&plane, cam.fy, x, noise.speckle_px()).unwrap();
+            let c = calibration_displacements(&plane, cam.fx, x, &noise).unwrap();
+            let mm = 1000.0;
+            println!(
+                "| {z:.1} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} |",
+                s.x * mm, s.y * mm, s.z * mm, sp.z * mm,
+                c[0].z * mm, c[1].z * mm, c[2].z * mm, c[0].x * mm, c[1].x * mm, c[2].x * mm
+            );
+            assert!(s.z > 0.0 && sp.z > 0.0);
+        }
+        let mut scratch = std::vec![Vec2::zeros(); 2 * cam.width as usize];
+        println!("| distance (m) | diameter (cm) | columns | arc (°) | 3T random | 3T edges | 3T calib | 3T total | fit random | fit calib | fit total |");
+        println!("|---|---|---|---|---|---|---|---|---|---|---|");
+        for dist in [0.5, 1.0, 1.5, 2.0, 3.0] {
+            for diam in [0.05, 0.1, 0.2, 0.4, 0.6, 1.0] {
+                let stem = StemGeometry {
+                    distance: dist,
+                    diameter: diam,
+                };
+                let mm = 1000.0;
+                match predict_diameter_sigma(&plane, &cam, &stem, &noise, &mut scratch) {
+                    Ok(p) => {
+                        let f = p.circle_fit.unwrap();
+                        assert!(f.total > 0.0);
+                        let tt = match p.three_tangent {
+                            Some(t) => {
+                                assert!(t.total > 0.0);
+                                std::format!(
+                                    "{:.3} | {:.3} | {:.3} | {:.3}",
+                                    t.random * mm,
+                                    t.edges * mm,
+                                    t.calibration * mm,
+                                    t.total * mm
+                                )
+                            }
+                            None => "cut | cut | cut | cut".into(),
+                        };
+                        println!(
+                            "| {dist:.1} | {:.0} | {} | {:.0} | {tt} | {:.3} | {:.3} | {:.3} |",
+                            diam * 100.0,
+                            p.points,
+                            p.arc_angle * 180.0 / PI,
+                            f.random * mm,
+                            f.calibration * mm,
+                            f.total * mm
+                        );
+                    }
+                    Err(e) => println!("| {dist:.1} | {:.0} | – | {e} |", diam * 100.0),
+                }
+            }
+        }
+    }
 }

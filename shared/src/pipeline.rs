@@ -23,6 +23,8 @@ use crate::image::threshold::{self, ThresholdError, ThresholdMethod};
 use crate::image::{Frame, FrameError, FrameMut, Pixel};
 use crate::laser_plane::{triangulate, TriangulationError};
 use crate::real::{Real, Vec2, Vec3};
+use crate::solvers::cylinder::{self, CylinderInput, CylinderParams, CylinderSolution, Flags};
+use crate::solvers::SolveError;
 
 /// Tunable parameters of the image part of the chain. [`Default`] suits the reference hardware
 /// (MT9V034 behind a 650 nm band-pass filter, 752×480, f ≈ 1000 px).
@@ -128,6 +130,11 @@ pub enum PipelineError {
     Calibration,
     /// A point could not be triangulated.
     Triangulation(TriangulationError),
+    /// The aimed object's curve runs off the left or right edge of the frame: its silhouette
+    /// (the ends of the lit arc) is not seen, so no diameter can be trusted. Step back.
+    OutsideFrame,
+    /// The solver found no trustworthy answer.
+    Solve(SolveError),
 }
 
 impl fmt::Display for PipelineError {
@@ -160,6 +167,11 @@ impl fmt::Display for PipelineError {
             PipelineError::Curve(e) => write!(f, "curve extraction: {e}"),
             PipelineError::Calibration => write!(f, "the calibration is invalid"),
             PipelineError::Triangulation(e) => write!(f, "triangulation: {e}"),
+            PipelineError::OutsideFrame => write!(
+                f,
+                "the stem runs off the edge of the image: its outline is not seen (step back or aim at its centre)"
+            ),
+            PipelineError::Solve(e) => write!(f, "solver: {e}"),
         }
     }
 }
@@ -190,6 +202,11 @@ impl From<CurveError> for PipelineError {
         }
     }
 }
+impl From<SolveError> for PipelineError {
+    fn from(e: SolveError) -> Self {
+        PipelineError::Solve(e)
+    }
+}
 impl From<TriangulationError> for PipelineError {
     fn from(e: TriangulationError) -> Self {
         PipelineError::Triangulation(e)
@@ -214,6 +231,10 @@ pub struct Workspace<'a, P: Pixel> {
     pub curve: &'a mut [CurvePoint],
     /// 3-D points, grouped by plane in [`Profile::plane_points`] order (same length as `curve`).
     pub points: &'a mut [Vec3],
+    /// Solver scratch: 2-D points (same length as `curve`).
+    pub scratch_points: &'a mut [Vec2],
+    /// Solver scratch: residuals (same length as `curve`).
+    pub scratch_values: &'a mut [Real],
 }
 
 /// Buffer lengths a [`Workspace`] needs.
@@ -227,7 +248,7 @@ pub struct WorkspaceSizes {
     pub label_table: usize,
     /// Object-feature entries.
     pub objects: usize,
-    /// Curve and 3-D point entries.
+    /// Curve, 3-D point and solver-scratch entries.
     pub points: usize,
 }
 
@@ -292,6 +313,69 @@ fn need(buffer: &'static str, needed: usize, actual: usize) -> Result<(), Pipeli
     } else {
         Ok(())
     }
+}
+
+/// Fraction of saturated curve points above which [`Flags::STRIPE_SATURATED`] is set.
+pub const SATURATED_FRACTION: Real = 0.10;
+/// Laser-off mean, as a fraction of full scale, above which [`Flags::AMBIENT_BRIGHT`] is set.
+pub const BRIGHT_AMBIENT_FRACTION: Real = 0.5;
+/// An unused candidate at least this fraction of the smallest used curve's pixel count sets
+/// [`Flags::OTHER_OBJECTS`]; smaller ones are specks of clutter.
+pub const OTHER_OBJECT_FRACTION: Real = 0.25;
+
+/// A stem measurement: the solver's answer, the image summary, and the combined flags.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StemMeasurement {
+    /// The solver's answer (diameter, uncertainty, method, tilt, …). Its `flags` include
+    /// the image flags below.
+    pub solution: CylinderSolution,
+    /// The image part of the chain.
+    pub profile: Profile,
+}
+
+/// Quality flags that the image alone tells (saturation, ambient light, other objects).
+pub fn image_flags(profile: &Profile, full_scale: u32) -> Flags {
+    let mut flags = Flags::default();
+    let total: usize = profile.plane_points.iter().take(profile.planes).map(|(s, e)| e - s).sum();
+    if total > 0 && profile.saturated_points as Real > SATURATED_FRACTION * total as Real {
+        flags.insert(Flags::STRIPE_SATURATED);
+    }
+    if profile.subtract.off_mean > BRIGHT_AMBIENT_FRACTION * full_scale as Real {
+        flags.insert(Flags::AMBIENT_BRIGHT);
+    }
+    if profile.unused_candidates > 0
+        && profile.largest_unused as Real >= OTHER_OBJECT_FRACTION * profile.smallest_used as Real
+    {
+        flags.insert(Flags::OTHER_OBJECTS);
+    }
+    flags
+}
+
+/// Measures a stem: [`extract_profile`], then the cylinder solver
+/// ([`cylinder::solve`]: three-tangent, circle or cylinder fit, chosen by the data) on the
+/// points of every plane. A curve that runs off the frame is [`PipelineError::OutsideFrame`].
+pub fn measure_stem<P: Pixel>(
+    off: &Frame<'_, P>,
+    on: &Frame<'_, P>,
+    calibration: &Calibration,
+    config: &PipelineConfig,
+    params: &CylinderParams,
+    ws: &mut Workspace<'_, P>,
+) -> Result<StemMeasurement, PipelineError> {
+    let profile = extract_profile(off, on, calibration, config, ws)?;
+    if profile.touches_edge {
+        return Err(PipelineError::OutsideFrame);
+    }
+    let n_planes = profile.planes.min(MAX_PLANES);
+    let mut curves: [&[Vec3]; MAX_PLANES] = [&[]; MAX_PLANES];
+    for (k, c) in curves.iter_mut().enumerate().take(n_planes) {
+        *c = profile.points(ws.points, k);
+    }
+    let input = CylinderInput { curves: &curves[..n_planes], planes: &calibration.planes[..n_planes] };
+    let scratch = cylinder::Scratch { points: &mut *ws.scratch_points, values: &mut *ws.scratch_values };
+    let mut solution = cylinder::solve(&input, params, scratch)?;
+    solution.flags.insert(image_flags(&profile, on.max_value()));
+    Ok(StemMeasurement { solution, profile })
 }
 
 /// One selected object and what the plane assignment needs of it.
@@ -597,6 +681,8 @@ mod tests {
         objects: Vec<ObjectFeatures>,
         curve: Vec<CurvePoint>,
         points: Vec<Vec3>,
+        scratch_points: Vec<Vec2>,
+        scratch_values: Vec<Real>,
     }
 
     impl Buffers {
@@ -610,6 +696,8 @@ mod tests {
                 objects: vec![ObjectFeatures::empty(0); s.objects],
                 curve: vec![CurvePoint { column: 0, row: 0.0, amplitude: 0.0, curve: 0, saturated: false }; s.points],
                 points: vec![Vec3::zeros(); s.points],
+                scratch_points: vec![Vec2::zeros(); s.points],
+                scratch_values: vec![0.0; s.points],
             }
         }
         fn ws(&mut self) -> Workspace<'_, u8> {
@@ -621,6 +709,8 @@ mod tests {
                 objects: &mut self.objects,
                 curve: &mut self.curve,
                 points: &mut self.points,
+                scratch_points: &mut self.scratch_points,
+                scratch_values: &mut self.scratch_values,
             }
         }
     }

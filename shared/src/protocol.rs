@@ -245,9 +245,11 @@ pub struct Reading {
     pub uncertainty_m: f32,
     /// Distance from the camera to the stem axis along the optical axis (metres).
     pub distance_m: f32,
-    /// Stem tilt out of the normal to the laser plane (radians; 0 when not measured).
+    /// Stem tilt: total angle between the stem axis and the laser-plane normal (radians;
+    /// 0 when not measured, i.e. with one plane).
     pub tilt_rad: f32,
-    /// Quality flags ([`flags`]).
+    /// Quality flags: the bits of `solvers::cylinder::Flags` (solver and image flags,
+    /// e.g. `ARC_TOO_SHORT`, `TILT_IGNORED`, `STRIPE_SATURATED`), sent verbatim.
     pub flags: u16,
     /// Exposure used (µs).
     pub exposure_us: u32,
@@ -266,33 +268,29 @@ pub struct RunningStats {
     pub spread_m: f32,
 }
 
-/// Which solver produced a reading.
+/// Which solver produced a reading (mirrors `solvers::cylinder::Method`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Method {
-    /// Three-tangent circle from one laser plane (stem assumed normal to the plane).
+    /// Three-tangent method in one plane (transversal stem assumed).
     ThreeTangent,
-    /// Ellipse from two parallel planes: tilt measured and corrected.
-    TiltedTwoPlane,
-    /// Least-squares circle fit of the laser curve.
+    /// Robust geometric circle fit in one plane (transversal stem assumed).
     CircleFit,
+    /// Cylinder fit to two or more planes' curves (tilt measured).
+    CylinderFit,
+    /// Three-tangent method on the curves projected along the fitted axis (tilt measured).
+    GeneralisedThreeTangent,
 }
 
-/// Quality flags of a [`Reading`] (bits of [`Reading::flags`]).
-pub mod flags {
-    /// Some stripe pixels were saturated: peak positions may be biased.
-    pub const SATURATED: u16 = 1 << 0;
-    /// The stripe was weak: few pixels above threshold.
-    pub const LOW_SIGNAL: u16 = 1 << 1;
-    /// The laser curve covers a short arc: the diameter is poorly constrained.
-    pub const SHORT_ARC: u16 = 1 << 2;
-    /// Tilt could not be measured (one plane): the reading assumes a vertical stem.
-    pub const TILT_NOT_MEASURED: u16 = 1 << 3;
-    /// The predicted uncertainty exceeds the instrument's target (reading not trustworthy).
-    pub const HIGH_UNCERTAINTY: u16 = 1 << 4;
-    /// The object is outside the calibrated working range.
-    pub const OUT_OF_RANGE: u16 = 1 << 5;
-    /// The fit residuals are large compared with the noise model (non-round stem, clutter).
-    pub const HIGH_RESIDUAL: u16 = 1 << 6;
+impl From<crate::solvers::cylinder::Method> for Method {
+    fn from(m: crate::solvers::cylinder::Method) -> Self {
+        use crate::solvers::cylinder::Method as M;
+        match m {
+            M::ThreeTangent => Method::ThreeTangent,
+            M::CircleFit => Method::CircleFit,
+            M::CylinderFit => Method::CylinderFit,
+            M::GeneralisedThreeTangent => Method::GeneralisedThreeTangent,
+        }
+    }
 }
 
 /// An error reported by the device.
@@ -836,12 +834,12 @@ mod tests {
             seq,
             timestamp_ms: 123_456_789_012,
             calib_id: 7,
-            method: Method::TiltedTwoPlane,
+            method: Method::CylinderFit,
             diameter_m: 0.3141,
             uncertainty_m: 0.0012,
             distance_m: 1.75,
             tilt_rad: -0.05,
-            flags: flags::SATURATED | flags::HIGH_RESIDUAL,
+            flags: 0x1803,
             exposure_us: 850,
             stats: Some(RunningStats {
                 count: 4,

@@ -15,7 +15,7 @@ use cortex_m_rt::{entry, exception};
 use tangent_firmware::app::{App, Buffers};
 use tangent_firmware::board::qemu::{self, FileCamera, Qemu, QemuClock, QemuLaser, RamStore, Uart};
 use tangent_firmware::hal::Devices;
-use tangent_firmware::measure::PipelineMeasurer;
+use tangent_firmware::measure::{self, PipelineMeasurer, SmallBuffers};
 
 /// Largest frame the emulated board accepts (752 × 480 8-bit).
 const MAX_FRAME: usize = 752 * 480;
@@ -24,6 +24,11 @@ static mut OFF: [u8; MAX_FRAME] = [0; MAX_FRAME];
 static mut ON: [u8; MAX_FRAME] = [0; MAX_FRAME];
 static mut RX: [u8; tangent_core::protocol::MAX_FRAME_LEN] = [0; tangent_core::protocol::MAX_FRAME_LEN];
 static mut CMDLINE: [u8; 4096] = [0; 4096];
+/// Pipeline working memory for a full frame and two planes.
+const POINTS: usize = measure::points_for(752, 2);
+static mut DIFF: [u8; MAX_FRAME] = [0; MAX_FRAME];
+static mut LABELS: [u16; MAX_FRAME] = [0; MAX_FRAME];
+static mut SMALL: SmallBuffers<POINTS> = SmallBuffers::new();
 
 #[exception]
 fn SysTick() {
@@ -39,12 +44,15 @@ fn main() -> ! {
 
     // SAFETY: `main` runs once; these statics are borrowed only here, for the program's
     // whole life.
-    let (off, on, rx, cmdline) = unsafe {
+    let (off, on, rx, cmdline, diff, labels, small) = unsafe {
         (
             &mut *core::ptr::addr_of_mut!(OFF),
             &mut *core::ptr::addr_of_mut!(ON),
             &mut *core::ptr::addr_of_mut!(RX),
             &mut *core::ptr::addr_of_mut!(CMDLINE),
+            &mut *core::ptr::addr_of_mut!(DIFF),
+            &mut *core::ptr::addr_of_mut!(LABELS),
+            &mut *core::ptr::addr_of_mut!(SMALL),
         )
     };
     let Some(cmdline) = qemu::command_line(cmdline) else {
@@ -88,6 +96,7 @@ fn main() -> ! {
         }
     };
     let n_scenes = camera.scene_count();
+    use tangent_firmware::hal::Camera as _;
     let calibration = match calib_path {
         Some(p) => match qemu::load_calibration(p) {
             Some(c) => Some(c),
@@ -110,7 +119,9 @@ fn main() -> ! {
         store: RamStore::new(calibration),
         watchdog: qemu::NoWatchdog,
     };
-    let measurer = PipelineMeasurer::new();
+    // The workspace covers the camera's frame size (at most MAX_FRAME pixels).
+    let pixels = camera.geometry().frame_len().min(MAX_FRAME);
+    let measurer = PipelineMeasurer::new(measure::workspace(&mut diff[..pixels], &mut labels[..pixels], small));
     let mut app = App::new(dev, measurer, Buffers { off, on, rx });
 
     if bench {

@@ -65,6 +65,32 @@ pub enum CornerError {
 /// `name` identifies the view in reports. Errors when the board is not found or too little
 /// of it is unambiguously labelled; a partial board is returned with the corners found.
 pub fn detect(img: &GrayImage, board: &Board, name: &str) -> Result<View, CornerError> {
+    detect_with(img, board, name, &DetectOptions::default())
+}
+
+/// Options of [`detect_with`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DetectOptions {
+    /// Largest half-width of the subpixel window (pixels); see [`MAX_HALF_WINDOW`].
+    pub max_half_window: usize,
+    /// Fraction of the nearest-neighbour spacing the half-window may reach.
+    pub window_fraction: f64,
+    /// Refine with [`corner_subpix`] (true) or keep the detector's own subpixel positions.
+    pub refine: bool,
+}
+
+impl Default for DetectOptions {
+    fn default() -> Self {
+        DetectOptions {
+            max_half_window: MAX_HALF_WINDOW,
+            window_fraction: 0.4,
+            refine: true,
+        }
+    }
+}
+
+/// [`detect`] with explicit options.
+pub fn detect_with(img: &GrayImage, board: &Board, name: &str, opts: &DetectOptions) -> Result<View, CornerError> {
     let found = detect::detect_chessboard_best(img, &detect::default_chess_config(), &ChessboardParams::sweep_default())
         .map_err(|_| CornerError::NotFound)?;
     let mut grid: HashMap<(i32, i32), Vec2> = found
@@ -78,8 +104,9 @@ pub fn detect(img: &GrayImage, board: &Board, name: &str) -> Result<View, Corner
     let mut refined = HashMap::with_capacity(grid.len());
     for (&key, &p) in &grid {
         let spacing = nearest_neighbour_distance(&grid, key).unwrap_or(2.0 * MAX_HALF_WINDOW as f64 + 2.0);
-        let half = ((0.4 * spacing).floor() as usize).clamp(2, MAX_HALF_WINDOW);
-        if let Some(q) = corner_subpix(&gray, p, half) {
+        let half = ((opts.window_fraction * spacing).floor() as usize).clamp(2, opts.max_half_window.max(2));
+        let q = if opts.refine { corner_subpix(&gray, p, half) } else { Some(p) };
+        if let Some(q) = q {
             // A refinement that walks more than a quarter of a square away has locked on
             // something else.
             if (q - p).norm() <= 0.25 * spacing {

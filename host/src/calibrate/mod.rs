@@ -18,7 +18,9 @@
 //! calibrated here is exactly what the instrument evaluates.
 
 pub mod corners;
+pub mod laser;
 pub mod refine;
+pub mod report;
 pub mod zhang;
 
 use nalgebra::{Rotation3, Vector3};

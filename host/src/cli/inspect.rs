@@ -23,7 +23,8 @@ use tangent_host::pgm::{Pgm, PgmSamples};
 pub struct Args {
     /// Capture directory.
     capture: PathBuf,
-    /// Output PNG (default: `<capture>/inspect.png`).
+    /// Output PNG (default: `<capture directory name>.png` in the current directory, so
+    /// that inspecting a corpus capture does not add a file to it).
     #[arg(long)]
     out: Option<PathBuf>,
 }
@@ -46,6 +47,8 @@ fn extract(capture: &Capture, on: &Pgm) -> Result<Vec<(usize, f64, f64)>, String
         let blank = CurvePoint { column: 0, row: 0.0, amplitude: 0.0, curve: 0, saturated: false };
         let mut curve = vec![blank; sizes.points];
         let mut points = vec![tangent_core::real::Vec3::zeros(); sizes.points];
+        let mut scratch_points = vec![tangent_core::real::Vec2::zeros(); sizes.points];
+        let mut scratch_values = vec![0.0; sizes.points];
         let mut ws = Workspace {
             diff: &mut diff,
             labels: &mut labels,
@@ -54,6 +57,8 @@ fn extract(capture: &Capture, on: &Pgm) -> Result<Vec<(usize, f64, f64)>, String
             objects: &mut objects,
             curve: &mut curve,
             points: &mut points,
+            scratch_points: &mut scratch_points,
+            scratch_values: &mut scratch_values,
         };
         let profile = pipeline::extract_profile(&off, &on, &c.calibration, &PipelineConfig::default(), &mut ws)
             .map_err(|e| e.to_string())?;
@@ -171,7 +176,10 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         }
     }
 
-    let out = args.out.unwrap_or_else(|| args.capture.join("inspect.png"));
+    let out = args.out.unwrap_or_else(|| {
+        let name = args.capture.file_name().map_or("capture".into(), |n| n.to_string_lossy().into_owned());
+        PathBuf::from(format!("{name}.png"))
+    });
     img.save(&out).with_context(|| format!("writing {}", out.display()))?;
     println!("{}: {}", out.display(), c.meta.description);
     println!("panels: off | on | on − off (×{:.1}) with curves | ×4 zoom", 255.0 / top);

@@ -2,5 +2,6 @@
 //! `run(args) -> anyhow::Result<ExitCode>`.
 
 pub mod inspect;
+pub mod measure;
 pub mod simulate;
 pub mod study;

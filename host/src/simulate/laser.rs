@@ -19,12 +19,16 @@ pub struct LaserParams {
     pub waist_half_width_m: f64,
     /// Growth of the half-thickness with distance (radians): `w(r) = √(w0² + (θ·r)²)`.
     pub divergence_rad: f64,
+    /// Spectral width (metres); with the surface roughness it reduces the speckle contrast
+    /// ([`super::sensor::spectral_speckle_contrast`]).
+    pub spectral_width_m: f64,
 }
 
 impl Default for LaserParams {
     /// A 1 mW, 650 nm line laser with a 45° Powell fan (covers the 41° horizontal field of
     /// the reference camera from 0.1 m below it), 0.6 mm waist and 1 mrad thickness
-    /// divergence: `w` = 1.2 mm at 1 m, 3.1 mm at 3 m — the "1–3 mm line" of datasheets.
+    /// divergence: `w` = 1.2 mm at 1 m, 3.1 mm at 3 m — the "1–3 mm line" of datasheets;
+    /// 1 nm spectral width (a multimode diode).
     fn default() -> Self {
         LaserParams {
             wavelength_m: 650e-9,
@@ -32,6 +36,7 @@ impl Default for LaserParams {
             fan_angle_rad: 45f64.to_radians(),
             waist_half_width_m: 0.6e-3,
             divergence_rad: 1e-3,
+            spectral_width_m: 1e-9,
         }
     }
 }

@@ -73,6 +73,9 @@ pub struct SimParams {
     pub gain: f64,
     /// Multiplicative laser speckle on or off.
     pub speckle: bool,
+    /// RMS height roughness of the surfaces for the speckle's spectral decorrelation
+    /// (metres; bark ≈ 1 mm).
+    pub surface_roughness_m: f64,
     /// Device displacement of the laser-off frame relative to the laser-on frame.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub hand_motion: Option<HandMotion>,
@@ -95,6 +98,7 @@ impl Default for SimParams {
             exposure: Exposure::Auto { peak_fraction: 0.7, max_s: 0.03 },
             gain: 1.0,
             speckle: true,
+            surface_roughness_m: 1e-3,
             hand_motion: None,
             supersampling: 8,
         }
@@ -139,7 +143,8 @@ pub struct SimReport {
     pub exposure_s: f64,
     /// Electron rate per unit `ρ·E` (e⁻/s per W/m²), [`SensorParams::electrons_per_s`].
     pub electrons_per_w_m2_s: f64,
-    /// Speckle cells per pixel `M` ([`sensor::speckle_cells`]).
+    /// Gamma shape `M` of the per-pixel speckle factor (contrast `1/√M`): pixel
+    /// integration ([`sensor::speckle_cells`]) and spectral decorrelation combined.
     pub speckle_cells: f64,
 }
 
@@ -222,10 +227,19 @@ pub fn simulate(spec: &SimSpec) -> Result<(Capture, SimReport), SimError> {
         }
     };
 
-    let cells = sensor::speckle_cells(
+    // Speckle contrast per pixel: pixel integration (1/√M_pix) times spectral
+    // decorrelation (C_λ); the Gamma shape is 1/C².
+    let cells_pixel = sensor::speckle_cells(
         p.sensor.pixel_pitch_m,
         sensor::speckle_correlation_m(p.laser.wavelength_m, p.optics.f_number),
     );
+    let c_lambda = sensor::spectral_speckle_contrast(
+        p.laser.wavelength_m,
+        p.laser.spectral_width_m,
+        p.surface_roughness_m,
+    );
+    let contrast = c_lambda / cells_pixel.sqrt();
+    let cells = if contrast > 0.0 { 1.0 / (contrast * contrast) } else { f64::INFINITY };
     // Speckle: one factor per pixel and laser (independent lasers, independent patterns).
     let speckle: Vec<Vec<f64>> = (0..nplanes)
         .map(|i| {

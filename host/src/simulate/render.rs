@@ -287,7 +287,9 @@ pub fn truth_curve(setup: &RenderSetup<'_>, planes: &[usize]) -> Vec<TruthPoint>
                         continue;
                     }
                     let (sa, sb) = (plane.signed_distance(ha.point), plane.signed_distance(hb.point));
-                    if (sa > 0.0) == (sb > 0.0) && sb != 0.0 {
+                    // A crossing in (a, b]: strict sign change, or an exact zero at b (a zero
+                    // at a belongs to the previous bracket, so no root is counted twice).
+                    if !(sa * sb < 0.0 || (sb == 0.0 && sa != 0.0)) {
                         continue;
                     }
                     let (mut lo, mut hi, mut slo) = (vs[k], vs[k + 1], sa);

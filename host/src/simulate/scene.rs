@@ -189,7 +189,7 @@ enum Shape {
     Cylinder { c: Vec3, axis: Vec3, m: Vec3, k: Vec3, a: f64, b: f64, extent: Option<[f64; 2]> },
     Sphere { c: Vec3, r: f64 },
     Plane { p: Vec3, n: Vec3, u: Vec3, w: Vec3 },
-    Road { z0: f64, waves: Vec<Wave>, amp: f64, min_wavelength: f64 },
+    Road { z0: f64, waves: Vec<Wave>, amp: f64, min_wavelength: f64, max_slope: f64 },
 }
 
 #[derive(Debug, Clone)]
@@ -278,7 +278,12 @@ impl Scene {
                     let amp = r.waves.iter().map(|w| w.amplitude_m.abs()).sum();
                     let min_wavelength =
                         r.waves.iter().map(|w| w.wavelength_m).fold(f64::INFINITY, f64::min);
-                    Shape::Road { z0: r.distance_m, waves: r.waves.clone(), amp, min_wavelength }
+                    let max_slope = r
+                        .waves
+                        .iter()
+                        .map(|w| 2.0 * std::f64::consts::PI * w.amplitude_m.abs() / w.wavelength_m)
+                        .sum();
+                    Shape::Road { z0: r.distance_m, waves: r.waves.clone(), amp, min_wavelength, max_slope }
                 }
             };
             out.push(Prepared {
@@ -401,10 +406,10 @@ impl Shape {
                 let t = n.dot(&(p - o)) / den;
                 accept(t).then_some((t, *n))
             }
-            Shape::Road { z0, waves, amp, min_wavelength } => {
+            Shape::Road { z0, waves, amp, min_wavelength, max_slope } => {
                 // g(t) = z(t) − surface(x(t), y(t)); the surface lies within z0 ± amp, so the
-                // first root is in the t-range where z crosses that slab. March with steps
-                // of ≤ λ_min/16 of lateral travel (so no crest is skipped), then bisect.
+                // first root is in the t-range where z crosses that slab. March to the first
+                // sign change, then refine by regula falsi.
                 if d.z <= 0.0 {
                     return None;
                 }
@@ -417,30 +422,48 @@ impl Shape {
                 if t_hi <= t_lo || t_lo >= t_max {
                     return None;
                 }
-                let lateral = (d.x * d.x + d.y * d.y).sqrt() * (t_hi - t_lo);
-                let depth = d.z * (t_hi - t_lo);
-                let steps = ((lateral / (min_wavelength / 16.0)).max(depth / (amp.max(1e-9) / 8.0)))
-                    .ceil()
-                    .clamp(1.0, 100_000.0) as usize;
-                let dt = (t_hi - t_lo) / steps as f64;
+                // Steps: at least λ_min/16 of lateral travel (a crest narrower than that
+                // could be skipped), and larger while far from the surface: g changes at
+                // most L = d_z + |d_xy|·S per unit t (S = Σ 2πA/λ, the largest slope), so
+                // no root lies within |g|/L of t (conservative advancement).
+                let dxy = (d.x * d.x + d.y * d.y).sqrt();
+                let lipschitz = d.z + dxy * max_slope;
+                let dt_min = if dxy > 0.0 { min_wavelength / 16.0 / dxy } else { f64::INFINITY }
+                    .min((t_hi - t_lo) / 16.0);
                 let (mut ta, mut ga) = (t_lo, g(t_lo));
                 if ga >= 0.0 {
                     return None; // ray starts behind the surface
                 }
-                for i in 1..=steps {
-                    let tb = t_lo + dt * i as f64;
+                while ta < t_hi {
+                    let tb = (ta + dt_min.max(-ga / lipschitz)).min(t_hi);
                     let gb = g(tb);
                     if gb >= 0.0 {
-                        let (mut lo, mut hi) = (ta, tb);
+                        // Illinois regula falsi on [ta, tb] (superlinear; ~10 evaluations).
+                        let (mut lo, mut hi, mut glo, mut ghi) = (ta, tb, ga, gb);
+                        let mut side = 0i8;
                         for _ in 0..60 {
-                            let mid = 0.5 * (lo + hi);
-                            if g(mid) >= 0.0 {
-                                hi = mid;
+                            let t = (lo * ghi - hi * glo) / (ghi - glo);
+                            let gt = g(t);
+                            if gt >= 0.0 {
+                                hi = t;
+                                ghi = gt;
+                                if side == 1 {
+                                    glo *= 0.5;
+                                }
+                                side = 1;
                             } else {
-                                lo = mid;
+                                lo = t;
+                                glo = gt;
+                                if side == -1 {
+                                    ghi *= 0.5;
+                                }
+                                side = -1;
+                            }
+                            if (hi - lo) * d.z < 1e-12 || gt.abs() < 1e-13 {
+                                break;
                             }
                         }
-                        let t = 0.5 * (lo + hi);
+                        let t = if ghi.abs() < glo.abs() { hi } else { lo };
                         if !accept(t) {
                             return None;
                         }
@@ -451,7 +474,6 @@ impl Shape {
                     ta = tb;
                     ga = gb;
                 }
-                let _ = ga;
                 None
             }
         }

@@ -147,7 +147,18 @@ pub fn speckle_cells(pitch_m: f64, sigma_c_m: f64) -> f64 {
     1.0 / (one_d * one_d)
 }
 
-/// One multiplicative speckle factor (mean 1, variance `1/M`) for a pixel.
+/// Speckle contrast left by a broadband laser on a rough surface (Goodman, *Speckle
+/// Phenomena in Optics*, §3.6, Gaussian spectrum of FWHM-like width `Δλ`, Gaussian heights
+/// of RMS `σ_h`, reflection so the path differences are `2h`):
+/// `C_λ = [1 + (2π·Δλ·2σ_h/λ²)²]^(−1/4)`. A multimode 650 nm diode (`Δλ` ≈ 1 nm, coherence
+/// length λ²/Δλ ≈ 0.4 mm) on bark (σ_h ≈ 1 mm) leaves C_λ ≈ 0.18.
+pub fn spectral_speckle_contrast(wavelength_m: f64, spectral_width_m: f64, roughness_m: f64) -> f64 {
+    let x = 2.0 * std::f64::consts::PI * spectral_width_m * 2.0 * roughness_m / (wavelength_m * wavelength_m);
+    (1.0 + x * x).powf(-0.25)
+}
+
+/// One multiplicative speckle factor (mean 1, variance `1/M`, i.e. contrast `1/√M`) for a
+/// pixel: Gamma-distributed with shape `M` (Goodman §5.6).
 pub fn speckle_factor<R: Rng + ?Sized>(cells: f64, rng: &mut R) -> f64 {
     if !cells.is_finite() {
         return 1.0;
@@ -185,9 +196,4 @@ pub fn gaussian_blur(img: &mut [f64], w: usize, h: usize, sigma: f64) {
             img[y * w + x] = acc;
         }
     }
-}
-
-/// A uniform draw in `[0, 1)` (helper for callers holding a generic RNG).
-pub fn uniform<R: Rng + ?Sized>(rng: &mut R) -> f64 {
-    rng.random::<f64>()
 }

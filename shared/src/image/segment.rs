@@ -370,21 +370,25 @@ pub fn segment<P: Pixel>(
             break; // unreachable: 1 <= y < height
         };
         let row = image.row(y);
-        // Left and upper-left labels are carried in registers; the upper-right one comes from a
-        // one-step look-ahead on the previous row (0 past the right edge), so the loop has no
-        // indexing at all.
+        // Equal-length re-slices (n = width for every well-formed frame): with `x < n` the
+        // compiler drops the bounds checks, and a background pixel costs a load, a compare, a
+        // store. Neighbour labels are only read for foreground pixels.
+        let n = cur.len().min(row.len()).min(prev.len());
+        let (cur, row, prev) = (&mut cur[..n], &row[..n], &prev[..n]);
         let mut left = 0u16;
-        let mut up_left = 0u16;
         let mut any = false;
-        let up_right_iter = prev.iter().skip(1).chain(core::iter::once(&0u16));
-        for ((c, &p), (&up, &up_right)) in
-            cur.iter_mut().zip(row).zip(prev.iter().zip(up_right_iter))
-        {
-            let v: u32 = p.into();
-            let l = if v <= threshold {
-                0
-            } else {
-                any = true;
+        for x in 0..n {
+            let v: u32 = row[x].into();
+            if v <= threshold {
+                cur[x] = 0;
+                left = 0;
+                continue;
+            }
+            let up = prev[x];
+            let up_left = if x > 0 { prev[x - 1] } else { 0 };
+            let up_right = if x + 1 < n { prev[x + 1] } else { 0 };
+            any = true;
+            let l = {
                 match connectivity {
                     // Decision tree of Wu, Otoo & Suzuki (2005): the upper neighbour is adjacent
                     // to all the others, so when it is set no equivalence can be new.
@@ -427,9 +431,8 @@ pub fn segment<P: Pixel>(
                     }
                 }
             };
-            *c = l;
+            cur[x] = l;
             left = l;
-            up_left = up;
         }
         if any {
             first_row = first_row.min(y);

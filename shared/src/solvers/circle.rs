@@ -19,6 +19,10 @@
 //! (`Vec`/`DMatrix`) and are `std`; these are a few dozen lines on fixed-size `nalgebra`
 //! matrices.
 
+// `!(x > 0.0)` is deliberate throughout: it also rejects NaN, which `x <= 0.0` would let
+// through (no panics or made-up numbers on bad data).
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 // `Float` supplies sqrt/atan2/… in `no_std`.
 #[allow(unused_imports)]
 use crate::real::Float;
@@ -271,8 +275,7 @@ fn fit_algebraic(points: &[Vec2], kind: Algebraic) -> Result<Circle, SolveError>
         norm.mean + Vec2::new(xc, yc) * norm.scale,
         r2.sqrt() * norm.scale,
     );
-    if !(circle.centre.x.is_finite() && circle.centre.y.is_finite() && circle.radius.is_finite())
-    {
+    if !(circle.centre.x.is_finite() && circle.centre.y.is_finite() && circle.radius.is_finite()) {
         return Err(SolveError::Degenerate);
     }
     Ok(circle)
@@ -538,10 +541,9 @@ pub fn fit_robust(
     scratch: &mut [Real],
 ) -> Result<CircleFit, SolveError> {
     params.lm.validate()?;
-    if !(params.tuning.is_finite() && params.tuning > 0.0)
-        || !(params.min_scale.is_finite() && params.min_scale >= 0.0)
-        || params.max_rounds == 0
-    {
+    let tuning_ok = params.tuning.is_finite() && params.tuning > 0.0;
+    let scale_ok = params.min_scale.is_finite() && params.min_scale >= 0.0;
+    if !tuning_ok || !scale_ok || params.max_rounds == 0 {
         return Err(SolveError::InvalidParameter);
     }
     let norm = Normalisation::of(points, 3)?;
@@ -594,6 +596,8 @@ pub fn fit_robust(
 }
 
 #[cfg(test)]
+// The casts to f64 are no-ops in f64 builds but needed with `--features f32`.
+#[allow(clippy::unnecessary_cast)]
 pub(crate) mod tests {
     extern crate std;
     use super::*;
@@ -704,9 +708,17 @@ pub(crate) mod tests {
         }
         let same = [Vec2::new(1.0, 1.0); 5];
         assert_eq!(fit_hyper(&same), Err(SolveError::Degenerate));
-        let nan = [Vec2::new(0.0, 0.0), Vec2::new(1.0, Real::NAN), Vec2::new(0.0, 1.0)];
+        let nan = [
+            Vec2::new(0.0, 0.0),
+            Vec2::new(1.0, Real::NAN),
+            Vec2::new(0.0, 1.0),
+        ];
         assert_eq!(fit_taubin(&nan), Err(SolveError::NonFinite));
-        let tri = [Vec2::new(0.0, 0.0), Vec2::new(1.0, 0.0), Vec2::new(0.0, 1.0)];
+        let tri = [
+            Vec2::new(0.0, 0.0),
+            Vec2::new(1.0, 0.0),
+            Vec2::new(0.0, 1.0),
+        ];
         let c = fit_hyper(&tri).unwrap();
         let bad = LmParams {
             max_iterations: 0,
@@ -802,9 +814,12 @@ pub(crate) mod tests {
             let t = -1.5 + 0.3 * rng.uniform() as Real;
             *p = c + Vec2::new(t.cos(), t.sin()) * (r + 0.05 + 0.1 * rng.uniform() as Real);
         }
-        let clean =
-            fit_geometric(&pts[..60], fit_hyper(&pts[..60]).unwrap(), &LmParams::default())
-                .unwrap();
+        let clean = fit_geometric(
+            &pts[..60],
+            fit_hyper(&pts[..60]).unwrap(),
+            &LmParams::default(),
+        )
+        .unwrap();
         let sr = clean.std_dev.z;
         let plain = fit_geometric(&pts, fit_hyper(&pts).unwrap(), &LmParams::default()).unwrap();
         assert!((plain.circle.radius - r).abs() > 10.0 * sr);

@@ -16,6 +16,10 @@
 //! In-plane coordinates are those of [`LaserPlane::to_plane_coords`]: origin at the laser
 //! source, so the grazing rays are rays from the origin.
 
+// `!(x > 0.0)` is deliberate throughout: it also rejects NaN, which `x <= 0.0` would let
+// through (no panics or made-up numbers on bad data).
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 #[allow(unused_imports)]
 use crate::real::Float;
 use crate::real::{Real, Vec2, Vec3, PI};
@@ -288,8 +292,7 @@ fn nearest_parabola(
 /// depth direction) and `φ` (lean in the `(a, n)` plane: sideways):
 /// `u ∝ (tan φ, tan θ, 1)` (`docs/cylinder.md`, "Tilt angles").
 pub fn tilted_axis(theta: Real, phi: Real) -> Result<Vec3, SolveError> {
-    if !(theta.is_finite() && phi.is_finite() && theta.abs() < 0.5 * PI && phi.abs() < 0.5 * PI)
-    {
+    if !(theta.is_finite() && phi.is_finite() && theta.abs() < 0.5 * PI && phi.abs() < 0.5 * PI) {
         return Err(SolveError::InvalidParameter);
     }
     let v = Vec3::new(phi.tan(), theta.tan(), 1.0);
@@ -337,15 +340,9 @@ pub fn tilt_error_ratio(theta: Real, phi: Real, l_over_r: Real) -> Result<Real, 
     }
     let sq = disc.sqrt();
     let dirs = if m22.abs() >= m11.abs() {
-        [
-            Vec2::new(m22, -m12 + sq),
-            Vec2::new(m22, -m12 - sq),
-        ]
+        [Vec2::new(m22, -m12 + sq), Vec2::new(m22, -m12 - sq)]
     } else {
-        [
-            Vec2::new(-m12 + sq, m11),
-            Vec2::new(-m12 - sq, m11),
-        ]
+        [Vec2::new(-m12 + sq, m11), Vec2::new(-m12 - sq, m11)]
     };
     let mut psi = [0.0; 2];
     for (k, d) in dirs.iter().enumerate() {
@@ -463,7 +460,11 @@ fn cyl_step(st: &CylState, step: &V5) -> CylState {
     let p = st.p + e1 * step[0] + e2 * step[1];
     // Keep the axis point canonical: nearest the (normalised) centroid, the origin.
     let p = p - u * p.dot(&u);
-    CylState { p, u, r: st.r + step[4] }
+    CylState {
+        p,
+        u,
+        r: st.r + step[4],
+    }
 }
 
 /// Geometric cylinder fit: minimises `Σ (dist(xᵢ, axis) − r)²` over all points of all
@@ -725,8 +726,15 @@ impl Flags {
     pub const LARGE_TILT: Flags = Flags(1 << 8);
     /// Several objects: more than `max_outlier_fraction` of the points were rejected.
     pub const SEVERAL_OBJECTS: Flags = Flags(1 << 9);
-    /// The section looks elliptic (see [`CylinderSolution::axes`]).
-    pub const ELLIPTIC: Flags = Flags(1 << 10);
+    /// Image: more than 10 % of the curve's samples clipped at full scale; the subpixel
+    /// estimator compensates, but exposure should come down (set by `pipeline`).
+    pub const STRIPE_SATURATED: Flags = Flags(1 << 11);
+    /// Image: the laser-off frame is brighter than half of full scale (sunlit bark): shot noise
+    /// and a shallow stripe; readings are noisier (set by `pipeline`).
+    pub const AMBIENT_BRIGHT: Flags = Flags(1 << 12);
+    /// Image: another object of comparable size was seen beside the aimed one (a second
+    /// trunk, a branch); the one nearest the central column was measured (set by `pipeline`).
+    pub const OTHER_OBJECTS: Flags = Flags(1 << 13);
 
     /// Whether every flag of `other` is set.
     pub fn contains(self, other: Flags) -> bool {
@@ -857,9 +865,6 @@ pub struct CylinderSolution {
     pub uncertainty: Real,
     /// Stem tilt, when two planes measured it.
     pub tilt: Option<Tilt>,
-    /// `(major, minor)` diameters of an elliptic section, when detected
-    /// ([`Flags::ELLIPTIC`]).
-    pub axes: Option<(Real, Real)>,
     /// Quality flags.
     pub flags: Flags,
     /// RMS residual of the fit (metres), 0 if it failed.
@@ -932,8 +937,12 @@ fn solve_plane(
     let pts = to_plane(curve, plane, scratch.points)?;
     let mut flags = Flags::default();
     let cal = |r: Real, centre: Vec2| {
-        error_model::calibration_relative_sigma(plane, plane.from_plane_coords(centre), &params.noise, params.focal_px)
-            * r
+        error_model::calibration_relative_sigma(
+            plane,
+            plane.from_plane_coords(centre),
+            &params.noise,
+            params.focal_px,
+        ) * r
     };
     // Three-tangent with σ from the edges (model) and from D (max of model and data).
     let tt = match three_tangent(pts, &params.three_tangent) {
@@ -966,14 +975,15 @@ fn solve_plane(
                         pts.iter().map(|q| (*q, noise_vector(plane, *q, params))),
                     );
                     let random = f.std_dev.z.max(model);
-                    let s = (random * random + cal(f.circle.radius, f.circle.centre).powi(2))
-                        .sqrt();
+                    let s =
+                        (random * random + cal(f.circle.radius, f.circle.centre).powi(2)).sqrt();
                     let arc = arc_angle(pts, f.circle.centre);
                     let rejected = 1.0 - f.inliers as Real / pts.len() as Real;
                     if rejected > params.max_outlier_fraction {
                         flags.insert(Flags::SEVERAL_OBJECTS);
                     }
-                    if f.rms_residual > 3.0 * s_point.max(params.robust.min_scale) || rejected > 0.2 {
+                    if f.rms_residual > 3.0 * s_point.max(params.robust.min_scale) || rejected > 0.2
+                    {
                         flags.insert(Flags::POOR_FIT);
                     }
                     if arc < params.min_arc_angle {
@@ -1104,17 +1114,28 @@ fn finish_plane(one: &PlaneResult, plane: &LaserPlane) -> Result<CylinderSolutio
     let (radius, sigma, method, centre, distance) = if use_fit {
         let (f, s, _) = one.fit.ok_or(SolveError::NotConverged)?;
         let c = f.circle.centre;
-        (f.circle.radius, s, Method::CircleFit, c, c.norm() - f.circle.radius)
+        (
+            f.circle.radius,
+            s,
+            Method::CircleFit,
+            c,
+            c.norm() - f.circle.radius,
+        )
     } else {
         let (t, s) = one.tt.ok_or(SolveError::NotConverged)?;
-        (t.radius, s, Method::ThreeTangent, t.centre, t.nearest_distance)
+        (
+            t.radius,
+            s,
+            Method::ThreeTangent,
+            t.centre,
+            t.nearest_distance,
+        )
     };
     Ok(CylinderSolution {
         diameter: 2.0 * radius,
         method,
         uncertainty: 2.0 * sigma,
         tilt: None,
-        axes: None,
         flags,
         fit_rms: one.fit.map(|(f, _, _)| f.rms_residual).unwrap_or(0.0),
         n_points: one.n,
@@ -1143,9 +1164,13 @@ fn solve_tilted(
     let mut s2sum = 0.0;
     let mut k = 0;
     for (curve, plane) in input.curves.iter().zip(input.planes) {
-        if let Ok(t) =
-            generalised_three_tangent(curve, plane.source, cyl.axis, &params.three_tangent, scratch.points)
-        {
+        if let Ok(t) = generalised_three_tangent(
+            curve,
+            plane.source,
+            cyl.axis,
+            &params.three_tangent,
+            scratch.points,
+        ) {
             let (dr_da, dr_dd) = t.partials();
             let s_alpha = params.noise.edge_angle_sigma(params.focal_px) / Real::sqrt(2.0);
             let s_point = one_point_sigma(plane, params, t.nearest_distance);
@@ -1162,7 +1187,8 @@ fn solve_tilted(
     } else {
         return Err(SolveError::Degenerate);
     };
-    let cal_rel = error_model::calibration_relative_sigma(plane0, centre, &params.noise, params.focal_px);
+    let cal_rel =
+        error_model::calibration_relative_sigma(plane0, centre, &params.noise, params.focal_px);
     let fit_sigma = (fit.sigma_radius.powi(2) + (cal_rel * cyl.radius).powi(2)).sqrt();
     let tt = if k > 0 {
         let r = rsum / k as Real;
@@ -1202,7 +1228,6 @@ fn solve_tilted(
         method,
         uncertainty: 2.0 * sigma,
         tilt: Some(tilt),
-        axes: None,
         flags,
         fit_rms: fit.rms_residual,
         n_points: fit.points,
@@ -1261,7 +1286,10 @@ mod tests {
         }
         assert_eq!(three_tangent_radius(0.0, 1.0), Err(SolveError::Degenerate));
         assert_eq!(three_tangent_radius(0.3, -1.0), Err(SolveError::Degenerate));
-        assert_eq!(three_tangent_radius(Real::NAN, 1.0), Err(SolveError::NonFinite));
+        assert_eq!(
+            three_tangent_radius(Real::NAN, 1.0),
+            Err(SolveError::NonFinite)
+        );
     }
 
     #[test]
@@ -1288,7 +1316,10 @@ mod tests {
     fn three_tangent_errors() {
         let p = ThreeTangentParams::default();
         let few = [Vec2::new(0.0, 1.0); 3];
-        assert_eq!(three_tangent(&few, &p).err(), Some(SolveError::TooFewPoints));
+        assert_eq!(
+            three_tangent(&few, &p).err(),
+            Some(SolveError::TooFewPoints)
+        );
         // Points around the source (not in a half-plane in front of it).
         let mut ring = [Vec2::zeros(); 12];
         for (i, q) in ring.iter_mut().enumerate() {
@@ -1308,12 +1339,17 @@ mod tests {
         let r0 = tilt_error_ratio(0.0, 0.0, 8.0).unwrap();
         assert!((r0 - 1.0).abs() < 100.0 * EPS);
         // Far field: 1/cos φ whatever θ (docs/cylinder.md); the near-field correction is
-        // O(r/L) = 1e-4 here.
+        // O(r/L). The tangent construction cancels terms of size (L/r)², so L/r is kept
+        // below ε^(-1/3) (1e4 in f64, 150 in f32); tolerance 5·r/L + 1e4·ε.
         let deg = PI / 180.0;
+        let l: Real = if EPS > 1e-10 { 150.0 } else { 1e4 };
         for (th, ph) in [(0.0, 20.0), (25.0, 20.0), (30.0, 0.0), (-15.0, 10.0)] {
-            let got = tilt_error_ratio(th * deg, ph * deg, 1e4).unwrap();
+            let got = tilt_error_ratio(th * deg, ph * deg, l).unwrap();
             let want = 1.0 / (ph * deg).cos();
-            assert!((got - want).abs() < 5e-4 + 1e4 * EPS, "{th} {ph}: {got} vs {want}");
+            assert!(
+                (got - want).abs() < 5.0 / l + 1e4 * EPS,
+                "{th} {ph}: {got} vs {want}"
+            );
         }
         // Near field: the point-based three-tangent on densely sampled lit points of the
         // analytic ellipse. Sampling 40 000 points over the full ellipse: the extreme polar
@@ -1360,6 +1396,16 @@ mod tests {
     /// Lit (from the plane's source) and visible (from the camera at the origin) points of
     /// the cylinder's section by `plane`, `n` samples of the angle around the axis.
     fn section(cyl: &Cylinder, plane: &LaserPlane, n: usize, out: &mut std::vec::Vec<Vec3>) {
+        section_seen(cyl, plane, n, true, out)
+    }
+
+    fn section_seen(
+        cyl: &Cylinder,
+        plane: &LaserPlane,
+        n: usize,
+        camera_visibility: bool,
+        out: &mut std::vec::Vec<Vec3>,
+    ) {
         let (e1, e2) = basis(cyl.axis);
         out.clear();
         for i in 0..n {
@@ -1368,7 +1414,7 @@ mod tests {
             let base = cyl.point + nrm * cyl.radius;
             let s = (plane.offset - plane.normal.dot(&base)) / plane.normal.dot(&cyl.axis);
             let x = base + cyl.axis * s;
-            if nrm.dot(&(plane.source - x)) > 0.0 && nrm.dot(&(-x)) > 0.0 {
+            if nrm.dot(&(plane.source - x)) > 0.0 && (!camera_visibility || nrm.dot(&(-x)) > 0.0) {
                 out.push(x);
             }
         }
@@ -1405,12 +1451,20 @@ mod tests {
             assert!((fit.cylinder.radius - 0.15).abs() < tol, "{fit:?}");
             assert!(fit.cylinder.axis.cross(&truth.axis).norm() < tol * 10.0);
         }
+        // Lit but not necessarily visible: the grazing rays' ends (the camera, 10 cm
+        // above the source, sees a slightly different limb of a tilted stem — a second-
+        // order effect of ~4e-5 m here, see docs/cylinder.md).
+        let mut exact0 = std::vec::Vec::new();
+        section_seen(&truth, &p0, 2000, false, &mut exact0);
         // Noise: 0.5 mm isotropic, Gaussian. Radius within 4σ of the fit's own covariance
         // (whose calibration is tested for circles in circle.rs).
         let mut rng = Rng::new(4242);
         for x in c0.iter_mut().chain(c1.iter_mut()) {
-            *x += Vec3::new(rng.gauss() as Real, rng.gauss() as Real, rng.gauss() as Real)
-                * 5e-4;
+            *x += Vec3::new(
+                rng.gauss() as Real,
+                rng.gauss() as Real,
+                rng.gauss() as Real,
+            ) * 5e-4;
         }
         let curves: [&[Vec3]; 2] = [&c0, &c1];
         let init = initial_cylinder(&curves, &[p0, p1], &mut scratch).unwrap();
@@ -1420,21 +1474,30 @@ mod tests {
             "{fit:?}"
         );
         let ang = fit.cylinder.axis.cross(&truth.axis).norm().asin();
-        assert!(ang < 4.0 * fit.sigma_axis * Real::sqrt(2.0), "{ang} {}", fit.sigma_axis);
+        assert!(
+            ang < 4.0 * fit.sigma_axis * Real::sqrt(2.0),
+            "{ang} {}",
+            fit.sigma_axis
+        );
         let tilt = Tilt::of(fit.cylinder.axis, &p0, fit.sigma_axis);
         assert!((tilt.theta - 15.0 * deg).abs() < 4.0 * fit.sigma_axis * 2.0);
         assert!((tilt.phi - 20.0 * deg).abs() < 4.0 * fit.sigma_axis * 2.0);
-        // Generalised three-tangent on the projected curve (exact axis): the true radius to
-        // the noise level of D (0.5 mm over ~30 window points → ~0.15 mm; 4σ ≈ 0.6 mm).
+        // Generalised three-tangent on the exact curve projected along the true axis: the
+        // projection is exact (docs/cylinder.md), so only rounding remains (100·ε·L as in
+        // `three_tangent_exact_arc`, ×10 for the sampled rather than analytic tangent
+        // points: 2000 samples put the last lit one within Δs ≈ 0.5 mm of the tangent,
+        // where the polar angle deficit is ~(Δs)²/(2rL) ≈ 6e-7 rad → 1e-6 m in r).
+        // Isotropic noise would not do here: lateral noise biases the extreme polar
+        // angles outwards, which real column-wise data does not have (docs/cylinder.md).
         let g = generalised_three_tangent(
-            &c0,
+            &exact0,
             p0.source,
             truth.axis,
             &ThreeTangentParams::default(),
             &mut scratch,
         )
         .unwrap();
-        assert!((g.radius - 0.15).abs() < 1e-3, "{g:?}");
+        assert!((g.radius - 0.15).abs() < 2e-6 + 1000.0 * EPS * 1.5, "{g:?}");
     }
 
     fn noisy_columns(
@@ -1504,8 +1567,11 @@ mod tests {
         section(&truth, &p1, 1500, &mut c1);
         let mut rng = Rng::new(9);
         for x in c0.iter_mut().chain(c1.iter_mut()) {
-            *x += Vec3::new(rng.gauss() as Real, rng.gauss() as Real, rng.gauss() as Real)
-                * 3e-4;
+            *x += Vec3::new(
+                rng.gauss() as Real,
+                rng.gauss() as Real,
+                rng.gauss() as Real,
+            ) * 3e-4;
         }
         let mut pts = std::vec![Vec2::zeros(); 1500];
         let mut vals = std::vec![0.0; 1500];
@@ -1522,7 +1588,10 @@ mod tests {
         )
         .unwrap();
         let tilt = sol.tilt.unwrap();
-        assert!((sol.diameter - 0.4).abs() < 4.0 * sol.uncertainty, "{sol:?}");
+        assert!(
+            (sol.diameter - 0.4).abs() < 4.0 * sol.uncertainty,
+            "{sol:?}"
+        );
         assert!((tilt.phi - 25.0 * deg).abs() < 2.0 * deg, "{tilt:?}");
         assert!((tilt.theta + 10.0 * deg).abs() < 2.0 * deg, "{tilt:?}");
         assert!(!sol.flags.contains(Flags::TILT_IGNORED));
@@ -1576,7 +1645,13 @@ mod tests {
         // A 1.4 m stem: outside the plausible range (max radius 0.6 m).
         let mut rng = Rng::new(3);
         let mut big = std::vec::Vec::new();
-        noisy_columns(&p0, &Circle::new(Vec2::new(0.0, 3.5), 0.7), 0.0, &mut rng, &mut big);
+        noisy_columns(
+            &p0,
+            &Circle::new(Vec2::new(0.0, 3.5), 0.7),
+            0.0,
+            &mut rng,
+            &mut big,
+        );
         let mut pts = std::vec![Vec2::zeros(); 800];
         let mut vals = std::vec![0.0; 800];
         let r = solve(

@@ -9,11 +9,14 @@
 //! Every solver works on caller-owned slices, never allocates and returns a [`SolveError`]
 //! instead of a made-up number when the data cannot support an answer.
 
+// `!(x > 0.0)` is deliberate throughout: it also rejects NaN, which `x <= 0.0` would let
+// through (no panics or made-up numbers on bad data).
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use core::fmt;
 
 pub mod circle;
 pub mod cylinder;
-// pub mod ellipse;
 
 /// Why a solver could not produce a trustworthy answer.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

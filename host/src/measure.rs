@@ -1,0 +1,388 @@
+//! Replaying captures through the measurement core: a capture in, a [`Reading`] out.
+//!
+//! The host runs exactly the core's `pipeline::measure_stem` that the firmware runs, with
+//! buffers allocated here ([`HostWorkspace`]); this module only picks the frames, converts
+//! units for people (millimetres, degrees) and names the flags.
+
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+use tangent_core::calibration::Calibration;
+use tangent_core::curve::CurvePoint;
+use tangent_core::image::segment::ObjectFeatures;
+use tangent_core::image::{Frame, Pixel};
+use tangent_core::pipeline::{self, PipelineConfig, PipelineError, StemMeasurement, Workspace, WorkspaceSizes};
+use tangent_core::real::{Real, Vec2, Vec3};
+use tangent_core::solvers::cylinder::{CylinderParams, Flags, Method};
+
+use crate::capture::{Capture, CaptureError, Mode};
+use crate::pgm::{Pgm, PgmSamples};
+use crate::simulate::scene::Object;
+
+type Vec3d = nalgebra::Vector3<f64>;
+
+/// Every flag with its name as printed and exported (stable: the field log stores them).
+pub const FLAG_NAMES: [(Flags, &str); 13] = [
+    (Flags::ARC_TOO_SHORT, "arc_too_short"),
+    (Flags::POOR_FIT, "poor_fit"),
+    (Flags::TILT_IGNORED, "tilt_ignored"),
+    (Flags::INCONSISTENT, "inconsistent"),
+    (Flags::THREE_TANGENT_FAILED, "three_tangent_failed"),
+    (Flags::FIT_FAILED, "fit_failed"),
+    (Flags::RANGE_LIMIT, "range_limit"),
+    (Flags::TILT_FIT_FAILED, "tilt_fit_failed"),
+    (Flags::LARGE_TILT, "large_tilt"),
+    (Flags::SEVERAL_OBJECTS, "several_objects"),
+    (Flags::STRIPE_SATURATED, "stripe_saturated"),
+    (Flags::AMBIENT_BRIGHT, "ambient_bright"),
+    (Flags::OTHER_OBJECTS, "other_objects"),
+];
+
+/// The names of the flags set in `flags`.
+pub fn flag_names(flags: Flags) -> Vec<&'static str> {
+    FLAG_NAMES.iter().filter(|(f, _)| flags.contains(*f)).map(|(_, n)| *n).collect()
+}
+
+/// Name of a solver method as printed and exported.
+pub fn method_name(method: Method) -> &'static str {
+    match method {
+        Method::ThreeTangent => "three_tangent",
+        Method::CircleFit => "circle_fit",
+        Method::CylinderFit => "cylinder_fit",
+        Method::GeneralisedThreeTangent => "generalised_three_tangent",
+    }
+}
+
+/// Why a capture could not be measured (as opposed to a measurement that failed, which is a
+/// [`Reading`] with an error).
+#[derive(Debug, thiserror::Error)]
+pub enum MeasureError {
+    /// The capture could not be read.
+    #[error(transparent)]
+    Capture(#[from] CaptureError),
+    /// The capture is not of a mode this command measures.
+    #[error("capture mode {0:?} is not measured yet (only cylinder captures are)")]
+    UnsupportedMode(Mode),
+    /// No frame lit every plane of the calibration.
+    #[error("no laser-on frame lights all {0} planes of the calibration")]
+    NoFullFrame(usize),
+    /// The off and on frames differ in bit depth.
+    #[error("the laser-off and laser-on frames differ in bit depth")]
+    MixedDepth,
+}
+
+/// Tilt of the stem, in degrees for people.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct TiltReport {
+    /// Total angle between the stem axis and the laser plane's normal (degrees).
+    pub total_deg: f64,
+    /// Lean towards (+) or away from the instrument (degrees).
+    pub theta_deg: f64,
+    /// Sideways lean (degrees).
+    pub phi_deg: f64,
+}
+
+/// One capture's result, as printed and as JSON (`--json`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Reading {
+    /// The capture directory.
+    pub capture: String,
+    /// Reported diameter (metres), absent on error.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub diameter_m: Option<f64>,
+    /// 1σ uncertainty of the diameter (metres).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub uncertainty_m: Option<f64>,
+    /// Method of the reported diameter.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub method: Option<&'static str>,
+    /// Quality flags.
+    pub flags: Vec<&'static str>,
+    /// Tilt, when measured (two planes).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tilt: Option<TiltReport>,
+    /// Major and minor diameters of an elliptic section (metres).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub axes_m: Option<(f64, f64)>,
+    /// Three-tangent diameter (metres), when it succeeded.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub three_tangent_diameter_m: Option<f64>,
+    /// Fit diameter (metres), when it succeeded.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fit_diameter_m: Option<f64>,
+    /// Distance from the laser source to the stem (metres).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub distance_m: Option<f64>,
+    /// Curve points used.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub points: Option<usize>,
+    /// Why no diameter was given.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+    /// The true diameter, for synthetic captures with ground truth (metres).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub truth_diameter_m: Option<f64>,
+}
+
+impl Reading {
+    fn from_result(capture: &Path, result: &Result<StemMeasurement, PipelineError>, truth: Option<f64>) -> Self {
+        let capture = capture.display().to_string();
+        match result {
+            Ok(m) => {
+                let s = &m.solution;
+                Reading {
+                    capture,
+                    diameter_m: Some(s.diameter as f64),
+                    uncertainty_m: Some(s.uncertainty as f64),
+                    method: Some(method_name(s.method)),
+                    flags: flag_names(s.flags),
+                    tilt: s.tilt.map(|t| TiltReport {
+                        total_deg: (t.total as f64).to_degrees(),
+                        theta_deg: (t.theta as f64).to_degrees(),
+                        phi_deg: (t.phi as f64).to_degrees(),
+                    }),
+                    axes_m: None,
+                    three_tangent_diameter_m: s.three_tangent_diameter.map(|d| d as f64),
+                    fit_diameter_m: s.fit_diameter.map(|d| d as f64),
+                    distance_m: Some(s.distance as f64),
+                    points: Some(s.n_points),
+                    error: None,
+                    truth_diameter_m: truth,
+                }
+            }
+            Err(e) => Reading {
+                capture,
+                diameter_m: None,
+                uncertainty_m: None,
+                method: None,
+                flags: Vec::new(),
+                tilt: None,
+                axes_m: None,
+                three_tangent_diameter_m: None,
+                fit_diameter_m: None,
+                distance_m: None,
+                points: None,
+                error: Some(e.to_string()),
+                truth_diameter_m: truth,
+            },
+        }
+    }
+
+    /// One line for people: `d = 301.2 mm ± 0.8 mm (circle_fit) [flags]` or the error.
+    pub fn summary(&self) -> String {
+        match (self.diameter_m, &self.error) {
+            (Some(d), _) => {
+                let mut s = format!(
+                    "d = {:.1} mm ± {:.1} mm ({})",
+                    d * 1e3,
+                    self.uncertainty_m.unwrap_or(f64::NAN) * 1e3,
+                    self.method.unwrap_or("?")
+                );
+                if let Some(t) = self.tilt {
+                    s += &format!(", tilt {:.1}°", t.total_deg);
+                }
+                if let Some((a, b)) = self.axes_m {
+                    s += &format!(", axes {:.1} × {:.1} mm", a * 1e3, b * 1e3);
+                }
+                if let Some(z) = self.distance_m {
+                    s += &format!(", at {:.2} m", z);
+                }
+                if !self.flags.is_empty() {
+                    s += &format!(" [{}]", self.flags.join(", "));
+                }
+                if let Some(t) = self.truth_diameter_m {
+                    s += &format!(" (truth {:.1} mm, error {:+.1} mm)", t * 1e3, (d - t) * 1e3);
+                }
+                s
+            }
+            (None, Some(e)) => format!("no reading: {e}"),
+            (None, None) => "no reading".to_string(),
+        }
+    }
+}
+
+/// Heap-allocated buffers for the core's [`Workspace`], sized by [`WorkspaceSizes`].
+pub struct HostWorkspace<P: Pixel> {
+    diff: Vec<P>,
+    labels: Vec<u16>,
+    histogram: Vec<u32>,
+    label_table: Vec<u16>,
+    objects: Vec<ObjectFeatures>,
+    curve: Vec<CurvePoint>,
+    points: Vec<Vec3>,
+    scratch_points: Vec<Vec2>,
+    scratch_values: Vec<Real>,
+}
+
+impl<P: Pixel> HostWorkspace<P> {
+    /// Buffers for a `width × height` frame of `bit_depth` bits and `planes` laser planes.
+    pub fn new(width: usize, height: usize, bit_depth: u8, planes: usize) -> Self {
+        let s = WorkspaceSizes::new(width, height, bit_depth, planes);
+        HostWorkspace {
+            diff: vec![P::default(); s.pixels],
+            labels: vec![0; s.pixels],
+            histogram: vec![0; s.histogram],
+            label_table: vec![0; s.label_table],
+            objects: vec![ObjectFeatures::empty(0); s.objects],
+            curve: vec![CurvePoint { column: 0, row: 0.0, amplitude: 0.0, curve: 0, saturated: false }; s.points],
+            points: vec![Vec3::zeros(); s.points],
+            scratch_points: vec![Vec2::zeros(); s.points],
+            scratch_values: vec![0.0; s.points],
+        }
+    }
+
+    /// The core's view of these buffers.
+    pub fn workspace(&mut self) -> Workspace<'_, P> {
+        Workspace {
+            diff: &mut self.diff,
+            labels: &mut self.labels,
+            histogram: &mut self.histogram,
+            label_table: &mut self.label_table,
+            objects: &mut self.objects,
+            curve: &mut self.curve,
+            points: &mut self.points,
+            scratch_points: &mut self.scratch_points,
+            scratch_values: &mut self.scratch_values,
+        }
+    }
+
+    /// The difference frame of the last run.
+    pub fn diff(&self) -> &[P] {
+        &self.diff
+    }
+    /// The curve points of the last run (all planes; see `Profile::plane_points`).
+    pub fn curve(&self) -> &[CurvePoint] {
+        &self.curve
+    }
+    /// The 3-D points of the last run.
+    pub fn points(&self) -> &[Vec3] {
+        &self.points
+    }
+}
+
+/// What a measurement of one capture produced, with the buffers for plots.
+pub struct Outcome {
+    /// The result, for printing and JSON.
+    pub reading: Reading,
+    /// The core's result.
+    pub result: Result<StemMeasurement, PipelineError>,
+    /// The difference frame (as 16-bit, whatever the sensor depth) and its size.
+    pub diff: Vec<u16>,
+    /// The curve points (all planes).
+    pub curve: Vec<CurvePoint>,
+    /// The 3-D points (all planes).
+    pub points: Vec<Vec3>,
+    /// The calibration used.
+    pub calibration: Calibration,
+}
+
+/// The laser-off frame and the laser-on frame that lights every plane of `planes`.
+fn frame_pair(capture: &Capture, planes: usize) -> Result<(&Pgm, &Pgm), MeasureError> {
+    let on = capture
+        .on_frames()
+        .find(|(lit, _)| (0..planes).all(|k| lit.contains(&k)))
+        .map(|(_, p)| p)
+        .ok_or(MeasureError::NoFullFrame(planes))?;
+    Ok((capture.off_frame(), on))
+}
+
+fn run<P: Pixel>(
+    off: &[P],
+    on: &[P],
+    pgm: &Pgm,
+    calibration: &Calibration,
+    config: &PipelineConfig,
+    params: &CylinderParams,
+) -> (Result<StemMeasurement, PipelineError>, HostWorkspace<P>) {
+    let planes = calibration.planes.len();
+    let mut hw = HostWorkspace::<P>::new(pgm.width, pgm.height, pgm.bit_depth(), planes);
+    let result = (|| {
+        let off = Frame::new(off, pgm.width, pgm.height, pgm.width)?.with_bit_depth(pgm.bit_depth())?;
+        let on = Frame::new(on, pgm.width, pgm.height, pgm.width)?.with_bit_depth(pgm.bit_depth())?;
+        pipeline::measure_stem(&off, &on, calibration, config, params, &mut hw.workspace())
+    })();
+    (result, hw)
+}
+
+/// The true diameter of the aimed stem of a synthetic capture, when it carries ground truth:
+/// the cylinder whose axis passes nearest the optical axis; its diameter is `2r`, or for an
+/// elliptic section the mean of its two axes `a + b` (what cross-calipering reports).
+pub fn truth_diameter(capture: &Capture) -> Option<f64> {
+    let objects = &capture.meta.truth.as_ref()?.objects;
+    objects
+        .iter()
+        .filter_map(|o| match o {
+            Object::Cylinder(c) => {
+                let d = c.radius_m.map(|r| 2.0 * r).or(c.semi_axes_m.map(|[a, b]| a + b))?;
+                Some((axis_offset(c.axis_point_m, c.axis_direction), d))
+            }
+            _ => None,
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, d)| d)
+}
+
+/// Distance between a line (point `p`, direction `u`) and the optical axis (the z axis).
+fn axis_offset(p: [f64; 3], u: [f64; 3]) -> f64 {
+    let (p, u, z) = (Vec3d::from(p), Vec3d::from(u), Vec3d::z());
+    let n = u.cross(&z);
+    if n.norm() < 1e-12 {
+        (p.x * p.x + p.y * p.y).sqrt()
+    } else {
+        p.dot(&n).abs() / n.norm()
+    }
+}
+
+/// Measures one capture directory with the core pipeline. `calibration` overrides the
+/// capture's own.
+pub fn measure_capture(
+    dir: &Path,
+    calibration: Option<&Calibration>,
+    config: &PipelineConfig,
+    params: &CylinderParams,
+) -> Result<Outcome, MeasureError> {
+    let capture = Capture::read(dir)?;
+    if capture.meta.mode != Mode::Cylinder {
+        return Err(MeasureError::UnsupportedMode(capture.meta.mode));
+    }
+    let calibration = calibration.cloned().unwrap_or_else(|| capture.calibration.clone());
+    let (off, on) = frame_pair(&capture, calibration.planes.len())?;
+    let (result, diff, curve, points) = match (&off.samples, &on.samples) {
+        (PgmSamples::U8(a), PgmSamples::U8(b)) => {
+            let (r, hw) = run(a, b, on, &calibration, config, params);
+            (r, hw.diff.iter().map(|&v| v as u16).collect(), hw.curve, hw.points)
+        }
+        (PgmSamples::U16(a), PgmSamples::U16(b)) => {
+            let (r, hw) = run(a, b, on, &calibration, config, params);
+            (r, hw.diff, hw.curve, hw.points)
+        }
+        _ => return Err(MeasureError::MixedDepth),
+    };
+    let reading = Reading::from_result(dir, &result, truth_diameter(&capture));
+    Ok(Outcome { reading, result, diff, curve, points, calibration })
+}
+
+/// Lists capture directories: each argument is a capture (has `capture.toml`) or a directory
+/// whose sub-directories are captures (sorted by name).
+pub fn expand_captures(args: &[PathBuf]) -> std::io::Result<Vec<PathBuf>> {
+    let mut out = Vec::new();
+    for a in args {
+        if a.join(crate::capture::META_FILE).is_file() {
+            out.push(a.clone());
+            continue;
+        }
+        let mut subs: Vec<PathBuf> = std::fs::read_dir(a)?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.join(crate::capture::META_FILE).is_file())
+            .collect();
+        if subs.is_empty() {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::NotFound,
+                format!("{} is neither a capture (no capture.toml) nor a directory of captures", a.display()),
+            ));
+        }
+        subs.sort();
+        out.extend(subs);
+    }
+    Ok(out)
+}
