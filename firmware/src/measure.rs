@@ -68,15 +68,13 @@ pub const fn points_for(width: usize, planes: usize) -> usize {
     width * planes * 2
 }
 
-/// The pipeline's small buffers (everything but the two per-pixel ones), const-constructible
-/// so a board can place them in a static of its choice.
+/// The pipeline's point and table buffers (everything but the two per-pixel buffers and the
+/// object features), const-constructible so a board can place them in a static of its choice.
 pub struct SmallBuffers<const POINTS: usize> {
     /// Histogram.
     pub histogram: [u32; HISTOGRAM],
     /// Segmentation equivalence table.
     pub label_table: [u16; LABEL_TABLE],
-    /// Object features.
-    pub objects: [ObjectFeatures; OBJECTS],
     /// Curve points.
     pub curve: [CurvePoint; POINTS],
     /// 3-D points.
@@ -100,7 +98,6 @@ impl<const POINTS: usize> SmallBuffers<POINTS> {
         SmallBuffers {
             histogram: [0; HISTOGRAM],
             label_table: [0; LABEL_TABLE],
-            objects: [ObjectFeatures::empty(0); OBJECTS],
             curve: [ZERO_POINT; POINTS],
             points: [Vec3::new(0.0, 0.0, 0.0); POINTS],
             scratch_points: [Vec2::new(0.0, 0.0); POINTS],
@@ -115,10 +112,34 @@ impl<const POINTS: usize> Default for SmallBuffers<POINTS> {
     }
 }
 
+/// Object-feature buffer of the workspace (≈ 57 KB: placed separately from
+/// [`SmallBuffers`] so boards can spread the workspace over RAM regions).
+pub type Objects = [ObjectFeatures; OBJECTS];
+
+/// An all-zero [`Objects`] buffer (all-zero so that a static of it lands in `.bss`, not in
+/// `.data` with a 57 KB image in flash; the pipeline initialises every entry it uses).
+pub const NO_OBJECTS: Objects = [ZERO_OBJECT; OBJECTS];
+
+const ZERO_OBJECT: ObjectFeatures = ObjectFeatures {
+    label: 0,
+    pixel_count: 0,
+    min_x: 0,
+    max_x: 0,
+    min_y: 0,
+    max_y: 0,
+    intensity_sum: 0,
+    intensity_x_sum: 0,
+    intensity_y_sum: 0,
+    x_sum: 0,
+    y_sum: 0,
+    peak_intensity: 0,
+};
+
 /// Assembles a [`Workspace`] from a board's buffers.
 pub fn workspace<'w, const POINTS: usize>(
     diff: &'w mut [u8],
     labels: &'w mut [u16],
+    objects: &'w mut Objects,
     small: &'w mut SmallBuffers<POINTS>,
 ) -> Workspace<'w, u8> {
     Workspace {
@@ -126,7 +147,7 @@ pub fn workspace<'w, const POINTS: usize>(
         labels,
         histogram: &mut small.histogram,
         label_table: &mut small.label_table,
-        objects: &mut small.objects,
+        objects,
         curve: &mut small.curve,
         points: &mut small.points,
         scratch_points: &mut small.scratch_points,

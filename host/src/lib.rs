@@ -10,6 +10,7 @@ pub mod calibrate;
 pub mod calibration_file;
 pub mod measure;
 pub mod capture;
+pub mod evaluate;
 pub mod pgm;
 pub mod plot;
 pub mod simulate;

@@ -16,6 +16,10 @@ struct Cli {
 #[derive(Subcommand, Debug)]
 enum Command {
     // Each variant: `Name(cli::name::Args)`; keep one per line, alphabetical.
+    /// Camera and laser-plane calibration (`calibrate camera`, `calibrate laser`).
+    Calibrate(cli::calibrate::Args),
+    /// Accuracy against the simulator's truth on fresh random stems (writes docs/accuracy.md).
+    Evaluate(cli::evaluate::Args),
     /// A PNG of a capture: frames, difference, true and extracted laser curves.
     Inspect(cli::inspect::Args),
     /// Replay captures and print the stem diameter, uncertainty, method, tilt and flags.
@@ -30,6 +34,8 @@ fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let result: anyhow::Result<std::process::ExitCode> = match cli.command {
         // Each arm: `Command::Name(args) => cli::name::run(args),`
+        Command::Calibrate(args) => cli::calibrate::run(args),
+        Command::Evaluate(args) => cli::evaluate::run(args),
         Command::Inspect(args) => cli::inspect::run(args),
         Command::Measure(args) => cli::measure::run(args),
         Command::Simulate(args) => cli::simulate::run(args),

@@ -125,8 +125,8 @@ pub struct Reading {
 }
 
 impl Reading {
-    fn from_result(capture: &Path, result: &Result<StemMeasurement, PipelineError>, truth: Option<f64>) -> Self {
-        let capture = capture.display().to_string();
+    fn from_result(capture: &str, result: &Result<StemMeasurement, PipelineError>, truth: Option<f64>) -> Self {
+        let capture = capture.to_string();
         match result {
             Ok(m) => {
                 let s = &m.solution;
@@ -342,11 +342,23 @@ pub fn measure_capture(
     params: &CylinderParams,
 ) -> Result<Outcome, MeasureError> {
     let capture = Capture::read(dir)?;
+    measure_loaded(&capture, &dir.display().to_string(), calibration, config, params)
+}
+
+/// Measures a capture already in memory (e.g. fresh from the simulator); `name` labels the
+/// reading.
+pub fn measure_loaded(
+    capture: &Capture,
+    name: &str,
+    calibration: Option<&Calibration>,
+    config: &PipelineConfig,
+    params: &CylinderParams,
+) -> Result<Outcome, MeasureError> {
     if capture.meta.mode != Mode::Cylinder {
         return Err(MeasureError::UnsupportedMode(capture.meta.mode));
     }
     let calibration = calibration.cloned().unwrap_or_else(|| capture.calibration.clone());
-    let (off, on) = frame_pair(&capture, calibration.planes.len())?;
+    let (off, on) = frame_pair(capture, calibration.planes.len())?;
     let (result, diff, curve, points) = match (&off.samples, &on.samples) {
         (PgmSamples::U8(a), PgmSamples::U8(b)) => {
             let (r, hw) = run(a, b, on, &calibration, config, params);
@@ -358,7 +370,7 @@ pub fn measure_capture(
         }
         _ => return Err(MeasureError::MixedDepth),
     };
-    let reading = Reading::from_result(dir, &result, truth_diameter(&capture));
+    let reading = Reading::from_result(name, &result, truth_diameter(capture));
     Ok(Outcome { reading, result, diff, curve, points, calibration })
 }
 

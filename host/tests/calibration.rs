@@ -27,3 +27,19 @@ fn opencv_left() {
         println!("{}: n {} median {:.3} max {:.3}", v.name, d.len(), d[d.len()/2], d[d.len()-1]);
     }
 }
+#[test]
+fn dump_bad() {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../tests/data/opencv-left");
+    let board = Board::parse("9x6", "25mm").unwrap();
+    let csv = std::fs::read_to_string(dir.join("opencv_corners.csv")).unwrap();
+    let mut out = String::new();
+    for line in csv.lines().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        let img = image::open(dir.join(f[0])).unwrap().to_luma8();
+        let ours = corners::detect(&img, &board, f[0]).unwrap();
+        let p = Vec2::new(f[3].parse().unwrap(), f[4].parse().unwrap());
+        let m = ours.corners.iter().map(|c| (c.pixel - p).norm()).fold(f64::MAX, f64::min);
+        if m > 0.05 { out += &format!("{} {} {}\n", f[0], f[1], f[2]); }
+    }
+    std::fs::write("/tmp/cvwork/bad.txt", out).unwrap();
+}

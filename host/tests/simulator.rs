@@ -168,11 +168,14 @@ fn radiometric_chain_of_a_uniform_wall() {
 
 #[test]
 fn speckle_cells_limits() {
-    // Small correlation: M → (L/(√(2π)σ_c))² (each 1-D factor → √(2π)σ_c/L).
+    // Small correlation (σ_c ≪ L, the Gaussian vanishes at ±L): each 1-D factor is
+    // (1/L)∫(1 − |x|/L)e^{−x²/2σ²}dx = √(2π)σ/L − 2σ²/L² exactly up to e^{−L²/2σ²}, and
+    // M = factor⁻². The quadrature (2000 midpoints) is good to ~1e-6 relative.
     let (l, s) = (6e-6, 0.05e-6);
     let m = sensor::speckle_cells(l, s);
-    let asym = (l / ((2.0 * std::f64::consts::PI).sqrt() * s)).powi(2);
-    assert!((m / asym - 1.0).abs() < 0.01, "{m} vs {asym}");
+    let factor = (2.0 * std::f64::consts::PI).sqrt() * s / l - 2.0 * s * s / (l * l);
+    let asym = factor.powi(-2);
+    assert!((m / asym - 1.0).abs() < 1e-4, "{m} vs {asym}");
     // Large correlation: the pixel sees one speckle, M → 1.
     assert!((sensor::speckle_cells(l, 1e-3) - 1.0).abs() < 1e-4);
     // The reference design: σ_c = 0.594·λ·N = 0.93 µm, M ≈ 7 (contrast ≈ 0.38 per pixel).
@@ -279,7 +282,19 @@ fn core_extraction_matches_the_true_curve_on_clean_stripes() {
             .iter()
             .filter_map(|&(col, row)| truth.iter().find(|t| t.plane == 0 && t.column == col as u32).map(|t| row - t.row_px))
             .collect();
-        assert!(errors.len() as f64 > 0.9 * truth.len() as f64, "{name}: {} of {} columns", errors.len(), truth.len());
+        // Coverage: every column of the middle 80 % of the true curve is extracted. (At the
+        // ends of a stem's lit arc the incidence grows to grazing and the stripe fades as
+        // cos ι; the middle 80 % of the columns of a circle seen from afar is |ι| ≲ 53°,
+        // cos ι ≥ 0.6, where the stripe is bright.)
+        let cols: Vec<u32> = truth.iter().filter(|t| t.plane == 0).map(|t| t.column).collect();
+        let (c0, c1) = (cols[0] as f64, cols[cols.len() - 1] as f64);
+        let (m0, m1) = (c0 + 0.1 * (c1 - c0), c1 - 0.1 * (c1 - c0));
+        let missing: Vec<u32> = cols
+            .iter()
+            .copied()
+            .filter(|&c| (c as f64) >= m0 && (c as f64) <= m1 && !extracted.iter().any(|e| e.0 as u32 == c))
+            .collect();
+        assert!(missing.is_empty(), "{name}: columns not extracted: {missing:?}");
         let mean = errors.iter().sum::<f64>() / errors.len() as f64;
         let rms = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt();
         println!("{name}: {} points, mean error {mean:+.4} px, RMS {rms:.4} px", errors.len());

@@ -51,9 +51,11 @@ static mut DIFF: [u8; FRAME_BYTES] = [0; FRAME_BYTES];
 static mut LABELS: [u16; FRAME_BYTES] = [0; FRAME_BYTES];
 /// Curve/point entries for 752 columns and two planes.
 const POINTS: usize = measure::points_for(752, 2);
-/// The pipeline's small buffers (AXI SRAM, after the frames).
+/// The pipeline's point and table buffers (AXI SRAM, after the frames).
 #[link_section = ".axisram"]
 static mut SMALL: SmallBuffers<POINTS> = SmallBuffers::new();
+/// The pipeline's object features (DTCM: CPU-only, which the pipeline is).
+static mut OBJECTS: measure::Objects = measure::NO_OBJECTS;
 
 #[embassy_executor::main]
 async fn main(_spawner: Spawner) {
@@ -145,9 +147,15 @@ async fn main(_spawner: Spawner) {
     let class = CdcAcmClass::new(&mut builder, CDC_STATE.init(State::new()), 64);
     let mut usb_dev = builder.build();
 
-    // SAFETY: the frame buffers are borrowed once, here, for the program's life.
-    // The .axisram/.sram123 sections are NOLOAD: clear them before use.
+    // The .axisram/.sram123 sections are NOLOAD (not initialised by the reset handler):
+    // zero them in place (all-zero bytes are a valid value of every buffer type) before
+    // taking references, without building the ~190 KB values on the DTCM stack.
+    // SAFETY: `main` runs once; these statics are borrowed only here, for the program's life.
     let (frames, diff, labels, small) = unsafe {
+        core::ptr::write_bytes(core::ptr::addr_of_mut!(FRAMES), 0, 1);
+        core::ptr::write_bytes(core::ptr::addr_of_mut!(DIFF), 0, 1);
+        core::ptr::write_bytes(core::ptr::addr_of_mut!(LABELS), 0, 1);
+        core::ptr::write_bytes(core::ptr::addr_of_mut!(SMALL), 0, 1);
         (
             &mut *core::ptr::addr_of_mut!(FRAMES),
             &mut *core::ptr::addr_of_mut!(DIFF),
@@ -155,9 +163,6 @@ async fn main(_spawner: Spawner) {
             &mut *core::ptr::addr_of_mut!(SMALL),
         )
     };
-    diff.fill(0);
-    labels.fill(0);
-    *small = SmallBuffers::new();
     let [off, on] = frames;
     static RX: StaticCell<[u8; tangent_core::protocol::MAX_FRAME_LEN]> = StaticCell::new();
     let buffers = Buffers {
@@ -174,7 +179,9 @@ async fn main(_spawner: Spawner) {
         store,
         watchdog: Iwdg::start(wdg),
     };
-    let measurer = PipelineMeasurer::new(measure::workspace(diff, labels, small));
+    // SAFETY: as above; OBJECTS is in .bss (zeroed by the reset handler).
+    let objects = unsafe { &mut *core::ptr::addr_of_mut!(OBJECTS) };
+    let measurer = PipelineMeasurer::new(measure::workspace(diff, labels, objects, small));
     let mut app = App::new(dev, measurer, buffers);
     embassy_futures::join::join(usb_dev.run(), app.run()).await;
 }

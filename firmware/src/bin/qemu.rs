@@ -29,6 +29,7 @@ const POINTS: usize = measure::points_for(752, 2);
 static mut DIFF: [u8; MAX_FRAME] = [0; MAX_FRAME];
 static mut LABELS: [u16; MAX_FRAME] = [0; MAX_FRAME];
 static mut SMALL: SmallBuffers<POINTS> = SmallBuffers::new();
+static mut OBJECTS: measure::Objects = measure::NO_OBJECTS;
 
 #[exception]
 fn SysTick() {
@@ -44,7 +45,7 @@ fn main() -> ! {
 
     // SAFETY: `main` runs once; these statics are borrowed only here, for the program's
     // whole life.
-    let (off, on, rx, cmdline, diff, labels, small) = unsafe {
+    let (off, on, rx, cmdline, diff, labels, small, objects) = unsafe {
         (
             &mut *core::ptr::addr_of_mut!(OFF),
             &mut *core::ptr::addr_of_mut!(ON),
@@ -53,6 +54,7 @@ fn main() -> ! {
             &mut *core::ptr::addr_of_mut!(DIFF),
             &mut *core::ptr::addr_of_mut!(LABELS),
             &mut *core::ptr::addr_of_mut!(SMALL),
+            &mut *core::ptr::addr_of_mut!(OBJECTS),
         )
     };
     let Some(cmdline) = qemu::command_line(cmdline) else {
@@ -96,7 +98,8 @@ fn main() -> ! {
         }
     };
     let n_scenes = camera.scene_count();
-    use tangent_firmware::hal::Camera as _;
+    // The workspace covers the camera's frame size (at most MAX_FRAME pixels).
+    let pixels = tangent_firmware::hal::Camera::geometry(&camera).frame_len().min(MAX_FRAME);
     let calibration = match calib_path {
         Some(p) => match qemu::load_calibration(p) {
             Some(c) => Some(c),
@@ -119,12 +122,22 @@ fn main() -> ! {
         store: RamStore::new(calibration),
         watchdog: qemu::NoWatchdog,
     };
-    // The workspace covers the camera's frame size (at most MAX_FRAME pixels).
-    let pixels = camera.geometry().frame_len().min(MAX_FRAME);
-    let measurer = PipelineMeasurer::new(measure::workspace(&mut diff[..pixels], &mut labels[..pixels], small));
+    let measurer = PipelineMeasurer::new(measure::workspace(&mut diff[..pixels], &mut labels[..pixels], objects, small));
     let mut app = App::new(dev, measurer, Buffers { off, on, rx });
 
     if bench {
+        // The instruction counter's scale: `asm::delay(2n)` runs n + 1 iterations of a
+        // two-instruction loop (cortex-m 0.7), 20,000,002 instructions here. Under
+        // `-icount shift=0` that is 20.000002 ms of virtual time = 500,000 SysTick ticks
+        // at 25 MHz; the line lets the benchmark check both assumptions.
+        let t0 = qemu::ticks();
+        cortex_m::asm::delay(20_000_000);
+        let t1 = qemu::ticks();
+        qemu::log(format_args!(
+            "bench calibration instructions=20000002 ticks={} ns_per_tick={}",
+            t1 - t0,
+            1_000_000_000 / qemu::SYSCLK_HZ
+        ));
         embassy_futures::block_on(async {
             let mut ok = true;
             for i in 0..n_scenes {

@@ -1,6 +1,8 @@
 //! One module per `tangent` subcommand. Each exposes an `Args` struct (clap) and
 //! `run(args) -> anyhow::Result<ExitCode>`.
 
+pub mod calibrate;
+pub mod evaluate;
 pub mod inspect;
 pub mod measure;
 pub mod simulate;

@@ -10,8 +10,8 @@
 //! 1-D pass followed by a horizontal one: `2(2r + 1)` multiplications per pixel instead of
 //! `(2r + 1)²` (and `2(r + 1)` using the kernel's symmetry, as done here). Weights are integers
 //! in Q15 (`Σ = 2^15` exactly), so the filter has a DC gain of exactly 1, integer arithmetic
-//! per pixel (`u32` only), and a rounding error below 0.75 grey level. Borders are handled by clamping (the edge pixel
-//! is repeated), which also preserves constants exactly.
+//! per pixel (`u32` only), and a rounding error below 0.75 grey level. Borders are handled by
+//! clamping (the edge pixel is repeated), which also preserves constants exactly.
 
 use core::fmt;
 

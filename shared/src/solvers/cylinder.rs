@@ -1046,7 +1046,7 @@ fn choose(tt: Option<(Real, Real)>, fit: Option<(Real, Real, bool)>) -> Option<(
 /// arc is too short for the fit. Errors: [`SolveError::PlaneCount`] (no curve, or
 /// curves ≠ planes), [`SolveError::ScratchTooSmall`], [`SolveError::ArcTooShort`] (fit
 /// ill-conditioned and three-tangent failed), [`SolveError::RadiusOutOfRange`], and the
-/// first method's error when both fail.
+/// [`SolveError::NotConverged`] when both methods fail.
 pub fn solve(
     input: &CylinderInput<'_>,
     params: &CylinderParams,

@@ -3,7 +3,7 @@
 //! * [`circle`]: algebraic (Kåsa, Taubin, Hyper) and geometric (Levenberg–Marquardt,
 //!   robust) circle fits on 2-D points (`docs/cylinder.md`, "Circle fits").
 //! * [`cylinder`]: the stem diameter — three-tangent method, full-arc fits, tilted
-//!   cylinders from two parallel planes, elliptic sections, method choice
+//!   cylinders from two parallel planes, method choice
 //!   (`docs/cylinder.md`).
 //!
 //! Every solver works on caller-owned slices, never allocates and returns a [`SolveError`]
