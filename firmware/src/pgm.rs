@@ -82,7 +82,7 @@ mod tests {
     fn parses_headers_with_comments() {
         let h = parse_header(b"P5\n# made by tangent\n752 480\n255\n\x00\x01").unwrap();
         assert_eq!((h.width, h.height, h.maxval), (752, 480, 255));
-        assert_eq!(h.data_offset, 29);
+        assert_eq!(h.data_offset, 33); // 3 + 18 + 8 + 4 header bytes
         assert_eq!(h.bytes_per_sample(), 1);
         let h = parse_header(b"P5 4 2 1023 ").unwrap();
         assert_eq!((h.width, h.height, h.maxval, h.data_offset), (4, 2, 1023, 12));

@@ -49,6 +49,9 @@ fn firmware_elf() -> Option<PathBuf> {
                 "qemu",
                 "--bin",
                 "tangent-qemu",
+                // Explicit, so a CARGO_TARGET_DIR set for the host build does not move it.
+                "--target-dir",
+                "firmware/target",
             ])
             .status()
             .expect("run cargo to build the emulated firmware");

@@ -178,9 +178,13 @@ fn speckle_cells_limits() {
     assert!((m / asym - 1.0).abs() < 1e-4, "{m} vs {asym}");
     // Large correlation: the pixel sees one speckle, M → 1.
     assert!((sensor::speckle_cells(l, 1e-3) - 1.0).abs() < 1e-4);
-    // The reference design: σ_c = 0.594·λ·N = 0.93 µm, M ≈ 7 (contrast ≈ 0.38 per pixel).
-    let m = sensor::speckle_cells(6e-6, sensor::speckle_correlation_m(650e-9, 2.4));
-    assert!((6.0..8.0).contains(&m), "{m}");
+    // The reference design: σ_c = √2·0.42·λ·N = 0.927 µm, σ_c/L = 0.154: the two-term
+    // form is still exact (e^{−L²/2σ²} = e^{−21}): M = 8.68, contrast 0.34 per pixel.
+    let sc = sensor::speckle_correlation_m(650e-9, 2.4);
+    assert!((sc - 2f64.sqrt() * 0.42 * 650e-9 * 2.4).abs() < 1e-18);
+    let m = sensor::speckle_cells(6e-6, sc);
+    let factor = (2.0 * std::f64::consts::PI).sqrt() * sc / 6e-6 - 2.0 * sc * sc / 36e-12;
+    assert!((m * factor * factor - 1.0).abs() < 1e-4, "{m}");
     // Spectral decorrelation: 1 nm on 1 mm roughness.
     let c = sensor::spectral_speckle_contrast(650e-9, 1e-9, 1e-3);
     assert!((c - (1.0 + (4.0 * std::f64::consts::PI * 1e-12 / 650e-9f64.powi(2)).powi(2)).powf(-0.25)).abs() < 1e-15);

@@ -126,15 +126,15 @@ fn main() -> ! {
     let mut app = App::new(dev, measurer, Buffers { off, on, rx });
 
     if bench {
-        // The instruction counter's scale: `asm::delay(2n)` runs n + 1 iterations of a
-        // two-instruction loop (cortex-m 0.7), 20,000,002 instructions here. Under
-        // `-icount shift=0` that is 20.000002 ms of virtual time = 500,000 SysTick ticks
+        // The instruction counter's scale: `asm::delay(n)` runs n + 1 iterations of a
+        // two-instruction loop (cortex-m 0.7.10), 40,000,002 instructions here. Under
+        // `-icount shift=0` that is 40.000002 ms of virtual time = 1,000,000 SysTick ticks
         // at 25 MHz; the line lets the benchmark check both assumptions.
         let t0 = qemu::ticks();
         cortex_m::asm::delay(20_000_000);
         let t1 = qemu::ticks();
         qemu::log(format_args!(
-            "bench calibration instructions=20000002 ticks={} ns_per_tick={}",
+            "bench calibration instructions=40000002 ticks={} ns_per_tick={}",
             t1 - t0,
             1_000_000_000 / qemu::SYSCLK_HZ
         ));

@@ -90,22 +90,42 @@ impl Default for DetectOptions {
 }
 
 /// [`detect`] with explicit options.
-pub fn detect_with(img: &GrayImage, board: &Board, name: &str, opts: &DetectOptions) -> Result<View, CornerError> {
-    let found = detect::detect_chessboard_best(img, &detect::default_chess_config(), &ChessboardParams::sweep_default())
-        .map_err(|_| CornerError::NotFound)?;
+pub fn detect_with(
+    img: &GrayImage,
+    board: &Board,
+    name: &str,
+    opts: &DetectOptions,
+) -> Result<View, CornerError> {
+    let found = detect::detect_chessboard_best(
+        img,
+        &detect::default_chess_config(),
+        &ChessboardParams::sweep_default(),
+    )
+    .map_err(|_| CornerError::NotFound)?;
     let mut grid: HashMap<(i32, i32), Vec2> = found
         .corners
         .iter()
-        .map(|c| ((c.grid.u, c.grid.v), Vec2::new(c.position[0] as f64, c.position[1] as f64)))
+        .map(|c| {
+            (
+                (c.grid.u, c.grid.v),
+                Vec2::new(c.position[0] as f64, c.position[1] as f64),
+            )
+        })
         .collect();
     remove_inconsistent(&mut grid);
 
     let gray = GrayF::from_image(img);
     let mut refined = HashMap::with_capacity(grid.len());
     for (&key, &p) in &grid {
-        let spacing = nearest_neighbour_distance(&grid, key).unwrap_or(2.0 * MAX_HALF_WINDOW as f64 + 2.0);
-        let half = ((opts.window_fraction * spacing).floor() as usize).clamp(2, opts.max_half_window.max(2));
-        let q = if opts.refine { corner_subpix(&gray, p, half) } else { Some(p) };
+        let spacing =
+            nearest_neighbour_distance(&grid, key).unwrap_or(2.0 * MAX_HALF_WINDOW as f64 + 2.0);
+        let half = ((opts.window_fraction * spacing).floor() as usize)
+            .clamp(2, opts.max_half_window.max(2));
+        let q = if opts.refine {
+            corner_subpix(&gray, p, half)
+        } else {
+            Some(p)
+        };
         if let Some(q) = q {
             // A refinement that walks more than a quarter of a square away has locked on
             // something else.
@@ -138,7 +158,9 @@ fn nearest_neighbour_distance(grid: &HashMap<(i32, i32), Vec2>, (u, v): (i32, i3
 
 /// Counts `(agreeing, disagreeing)` neighbour predictions of the corner at `key`.
 fn support(grid: &HashMap<(i32, i32), Vec2>, key: (i32, i32)) -> (usize, usize) {
-    let Some(&p) = grid.get(&key) else { return (0, 0) };
+    let Some(&p) = grid.get(&key) else {
+        return (0, 0);
+    };
     let (u, v) = key;
     let (mut agree, mut disagree) = (0, 0);
     let mut judge = |pred: Vec2, spacing: f64, tol: f64| {
@@ -203,7 +225,9 @@ fn label(grid: &HashMap<(i32, i32), Vec2>, board: &Board) -> Result<Vec<Corner>,
             for v0 in (vmin - wh as i32 + 1)..=vmax {
                 let count = grid
                     .keys()
-                    .filter(|&&(u, v)| u >= u0 && u < u0 + ww as i32 && v >= v0 && v < v0 + wh as i32)
+                    .filter(|&&(u, v)| {
+                        u >= u0 && u < u0 + ww as i32 && v >= v0 && v < v0 + wh as i32
+                    })
                     .count();
                 if count > best_count {
                     best_count = count;
@@ -216,7 +240,11 @@ fn label(grid: &HashMap<(i32, i32), Vec2>, board: &Board) -> Result<Vec<Corner>,
         }
     }
     let inside = |&(t, u0, v0): &(bool, i32, i32), u: i32, v: i32| {
-        let (ww, wh) = if t { (r as i32, c as i32) } else { (c as i32, r as i32) };
+        let (ww, wh) = if t {
+            (r as i32, c as i32)
+        } else {
+            (c as i32, r as i32)
+        };
         u >= u0 && u < u0 + ww && v >= v0 && v < v0 + wh
     };
     let Some(&first) = best.first() else {
@@ -225,7 +253,10 @@ fn label(grid: &HashMap<(i32, i32), Vec2>, board: &Board) -> Result<Vec<Corner>,
     // Every best window must select the same corners; otherwise the placement is ambiguous.
     if best_count < grid.len() {
         for cand in &best[1..] {
-            if grid.keys().any(|&(u, v)| inside(cand, u, v) != inside(&first, u, v)) {
+            if grid
+                .keys()
+                .any(|&(u, v)| inside(cand, u, v) != inside(&first, u, v))
+            {
                 return Err(CornerError::Ambiguous(w, h, c, r));
             }
         }

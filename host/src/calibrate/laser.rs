@@ -62,7 +62,14 @@ pub fn board_pose(camera: &Camera, view: &View, board: &Board) -> Option<Pose> {
         r
     };
     let rv = pose.rotation.scaled_axis();
-    let mut p = [rv.x, rv.y, rv.z, pose.translation.x, pose.translation.y, pose.translation.z];
+    let mut p = [
+        rv.x,
+        rv.y,
+        rv.z,
+        pose.translation.x,
+        pose.translation.y,
+        pose.translation.z,
+    ];
     let mut cost: f64 = residuals(&p).iter().map(|x| x * x).sum();
     for _ in 0..10 {
         let r = residuals(&p);
@@ -75,7 +82,12 @@ pub fn board_pose(camera: &Camera, view: &View, board: &Board) -> Option<Pose> {
             a[k] += h;
             b[k] -= h;
             let (ra, rb) = (residuals(&a), residuals(&b));
-            cols.push(ra.iter().zip(&rb).map(|(x, y)| (x - y) / (2.0 * h)).collect::<Vec<f64>>());
+            cols.push(
+                ra.iter()
+                    .zip(&rb)
+                    .map(|(x, y)| (x - y) / (2.0 * h))
+                    .collect::<Vec<f64>>(),
+            );
         }
         for a in 0..6 {
             for b in 0..6 {
@@ -83,7 +95,9 @@ pub fn board_pose(camera: &Camera, view: &View, board: &Board) -> Option<Pose> {
             }
             jtr[a] = cols[a].iter().zip(&r).map(|(x, y)| x * y).sum();
         }
-        let Some(delta) = jtj.cholesky().map(|c| c.solve(&(-jtr))) else { break };
+        let Some(delta) = jtj.cholesky().map(|c| c.solve(&(-jtr))) else {
+            break;
+        };
         let mut cand = p;
         for k in 0..6 {
             cand[k] += delta[k];
@@ -146,10 +160,18 @@ pub fn stripe_pixels(diff: &[f64], width: usize, height: usize) -> Vec<Vec2> {
 
 /// Back-projects stripe pixels onto the board plane of `pose` and keeps the points that
 /// lie on the board (inner-corner grid plus [`BOARD_MARGIN_SQUARES`]). Camera frame, metres.
-pub fn stripe_points_on_board(camera: &Camera, pose: &Pose, board: &Board, pixels: &[Vec2]) -> Vec<Vec3> {
+pub fn stripe_points_on_board(
+    camera: &Camera,
+    pose: &Pose,
+    board: &Board,
+    pixels: &[Vec2],
+) -> Vec<Vec3> {
     let (n, d) = pose.plane();
     let m = BOARD_MARGIN_SQUARES * board.square;
-    let (xmax, ymax) = ((board.cols - 1) as f64 * board.square + m, (board.rows - 1) as f64 * board.square + m);
+    let (xmax, ymax) = (
+        (board.cols - 1) as f64 * board.square + m,
+        (board.rows - 1) as f64 * board.square + m,
+    );
     let inv = pose.rotation.inverse();
     pixels
         .iter()
@@ -218,7 +240,11 @@ pub fn fit_plane(points: &[Vec3]) -> Result<PlaneFit, CalibrateError> {
         let c = TUKEY_C * scale;
         for (w, r) in weights.iter_mut().zip(&dist) {
             let u = r / c;
-            *w = if u.abs() < 1.0 { (1.0 - u * u).powi(2) } else { 0.0 };
+            *w = if u.abs() < 1.0 {
+                (1.0 - u * u).powi(2)
+            } else {
+                0.0
+            };
         }
         if moved < 1e-12 {
             break;
@@ -252,14 +278,22 @@ fn weighted_plane(points: &[Vec3], weights: &[f64]) -> Option<(Vec3, f64)> {
     if !(wsum > 0.0) {
         return None;
     }
-    let c = points.iter().zip(weights).fold(Vec3::zeros(), |a, (p, w)| a + p * *w) / wsum;
+    let c = points
+        .iter()
+        .zip(weights)
+        .fold(Vec3::zeros(), |a, (p, w)| a + p * *w)
+        / wsum;
     let mut s = Matrix3::<f64>::zeros();
     for (p, w) in points.iter().zip(weights) {
         let q = p - c;
         s += q * q.transpose() * *w;
     }
     let eig = SymmetricEigen::new(s);
-    let (imin, _) = eig.eigenvalues.iter().enumerate().min_by(|a, b| a.1.total_cmp(b.1))?;
+    let (imin, _) = eig
+        .eigenvalues
+        .iter()
+        .enumerate()
+        .min_by(|a, b| a.1.total_cmp(b.1))?;
     let (imid, _) = eig
         .eigenvalues
         .iter()
@@ -279,7 +313,8 @@ fn weighted_plane(points: &[Vec3], weights: &[f64]) -> Option<(Vec3, f64)> {
 /// plane) or, by default, the thesis's source `S = R_z(ρ)·(0, e, 0)`: the point where the
 /// plane meets the camera's (rolled) `y` axis (`docs/calibration.md`, "Source point").
 pub fn laser_plane(fit: &PlaneFit, source: Option<Vec3>) -> Result<LaserPlane, CalibrateError> {
-    let bad = |e| CalibrateError::Degenerate(format!("fitted plane is not a valid laser plane: {e}"));
+    let bad =
+        |e| CalibrateError::Degenerate(format!("fitted plane is not a valid laser plane: {e}"));
     let foot = fit.normal * fit.offset;
     let tmp = LaserPlane::new(fit.normal, fit.offset, foot).map_err(bad)?;
     match source {
@@ -370,8 +405,9 @@ pub fn calibrate_plane(
 ) -> Result<LaserCalibration, CalibrateError> {
     let mut per_pose = Vec::with_capacity(poses.len());
     for (view, pixels) in poses {
-        let pose = board_pose(camera, view, board)
-            .ok_or_else(|| CalibrateError::Degenerate(format!("no board pose for {}", view.name)))?;
+        let pose = board_pose(camera, view, board).ok_or_else(|| {
+            CalibrateError::Degenerate(format!("no board pose for {}", view.name))
+        })?;
         per_pose.push(stripe_points_on_board(camera, &pose, board, pixels));
     }
     if per_pose.iter().filter(|p| !p.is_empty()).count() < 2 {

@@ -69,7 +69,9 @@ impl Board {
             .parse()
             .map_err(|_| format!("board size `{size}`: bad row count"))?;
         if cols < 3 || rows < 3 {
-            return Err(format!("board size `{size}`: need at least 3x3 inner corners"));
+            return Err(format!(
+                "board size `{size}`: need at least 3x3 inner corners"
+            ));
         }
         let s = square.trim();
         let (num, scale) = if let Some(v) = s.strip_suffix("mm") {
@@ -90,7 +92,11 @@ impl Board {
             return Err(format!("square size `{square}`: must be positive"));
         }
         // The long side is `cols` by convention; a "6x9" board is the same board.
-        let (cols, rows) = if cols >= rows { (cols, rows) } else { (rows, cols) };
+        let (cols, rows) = if cols >= rows {
+            (cols, rows)
+        } else {
+            (rows, cols)
+        };
         Ok(Board { cols, rows, square })
     }
 }

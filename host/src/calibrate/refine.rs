@@ -23,7 +23,8 @@ use super::{Board, CalibrateError, Pose, View};
 pub const N_INTRINSICS: usize = 9;
 
 /// Names of the intrinsic parameters, in parameter order.
-pub const INTRINSIC_NAMES: [&str; N_INTRINSICS] = ["fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"];
+pub const INTRINSIC_NAMES: [&str; N_INTRINSICS] =
+    ["fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"];
 
 /// A view whose RMS reprojection error exceeds this multiple of the median view RMS is
 /// reported as an outlier: with equally good corners the per-view RMS values scatter by
@@ -140,7 +141,13 @@ impl Problem<'_> {
         for (v, view) in self.views.iter().enumerate() {
             let o = self.offsets[v];
             let pose = &p[N_INTRINSICS + 6 * v..N_INTRINSICS + 6 * v + 6];
-            view_residuals(&cam, pose, view, self.board, &mut r.as_mut_slice()[o..o + 2 * view.corners.len()]);
+            view_residuals(
+                &cam,
+                pose,
+                view,
+                self.board,
+                &mut r.as_mut_slice()[o..o + 2 * view.corners.len()],
+            );
         }
         r
     }
@@ -189,12 +196,16 @@ impl Problem<'_> {
             // block is accumulated over views.
             let cross = ji.transpose() * &j_pose;
             jtj.view_mut((0, base), (N_INTRINSICS, 6)).copy_from(&cross);
-            jtj.view_mut((base, 0), (6, N_INTRINSICS)).copy_from(&cross.transpose());
-            jtj.view_mut((base, base), (6, 6)).copy_from(&(j_pose.transpose() * &j_pose));
+            jtj.view_mut((base, 0), (6, N_INTRINSICS))
+                .copy_from(&cross.transpose());
+            jtj.view_mut((base, base), (6, 6))
+                .copy_from(&(j_pose.transpose() * &j_pose));
             jtr.rows_mut(base, 6).copy_from(&(j_pose.transpose() * rv));
         }
-        jtj.view_mut((0, 0), (N_INTRINSICS, N_INTRINSICS)).copy_from(&(j_int.transpose() * &j_int));
-        jtr.rows_mut(0, N_INTRINSICS).copy_from(&(j_int.transpose() * r));
+        jtj.view_mut((0, 0), (N_INTRINSICS, N_INTRINSICS))
+            .copy_from(&(j_int.transpose() * &j_int));
+        jtr.rows_mut(0, N_INTRINSICS)
+            .copy_from(&(j_int.transpose() * r));
         (jtj, jtr)
     }
 }
@@ -209,8 +220,9 @@ pub fn initial_estimate(
     let mut hs = Vec::with_capacity(views.len());
     for v in views {
         let (b, i) = zhang::correspondences(v, board);
-        let h = zhang::homography(&b, &i)
-            .ok_or_else(|| CalibrateError::Degenerate(format!("no homography for view {}", v.name)))?;
+        let h = zhang::homography(&b, &i).ok_or_else(|| {
+            CalibrateError::Degenerate(format!("no homography for view {}", v.name))
+        })?;
         hs.push(h);
     }
     let (fx, fy, cx, cy) = zhang::intrinsics(&hs, width, height)?;
@@ -243,7 +255,10 @@ pub fn initial_estimate(
 /// Calibrates the camera from the labelled corners of several views: Zhang's closed form,
 /// then Levenberg–Marquardt over all parameters. Views with fewer than 6 corners are not
 /// accepted (a homography has 8 degrees of freedom; 6 corners leave a margin of 4).
-pub fn calibrate_camera(views: &[View], board: &Board) -> Result<CameraCalibration, CalibrateError> {
+pub fn calibrate_camera(
+    views: &[View],
+    board: &Board,
+) -> Result<CameraCalibration, CalibrateError> {
     let used: Vec<&View> = views.iter().filter(|v| v.corners.len() >= 6).collect();
     // 9 intrinsics + 6 per view against 2 equations per view from the closed form:
     // three views are the minimum for a free principal point (Zhang, §3.1).
@@ -283,7 +298,9 @@ pub fn calibrate_camera(views: &[View], board: &Board) -> Result<CameraCalibrati
     let (jtj, _) = problem.normal_equations(&p, &r);
     let camera = camera_from(&p, width, height);
     if camera.validate().is_err() {
-        return Err(CalibrateError::Refinement(format!("the refined camera is not valid: {camera:?}")));
+        return Err(CalibrateError::Refinement(format!(
+            "the refined camera is not valid: {camera:?}"
+        )));
     }
 
     let dof = m.saturating_sub(n).max(1);
@@ -343,12 +360,17 @@ pub fn calibrate_camera(views: &[View], board: &Board) -> Result<CameraCalibrati
 }
 
 /// Levenberg–Marquardt with Marquardt's diagonal scaling (`docs/calibration.md`, "LM").
-fn levenberg_marquardt(problem: &Problem<'_>, mut p: Vec<f64>) -> Result<(Vec<f64>, usize), CalibrateError> {
+fn levenberg_marquardt(
+    problem: &Problem<'_>,
+    mut p: Vec<f64>,
+) -> Result<(Vec<f64>, usize), CalibrateError> {
     let n = p.len();
     let mut r = problem.residuals(&p);
     let mut cost = r.norm_squared();
     if !cost.is_finite() {
-        return Err(CalibrateError::Refinement("initial estimate projects to non-finite pixels".into()));
+        return Err(CalibrateError::Refinement(
+            "initial estimate projects to non-finite pixels".into(),
+        ));
     }
     let mut mu = 1e-3;
     let mut iterations = 0;

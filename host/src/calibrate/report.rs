@@ -20,7 +20,10 @@ pub fn camera_text(cal: &CameraCalibration, skipped: &[(String, String)]) -> Str
     let c = &cal.camera;
     let d = c.distortion;
     let mut s = String::new();
-    let _ = writeln!(s, "Camera calibration (Zhang closed form + Levenberg-Marquardt)");
+    let _ = writeln!(
+        s,
+        "Camera calibration (Zhang closed form + Levenberg-Marquardt)"
+    );
     let _ = writeln!(
         s,
         "views used: {}   corners: {}   iterations: {}",
@@ -30,7 +33,10 @@ pub fn camera_text(cal: &CameraCalibration, skipped: &[(String, String)]) -> Str
     );
     let _ = writeln!(s, "image: {} x {} px", c.width, c.height);
     let values = [c.fx, c.fy, c.cx, c.cy, d.k1, d.k2, d.p1, d.p2, d.k3];
-    let _ = writeln!(s, "\nparameter        value        std dev   (closed-form start)");
+    let _ = writeln!(
+        s,
+        "\nparameter        value        std dev   (closed-form start)"
+    );
     let init = &cal.initial;
     let starts = [
         init.fx,
@@ -56,9 +62,16 @@ pub fn camera_text(cal: &CameraCalibration, skipped: &[(String, String)]) -> Str
         "\nRMS reprojection error: {:.4} px (sqrt of mean squared corner error); sigma per coordinate {:.4} px",
         cal.rms, cal.sigma
     );
-    let _ = writeln!(s, "\nview                                     corners   RMS px");
+    let _ = writeln!(
+        s,
+        "\nview                                     corners   RMS px"
+    );
     for (k, name) in cal.view_names.iter().enumerate() {
-        let flag = if cal.outlier_views.contains(&k) { "  OUTLIER" } else { "" };
+        let flag = if cal.outlier_views.contains(&k) {
+            "  OUTLIER"
+        } else {
+            ""
+        };
         let _ = writeln!(
             s,
             "{:<40} {:>7} {:>8.4}{}",
@@ -150,7 +163,12 @@ fn circle(img: &mut RgbImage, centre: Vec2, r: f64, c: Rgb<u8>) {
     let n = ((2.0 * std::f64::consts::PI * r).ceil() as usize).max(8);
     for k in 0..n {
         let t = 2.0 * std::f64::consts::PI * k as f64 / n as f64;
-        put(img, (centre.x + r * t.cos()).round() as i64, (centre.y + r * t.sin()).round() as i64, c);
+        put(
+            img,
+            (centre.x + r * t.cos()).round() as i64,
+            (centre.y + r * t.sin()).round() as i64,
+            c,
+        );
     }
 }
 
@@ -163,9 +181,24 @@ pub fn view_overlay(img: &GrayImage, residuals: &[(Vec2, Vec2)]) -> RgbImage {
     });
     for &(p, r) in residuals {
         let green = Rgb([0, 255, 0]);
-        line(&mut out, p - Vec2::new(4.0, 0.0), p + Vec2::new(4.0, 0.0), green);
-        line(&mut out, p - Vec2::new(0.0, 4.0), p + Vec2::new(0.0, 4.0), green);
-        line(&mut out, p, p + r * RESIDUAL_MAGNIFICATION, Rgb([255, 40, 40]));
+        line(
+            &mut out,
+            p - Vec2::new(4.0, 0.0),
+            p + Vec2::new(4.0, 0.0),
+            green,
+        );
+        line(
+            &mut out,
+            p - Vec2::new(0.0, 4.0),
+            p + Vec2::new(0.0, 4.0),
+            green,
+        );
+        line(
+            &mut out,
+            p,
+            p + r * RESIDUAL_MAGNIFICATION,
+            Rgb([255, 40, 40]),
+        );
     }
     out
 }
@@ -181,14 +214,33 @@ pub fn summary_figure(cal: &CameraCalibration) -> RgbImage {
     for r in [0.25, 0.5, 1.0] {
         circle(&mut img, centre, r * scale, Rgb([180, 180, 180]));
     }
-    line(&mut img, Vec2::new(20.0, 225.0), Vec2::new(430.0, 225.0), Rgb([200, 200, 200]));
-    line(&mut img, Vec2::new(225.0, 20.0), Vec2::new(225.0, 430.0), Rgb([200, 200, 200]));
+    line(
+        &mut img,
+        Vec2::new(20.0, 225.0),
+        Vec2::new(430.0, 225.0),
+        Rgb([200, 200, 200]),
+    );
+    line(
+        &mut img,
+        Vec2::new(225.0, 20.0),
+        Vec2::new(225.0, 430.0),
+        Rgb([200, 200, 200]),
+    );
     for (v, res) in cal.residuals.iter().enumerate() {
-        let colour = if cal.outlier_views.contains(&v) { Rgb([220, 0, 0]) } else { Rgb([0, 0, 0]) };
+        let colour = if cal.outlier_views.contains(&v) {
+            Rgb([220, 0, 0])
+        } else {
+            Rgb([0, 0, 0])
+        };
         for &(_, r) in res {
             let p = centre + r * scale;
             for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
-                put(&mut img, p.x.round() as i64 + dx, p.y.round() as i64 + dy, colour);
+                put(
+                    &mut img,
+                    p.x.round() as i64 + dx,
+                    p.y.round() as i64 + dy,
+                    colour,
+                );
             }
         }
     }
@@ -197,16 +249,38 @@ pub fn summary_figure(cal: &CameraCalibration) -> RgbImage {
     let bar_scale = 300.0;
     let w = (x1 - x0) / n as f64;
     for (v, &e) in cal.per_view_rms.iter().enumerate() {
-        let colour = if cal.outlier_views.contains(&v) { Rgb([220, 0, 0]) } else { Rgb([60, 60, 60]) };
+        let colour = if cal.outlier_views.contains(&v) {
+            Rgb([220, 0, 0])
+        } else {
+            Rgb([60, 60, 60])
+        };
         let top = (base - e * bar_scale).max(5.0);
-        let (a, b) = (x0 + v as f64 * w + 0.15 * w, x0 + (v as f64 + 1.0) * w - 0.15 * w);
+        let (a, b) = (
+            x0 + v as f64 * w + 0.15 * w,
+            x0 + (v as f64 + 1.0) * w - 0.15 * w,
+        );
         for x in a.round() as i64..=b.round() as i64 {
-            line(&mut img, Vec2::new(x as f64, base), Vec2::new(x as f64, top), colour);
+            line(
+                &mut img,
+                Vec2::new(x as f64, base),
+                Vec2::new(x as f64, top),
+                colour,
+            );
         }
     }
     let y = (base - cal.rms * bar_scale).max(5.0);
-    line(&mut img, Vec2::new(x0, y), Vec2::new(x1, y), Rgb([0, 80, 255]));
-    line(&mut img, Vec2::new(x0, base), Vec2::new(x1, base), Rgb([0, 0, 0]));
+    line(
+        &mut img,
+        Vec2::new(x0, y),
+        Vec2::new(x1, y),
+        Rgb([0, 80, 255]),
+    );
+    line(
+        &mut img,
+        Vec2::new(x0, base),
+        Vec2::new(x1, base),
+        Rgb([0, 0, 0]),
+    );
     img
 }
 

@@ -55,7 +55,17 @@ fn normalising_transform(pts: &[Vec2]) -> Option<Matrix3<f64>> {
         return None;
     }
     let s = std::f64::consts::SQRT_2 / mean_dist;
-    Some(Matrix3::new(s, 0.0, -s * c.x, 0.0, s, -s * c.y, 0.0, 0.0, 1.0))
+    Some(Matrix3::new(
+        s,
+        0.0,
+        -s * c.x,
+        0.0,
+        s,
+        -s * c.y,
+        0.0,
+        0.0,
+        1.0,
+    ))
 }
 
 /// Unit vector minimising `|A·x|`: the right singular vector of the smallest singular value.
@@ -113,12 +123,25 @@ pub fn intrinsics(
     height: u32,
 ) -> Result<(f64, f64, f64, f64), CalibrateError> {
     if homographies.is_empty() {
-        return Err(CalibrateError::TooFewViews { found: 0, needed: 2 });
+        return Err(CalibrateError::TooFewViews {
+            found: 0,
+            needed: 2,
+        });
     }
     // N maps pixels to roughly unit-size coordinates centred on the image.
     let s = 0.5 * (width as f64 + height as f64);
     let (c0x, c0y) = ((width as f64 - 1.0) / 2.0, (height as f64 - 1.0) / 2.0);
-    let nmat = Matrix3::new(1.0 / s, 0.0, -c0x / s, 0.0, 1.0 / s, -c0y / s, 0.0, 0.0, 1.0);
+    let nmat = Matrix3::new(
+        1.0 / s,
+        0.0,
+        -c0x / s,
+        0.0,
+        1.0 / s,
+        -c0y / s,
+        0.0,
+        0.0,
+        1.0,
+    );
     let hs: Vec<Matrix3<f64>> = homographies
         .iter()
         .map(|h| {
@@ -132,14 +155,18 @@ pub fn intrinsics(
         // Accept only a camera whose principal point is inside the central half of the image
         // and whose aspect ratio is plausible; anything else signals a biased solution.
         let (fxp, fyp, cxp, cyp) = back(fx, fy, cx, cy);
-        let inside = (cxp - c0x).abs() < 0.25 * width as f64 && (cyp - c0y).abs() < 0.25 * height as f64;
+        let inside =
+            (cxp - c0x).abs() < 0.25 * width as f64 && (cyp - c0y).abs() < 0.25 * height as f64;
         let aspect = fxp / fyp;
         if inside && (0.5..2.0).contains(&aspect) {
             return Ok((fxp, fyp, cxp, cyp));
         }
     }
-    let (fx, fy) = centred_closed_form(&hs)
-        .ok_or_else(|| CalibrateError::Degenerate("no focal length fits the homographies (views parallel to the image?)".into()))?;
+    let (fx, fy) = centred_closed_form(&hs).ok_or_else(|| {
+        CalibrateError::Degenerate(
+            "no focal length fits the homographies (views parallel to the image?)".into(),
+        )
+    })?;
     Ok(back(fx, fy, 0.0, 0.0))
 }
 
@@ -161,7 +188,8 @@ fn full_closed_form(hs: &[Matrix3<f64>]) -> Option<(f64, f64, f64, f64)> {
     // Zero skew: B12 = 0 (weighted like one homography's constraints).
     v[(2 * hs.len(), 1)] = 1.0;
     let b = null_vector(v)?;
-    let (mut b11, mut b12, mut b22, mut b13, mut b23, mut b33) = (b[0], b[1], b[2], b[3], b[4], b[5]);
+    let (mut b11, mut b12, mut b22, mut b13, mut b23, mut b33) =
+        (b[0], b[1], b[2], b[3], b[4], b[5]);
     if b11 < 0.0 {
         b11 = -b11;
         b12 = -b12;
@@ -279,7 +307,10 @@ pub fn radial_distortion_guess(
     board: &Board,
 ) -> (f64, f64) {
     let (fx, fy, cx, cy) = (k[(0, 0)], k[(1, 1)], k[(0, 2)], k[(1, 2)]);
-    let (mut ata, mut atb) = (nalgebra::Matrix2::<f64>::zeros(), nalgebra::Vector2::<f64>::zeros());
+    let (mut ata, mut atb) = (
+        nalgebra::Matrix2::<f64>::zeros(),
+        nalgebra::Vector2::<f64>::zeros(),
+    );
     for (pose, view) in poses.iter().zip(views) {
         for c in &view.corners {
             let x = pose.apply(&board.point(c.i, c.j));

@@ -13,7 +13,9 @@ use anyhow::{bail, Context as _};
 use clap::Subcommand;
 use tangent_core::real::Vec2;
 use tangent_host::calibrate::{corners, laser, refine, report, Board, View};
-use tangent_host::calibration_file::{self, CalibrationToml, CameraToml, DistortionToml, PlaneToml};
+use tangent_host::calibration_file::{
+    self, CalibrationToml, CameraToml, DistortionToml, PlaneToml,
+};
 use tangent_host::capture::Capture;
 use tangent_host::pgm::Pgm;
 
@@ -89,13 +91,21 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             square,
             out,
             report: report_dir,
-        } => laser_cmd(&captures, &camera, &board, &square, out.as_deref(), report_dir.as_deref()),
+        } => laser_cmd(
+            &captures,
+            &camera,
+            &board,
+            &square,
+            out.as_deref(),
+            report_dir.as_deref(),
+        ),
     }
 }
 
 /// Reads a calibration file leniently: a camera-only file (no planes) is accepted.
 fn read_lenient(path: &Path) -> anyhow::Result<CalibrationToml> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     toml::from_str::<CalibrationToml>(&text).with_context(|| format!("parsing {}", path.display()))
 }
 
@@ -123,7 +133,11 @@ fn camera(
         };
         match corners::detect(&img, &board, &name) {
             Ok(v) => {
-                let partial = if v.corners.len() < board.len() { " (partial board)" } else { "" };
+                let partial = if v.corners.len() < board.len() {
+                    " (partial board)"
+                } else {
+                    ""
+                };
                 eprintln!("{name}: {} corners{partial}", v.corners.len());
                 views.push(v);
                 grays.push(Some(img));
@@ -137,13 +151,22 @@ fn camera(
     if let Some(first) = views.first() {
         let (w, h) = (first.width, first.height);
         if let Some(v) = views.iter().find(|v| (v.width, v.height) != (w, h)) {
-            bail!("{} is {}x{}, the first image is {w}x{h}: one camera, one image size", v.name, v.width, v.height);
+            bail!(
+                "{} is {}x{}, the first image is {w}x{h}: one camera, one image size",
+                v.name,
+                v.width,
+                v.height
+            );
         }
     }
     let cal = refine::calibrate_camera(&views, &board)?;
     print!("{}", report::camera_text(&cal, &skipped));
 
-    let existing = if out.exists() { Some(read_lenient(out)?) } else { None };
+    let existing = if out.exists() {
+        Some(read_lenient(out)?)
+    } else {
+        None
+    };
     let c = cal.camera;
     let d = c.distortion;
     let file = CalibrationToml {
@@ -165,7 +188,8 @@ fn camera(
         },
         planes: existing.map(|e| e.planes).unwrap_or_default(),
     };
-    std::fs::write(out, toml::to_string(&file)?).with_context(|| format!("writing {}", out.display()))?;
+    std::fs::write(out, toml::to_string(&file)?)
+        .with_context(|| format!("writing {}", out.display()))?;
     eprintln!("wrote {}", out.display());
     if let Some(dir) = report_dir {
         report::write_camera_report(dir, &cal, &grays, &skipped)?;
@@ -178,8 +202,12 @@ fn camera(
 fn pgm_to_gray(p: &Pgm) -> (image::GrayImage, Vec<f64>) {
     let raw = p.to_u16();
     let scale = 255.0 / p.maxval.max(1) as f64;
-    let bytes = raw.iter().map(|&v| (v as f64 * scale).round().min(255.0) as u8).collect();
-    let img = image::GrayImage::from_raw(p.width as u32, p.height as u32, bytes).unwrap_or_default();
+    let bytes = raw
+        .iter()
+        .map(|&v| (v as f64 * scale).round().min(255.0) as u8)
+        .collect();
+    let img =
+        image::GrayImage::from_raw(p.width as u32, p.height as u32, bytes).unwrap_or_default();
     (img, raw.iter().map(|&v| v as f64).collect())
 }
 
@@ -209,7 +237,9 @@ fn laser_cmd(
             p2: c.distortion.p2,
         },
     };
-    camera.validate().map_err(|e| anyhow::anyhow!("camera in {}: {e}", camera_file.display()))?;
+    camera
+        .validate()
+        .map_err(|e| anyhow::anyhow!("camera in {}: {e}", camera_file.display()))?;
 
     // Per laser index: (board view, stripe pixels) of every pose.
     let mut per_plane: Vec<Vec<(View, Vec<Vec2>)>> = Vec::new();
@@ -236,7 +266,10 @@ fn laser_cmd(
         };
         for (lasers, frame) in cap.on_frames() {
             if lasers.len() != 1 {
-                eprintln!("{name}: skipping a frame lighting {} lasers (calibrate one laser per frame)", lasers.len());
+                eprintln!(
+                    "{name}: skipping a frame lighting {} lasers (calibrate one laser per frame)",
+                    lasers.len()
+                );
                 continue;
             }
             let (_, on) = pgm_to_gray(frame);
@@ -246,7 +279,11 @@ fn laser_cmd(
             if per_plane.len() <= k {
                 per_plane.resize_with(k + 1, Vec::new);
             }
-            eprintln!("{name}: laser {k}: {} stripe pixels, {} corners", pixels.len(), view.corners.len());
+            eprintln!(
+                "{name}: laser {k}: {} stripe pixels, {} corners",
+                pixels.len(),
+                view.corners.len()
+            );
             per_plane[k].push((view.clone(), pixels));
         }
     }
@@ -259,7 +296,8 @@ fn laser_cmd(
         if poses.is_empty() {
             bail!("laser {k}: no capture lights it alone; planes must be calibrated 0..n");
         }
-        let cal = laser::calibrate_plane(&camera, &board, poses, None).with_context(|| format!("laser {k}"))?;
+        let cal = laser::calibrate_plane(&camera, &board, poses, None)
+            .with_context(|| format!("laser {k}"))?;
         text.push_str(&report::laser_text(k, &cal));
         let p = cal.plane;
         planes.push(PlaneToml {

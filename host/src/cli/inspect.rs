@@ -4,7 +4,7 @@
 //! Panels, top to bottom: laser-off frame; laser-on frame; difference (on − off, stretched
 //! to its 99.9th percentile) with the true curve (green: plane 0, cyan: plane 1, …) and the
 //! curve extracted by `tangent_core::pipeline` (red: plane 0, magenta: plane 1, …); a ×4
-//! zoom of the difference around the middle of the true curve with the same overlays at
+//! zoom of the difference around the middle of the first plane's true curve with the same overlays at
 //! subpixel position (true: 1-pixel line; extracted: 3×3 dots).
 
 use std::path::PathBuf;
@@ -140,7 +140,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     // ×4 zoom around the middle truth point (or the image centre).
     let zoom = 4.0;
     let (cw, ch) = (w as f64 / zoom, h as f64 / zoom);
-    let centre = truth.get(truth.len() / 2).map(|&(_, u, v)| (u, v)).unwrap_or((w as f64 / 2.0, h as f64 / 2.0));
+    let first: Vec<_> = truth.iter().filter(|t| Some(t.0) == truth.first().map(|f| f.0)).collect();
+    let centre = first.get(first.len() / 2).map(|&&(_, u, v)| (u, v)).unwrap_or((w as f64 / 2.0, h as f64 / 2.0));
     let x0 = (centre.0 - cw / 2.0).clamp(-0.5, w as f64 - 0.5 - cw);
     let y0 = (centre.1 - ch / 2.0).clamp(-0.5, h as f64 - 0.5 - ch);
     for py in 0..h {

@@ -1,0 +1,47 @@
+//! Host benchmarks of the measurement chain on a 752×480 frame pair: the image part alone
+//! (`extract_profile`: subtract, threshold, segment, select, subpixel curve, triangulate) and
+//! the whole stem measurement (`measure_stem`). The frames come from the simulator (rendered
+//! once, outside the timed loop). Results: docs/performance.md.
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use std::hint::black_box;
+use tangent_core::image::Frame;
+use tangent_core::pipeline::{extract_profile, measure_stem, PipelineConfig};
+use tangent_core::solvers::cylinder::CylinderParams;
+use tangent_host::measure::HostWorkspace;
+use tangent_host::pgm::PgmSamples;
+use tangent_host::simulate::{corpus::random_stem, simulate};
+
+fn bench(c: &mut Criterion) {
+    // A 30 cm stem at 1.5 m in forest shade, one plane; and a tilted one with two planes.
+    for (name, seed, tilt) in [("one_plane", 7u64, 0.0), ("two_planes", 8u64, 20.0)] {
+        let spec = random_stem(seed, tilt);
+        let (capture, _) = simulate(&spec).expect("simulated capture");
+        let cal = capture.calibration.clone();
+        let (off, on) = (capture.off_frame(), capture.on_frames().next().expect("an on frame").1);
+        let (PgmSamples::U8(off_px), PgmSamples::U8(on_px)) = (&off.samples, &on.samples) else {
+            panic!("the benchmark expects 8-bit frames");
+        };
+        let (w, h) = (on.width, on.height);
+        let off_f = Frame::new(off_px, w, h, w).expect("frame");
+        let on_f = Frame::new(on_px, w, h, w).expect("frame");
+        let mut hw = HostWorkspace::<u8>::new(w, h, 8, cal.planes.len());
+        let config = PipelineConfig::default();
+        let params = CylinderParams::default();
+        c.bench_function(&format!("extract_profile_752x480_{name}"), |b| {
+            b.iter(|| black_box(extract_profile(&off_f, &on_f, &cal, &config, &mut hw.workspace())).is_ok())
+        });
+        c.bench_function(&format!("measure_stem_752x480_{name}"), |b| {
+            b.iter(|| black_box(measure_stem(&off_f, &on_f, &cal, &config, &params, &mut hw.workspace())).is_ok())
+        });
+    }
+}
+
+criterion_group! {
+    name = benches;
+    // Criterion's HTML plots need a system font that plotters (built here with the shipped
+    // font only) cannot find; the numbers are what we record.
+    config = Criterion::default().without_plots();
+    targets = bench
+}
+criterion_main!(benches);
