@@ -35,7 +35,6 @@ fi
 command -v qemu-system-arm >/dev/null || { echo "qemu-system-arm not found (apt-get install qemu-system-arm)" >&2; exit 2; }
 exec qemu-system-arm -M mps2-an500 -display none -monitor none -nodefaults -net none \
   "${icount[@]}" \
-  -chardev file,id=sh,path=/dev/stderr \
-  -semihosting-config enable=on,target=native,chardev=sh \
+  -semihosting-config enable=on,target=native \
   -serial "$serial" \
   -kernel "$elf" -append "$*"

@@ -57,20 +57,19 @@ fn main() {
     std::fs::write(&cal_path, &rec[..n]).expect("write calibration");
     args = format!("--calib {} {args}", cal_path.display());
 
-    let log = dir.path().join("bench.log");
-    let status = Command::new("qemu-system-arm")
+    // The firmware writes its log to QEMU's stderr (semihosting `:tt` in append mode).
+    let out = Command::new("qemu-system-arm")
         .args(["-M", "mps2-an500", "-display", "none", "-monitor", "none", "-nodefaults", "-net", "none"])
         .args(["-icount", "shift=0", "-serial", "null"])
-        .arg("-chardev")
-        .arg(format!("file,id=sh,path={}", log.display()))
-        .args(["-semihosting-config", "enable=on,target=native,chardev=sh"])
+        .args(["-semihosting-config", "enable=on,target=native"])
         .arg("-kernel")
         .arg(&elf)
         .arg("-append")
         .arg(&args)
-        .status()
+        .output()
         .expect("run qemu-system-arm");
-    let text = std::fs::read_to_string(&log).unwrap_or_default();
+    let status = out.status;
+    let text = String::from_utf8_lossy(&out.stderr).into_owned();
     println!("{text}");
     println!("| capture | pixels | instructions (pipeline) | per pixel | at 480 MHz, 1 IPC |");
     println!("|---|---|---|---|---|");

@@ -134,10 +134,12 @@ pub struct CameraToml {
 #[serde(deny_unknown_fields)]
 pub struct PlaneToml {
     /// Plane normal (normalised on reading; the sign is made to give a positive offset).
+    #[serde(deserialize_with = "three")]
     pub normal: [f64; 3],
     /// Distance from the camera centre to the plane along `normal` (metres).
     pub offset_m: f64,
     /// Laser emission point (fan apex), camera frame (metres).
+    #[serde(deserialize_with = "three")]
     pub source_m: [f64; 3],
 }
 
@@ -153,6 +155,15 @@ pub struct CalibrationToml {
     /// (defaulted to empty here only so that its absence gives [`CalibrationFileError::MissingPlanes`]).
     #[serde(default)]
     pub planes: Vec<PlaneToml>,
+}
+
+/// A 3-vector that must have exactly three components: serde's fixed-size array impl reads
+/// the first three elements of a longer TOML array and ignores the rest, which would let
+/// `normal = [0, 1, 0, 5]` pass silently.
+fn three<'de, D: serde::Deserializer<'de>>(d: D) -> Result<[f64; 3], D::Error> {
+    let v = Vec::<f64>::deserialize(d)?;
+    <[f64; 3]>::try_from(v.as_slice())
+        .map_err(|_| serde::de::Error::invalid_length(v.len(), &"an array of 3 numbers"))
 }
 
 fn v3(a: [f64; 3]) -> Vec3 {

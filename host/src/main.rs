@@ -18,6 +18,8 @@ enum Command {
     // Each variant: `Name(cli::name::Args)`; keep one per line, alphabetical.
     /// Camera and laser-plane calibration (`calibrate camera`, `calibrate laser`).
     Calibrate(cli::calibrate::Args),
+    /// Plot the error model's predicted diameter error against distance (PNG).
+    Accuracy(cli::accuracy::Args),
     /// Accuracy against the simulator's truth on fresh random stems (writes docs/accuracy.md).
     Evaluate(cli::evaluate::Args),
     /// A PNG of a capture: frames, difference, true and extracted laser curves.
@@ -35,6 +37,7 @@ fn main() -> std::process::ExitCode {
     let result: anyhow::Result<std::process::ExitCode> = match cli.command {
         // Each arm: `Command::Name(args) => cli::name::run(args),`
         Command::Calibrate(args) => cli::calibrate::run(args),
+        Command::Accuracy(args) => cli::accuracy::run(args),
         Command::Evaluate(args) => cli::evaluate::run(args),
         Command::Inspect(args) => cli::inspect::run(args),
         Command::Measure(args) => cli::measure::run(args),

@@ -310,7 +310,8 @@ fn synthetic_noisy_recovery_within_predicted_std() {
 fn synthetic_predicted_std_matches_spread() {
     let (cam, board) = (truth_camera(), board_9x6());
     let poses = truth_poses(&board);
-    let runs: Vec<(f64, f64, f64, f64)> = (0..24)
+    type Run = (f64, f64, f64, f64);
+    let runs: Vec<Run> = (0..24)
         .map(|seed| {
             let views = synthetic_views(&cam, &board, &poses, 0.1, 100 + seed);
             let cal = refine::calibrate_camera(&views, &board).expect("calibrates");
@@ -323,11 +324,11 @@ fn synthetic_predicted_std_matches_spread() {
         })
         .collect();
     let n = runs.len() as f64;
-    let spread = |f: &dyn Fn(&(f64, f64, f64, f64)) -> f64| {
+    let spread = |f: &dyn Fn(&Run) -> f64| {
         let m = runs.iter().map(f).sum::<f64>() / n;
         (runs.iter().map(|r| (f(r) - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
     };
-    let predicted = |f: &dyn Fn(&(f64, f64, f64, f64)) -> f64| runs.iter().map(f).sum::<f64>() / n;
+    let predicted = |f: &dyn Fn(&Run) -> f64| runs.iter().map(f).sum::<f64>() / n;
     for (name, ratio) in [
         ("fx", spread(&|r| r.0) / predicted(&|r| r.1)),
         ("k1", spread(&|r| r.2) / predicted(&|r| r.3)),

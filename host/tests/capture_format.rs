@@ -158,7 +158,8 @@ fn calibration_missing_planes_and_keys() {
 fn calibration_invalid_values_and_syntax() {
     let zero_normal = reference_text().replacen("normal = [", "normal = [0.0, 0.0, 0.0, ", 1);
     // Four components: a type error (array of 3 expected) is a syntax-level error.
-    assert!(matches!(calibration_file::parse(&zero_normal), Err(CalibrationFileError::Syntax { .. })));
+    let r = calibration_file::parse(&zero_normal);
+    assert!(matches!(r, Err(CalibrationFileError::Syntax { .. })), "{r:?}");
     let c = corpus::one_plane_calibration();
     let mut file = calibration_file::CalibrationToml::from_calibration(&c);
     file.planes[0].normal = [0.0, 0.0, 0.0];

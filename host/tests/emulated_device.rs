@@ -92,16 +92,15 @@ impl Device {
         let mut child = Command::new("qemu-system-arm")
             .args(["-M", "mps2-an500", "-display", "none", "-monitor", "none", "-nodefaults"])
             .args(["-net", "none", "-serial", "stdio"])
-            .arg("-chardev")
-            .arg(format!("file,id=sh,path={}", log.display()))
-            .args(["-semihosting-config", "enable=on,target=native,chardev=sh"])
+            .args(["-semihosting-config", "enable=on,target=native"])
             .arg("-kernel")
             .arg(elf)
             .arg("-append")
             .arg(&args)
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
-            .stderr(Stdio::null())
+            // The firmware's semihosting log goes to QEMU's stderr.
+            .stderr(Stdio::from(std::fs::File::create(&log).unwrap()))
             .spawn()
             .expect("start qemu-system-arm");
         let stdin = child.stdin.take().unwrap();

@@ -14,8 +14,9 @@
 //! | calibration set | [`calibration`] | `docs/formats.md` |
 //! | frames, subtraction, thresholds, segmentation, speckle filter | [`image`] | `docs/image-processing.md` |
 //! | subpixel peak estimators | [`peaks`] | `docs/subpixel.md` |
-//! | laser-curve extraction and smoothing | [`curve`] | `docs/image-processing.md` |
+//! | laser-curve extraction and smoothing | [`curve`] | `docs/subpixel.md` §8 |
 //! | solvers per object kind | [`solvers`] | `docs/cylinder.md`, … |
+//! | predicted uncertainty of a reading | [`error_model`] | `docs/error-model.md` |
 //! | device ↔ host wire protocol | [`protocol`] | `docs/protocol.md` |
 //! | the whole chain, frame pair → result | [`pipeline`] | `docs/pipeline.md` |
 #![no_std]

@@ -275,7 +275,8 @@ pub fn fit_plane(points: &[Vec3]) -> Result<PlaneFit, CalibrateError> {
 /// the eigenvector of the smallest eigenvalue of the weighted scatter matrix.
 fn weighted_plane(points: &[Vec3], weights: &[f64]) -> Option<(Vec3, f64)> {
     let wsum: f64 = weights.iter().sum();
-    if !(wsum > 0.0) {
+    // NaN weights compare false and are rejected too.
+    if wsum.is_nan() || wsum <= 0.0 {
         return None;
     }
     let c = points

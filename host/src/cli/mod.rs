@@ -2,6 +2,7 @@
 //! `run(args) -> anyhow::Result<ExitCode>`.
 
 pub mod calibrate;
+pub mod accuracy;
 pub mod evaluate;
 pub mod inspect;
 pub mod measure;
