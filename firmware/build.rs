@@ -10,7 +10,8 @@ use std::path::PathBuf;
 
 fn main() {
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
-    let manifest = PathBuf::from(env::var_os("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR"));
+    let manifest =
+        PathBuf::from(env::var_os("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR"));
     let qemu = env::var_os("CARGO_FEATURE_QEMU").is_some();
     let h743 = env::var_os("CARGO_FEATURE_H743").is_some();
     if qemu && h743 {

@@ -53,6 +53,14 @@ run_step() {
   if "$@"; then passed=$((passed + 1)); else failed=$((failed + 1)); failed_steps+=("$name"); fi
 }
 
+# Firmware: release builds of both boards for the Cortex-M7 (the emulated board's ELF is also
+# what the host's emulated-device tests run under QEMU), then its portable logic on the host.
+run_step firmware-h743 cargo firmware
+run_step firmware-qemu cargo firmware-qemu
+run_cargo_tests firmware-logic bash -c 'cd firmware && cargo test --target x86_64-unknown-linux-gnu --no-default-features --lib'
+
+# Host and core (including the corpus, the simulator, calibration on real images and the
+# emulated device under QEMU), then the core again in single precision, as on the device.
 run_cargo_tests host-and-core cargo test --workspace --release
 run_cargo_tests core-f32 cargo test -p tangent-core --features f32 --release
 

@@ -25,7 +25,10 @@ use tangent_core::protocol::{
 };
 
 use crate::exposure::{self, Exposure};
-use crate::hal::{Board, Camera, CameraError, CalibrationStore, Clock, Devices, Laser, Link, Strobe, Trigger, Watchdog};
+use crate::hal::{
+    Board, CalibrationStore, Camera, CameraError, Clock, Devices, Laser, Link, Strobe, Trigger,
+    Watchdog,
+};
 use crate::measure::{FramePair, Measurer};
 use crate::stats::Welford;
 
@@ -306,7 +309,14 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
         Ok(())
     }
 
-    async fn send_chunk(&mut self, tag: u16, capture: u32, frame: FrameSel, offset: u32, max_len: u16) {
+    async fn send_chunk(
+        &mut self,
+        tag: u16,
+        capture: u32,
+        frame: FrameSel,
+        offset: u32,
+        max_len: u16,
+    ) {
         let err = |code| Response::Error(DeviceError { code, detail: 0 });
         let Some(info) = self.frames else {
             return self.send(tag, &err(ErrorCode::NoFrames)).await;
@@ -386,7 +396,10 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
                 self.send(tag, &Response::Reading(reading)).await;
             }
             Err(e) => {
-                B::log(format_args!("measurement failed: {:?} {}", e.code, e.detail));
+                B::log(format_args!(
+                    "measurement failed: {:?} {}",
+                    e.code, e.detail
+                ));
                 self.send(tag, &Response::Error(e)).await;
             }
         }
@@ -472,7 +485,8 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
         expose(&mut d.camera, &mut d.laser, &d.clock, 0, exposure_us, off).await?;
         let timestamp_ms = d.clock.now_ms();
         expose(&mut d.camera, &mut d.laser, &d.clock, mask, exposure_us, on).await?;
-        self.exposure.update(exposure::peak(on, g.width as usize, PEAK_ROW_STEP));
+        self.exposure
+            .update(exposure::peak(on, g.width as usize, PEAK_ROW_STEP));
         self.capture_no = self.capture_no.wrapping_add(1);
         let info = FrameSetInfo {
             capture: self.capture_no,

@@ -54,7 +54,6 @@ pub trait Measurer {
     fn measure(&mut self, pair: &FramePair<'_>, calibration: &Calibration) -> Result<Outcome, u32>;
 }
 
-
 /// Label-table entries of the workspace (`pipeline::WorkspaceSizes::new`).
 pub const LABEL_TABLE: usize = 4096;
 /// Object-feature entries of the workspace.

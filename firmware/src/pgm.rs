@@ -85,7 +85,10 @@ mod tests {
         assert_eq!(h.data_offset, 33); // 3 + 18 + 8 + 4 header bytes
         assert_eq!(h.bytes_per_sample(), 1);
         let h = parse_header(b"P5 4 2 1023 ").unwrap();
-        assert_eq!((h.width, h.height, h.maxval, h.data_offset), (4, 2, 1023, 12));
+        assert_eq!(
+            (h.width, h.height, h.maxval, h.data_offset),
+            (4, 2, 1023, 12)
+        );
         assert_eq!(h.bytes_per_sample(), 2);
     }
 

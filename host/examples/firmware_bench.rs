@@ -33,7 +33,10 @@ fn main() {
     let mut args = String::from("--bench");
     let mut calibration = None;
     let mut sizes = Vec::new();
-    for e in corpus::entries().into_iter().filter(|e| names.contains(&e.name.as_str())) {
+    for e in corpus::entries()
+        .into_iter()
+        .filter(|e| names.contains(&e.name.as_str()))
+    {
         let (capture, _) = simulate(&e.spec).expect("simulate");
         let cal = capture.calibration.clone();
         // One calibration for all (every chosen capture uses the one-plane reference).
@@ -41,7 +44,11 @@ fn main() {
         let (_, on) = capture.on_frames().next().expect("on frame");
         for (tag, pgm) in [("off", capture.off_frame()), ("on", on)] {
             let bits = pgm.bit_depth() as u32;
-            let data: Vec<u8> = pgm.to_u16().into_iter().map(|v| (v >> bits.saturating_sub(8)) as u8).collect();
+            let data: Vec<u8> = pgm
+                .to_u16()
+                .into_iter()
+                .map(|v| (v >> bits.saturating_sub(8)) as u8)
+                .collect();
             let path = dir.path().join(format!("{}-{tag}.pgm", e.name));
             let mut bytes = format!("P5\n{} {}\n255\n", pgm.width, pgm.height).into_bytes();
             bytes.extend_from_slice(&data);
@@ -59,7 +66,17 @@ fn main() {
 
     // The firmware writes its log to QEMU's stderr (semihosting `:tt` in append mode).
     let out = Command::new("qemu-system-arm")
-        .args(["-M", "mps2-an500", "-display", "none", "-monitor", "none", "-nodefaults", "-net", "none"])
+        .args([
+            "-M",
+            "mps2-an500",
+            "-display",
+            "none",
+            "-monitor",
+            "none",
+            "-nodefaults",
+            "-net",
+            "none",
+        ])
         .args(["-icount", "shift=0", "-serial", "null"])
         .args(["-semihosting-config", "enable=on,target=native"])
         .arg("-kernel")
@@ -74,7 +91,11 @@ fn main() {
     println!("| capture | pixels | instructions (pipeline) | per pixel | at 480 MHz, 1 IPC |");
     println!("|---|---|---|---|---|");
     for line in text.lines().filter(|l| l.starts_with("bench scene=")) {
-        let field = |k: &str| line.split_whitespace().find_map(|w| w.strip_prefix(k)).unwrap_or("");
+        let field = |k: &str| {
+            line.split_whitespace()
+                .find_map(|w| w.strip_prefix(k))
+                .unwrap_or("")
+        };
         let i: usize = field("scene=").parse().unwrap_or(0);
         let us: f64 = field("pipeline_us=").parse().unwrap_or(0.0);
         let (name, pixels) = &sizes[i.min(sizes.len() - 1)];

@@ -28,6 +28,9 @@
 //! source_m = [0.0, 0.1, 0.0]
 //! ```
 
+// `Real` is f64 on the host, but the casts keep this file correct if it ever is not.
+#![allow(clippy::unnecessary_cast)]
+
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
@@ -235,8 +238,9 @@ impl CalibrationToml {
         };
         let mut planes = Vec::with_capacity(self.planes.len());
         for (index, p) in self.planes.iter().enumerate() {
-            let plane = LaserPlane::new(v3(p.normal), p.offset_m as Real, v3(p.source_m))
-                .map_err(|error| CalibrationFileError::Invalid(CalibrationError::Plane { index, error }))?;
+            let plane = LaserPlane::new(v3(p.normal), p.offset_m as Real, v3(p.source_m)).map_err(
+                |error| CalibrationFileError::Invalid(CalibrationError::Plane { index, error }),
+            )?;
             planes.push(plane);
         }
         Calibration::new(self.id, camera, &planes).map_err(CalibrationFileError::Invalid)
@@ -258,7 +262,10 @@ pub(crate) fn map_toml_error(err: &toml::de::Error, text: &str) -> CalibrationFi
     } else if message.starts_with("missing field") {
         CalibrationFileError::MissingKey { key: key(), line }
     } else {
-        CalibrationFileError::Syntax { message: message.trim().to_string(), line }
+        CalibrationFileError::Syntax {
+            message: message.trim().to_string(),
+            line,
+        }
     }
 }
 

@@ -263,7 +263,10 @@ fn map_meta_error(err: &toml::de::Error, text: &str) -> CaptureError {
         CalibrationFileError::UnknownKey { key, line } => CaptureError::UnknownKey { key, line },
         CalibrationFileError::MissingKey { key, line } => CaptureError::MissingKey { key, line },
         CalibrationFileError::Syntax { message, line } => CaptureError::Syntax { message, line },
-        other => CaptureError::Syntax { message: other.to_string(), line: None },
+        other => CaptureError::Syntax {
+            message: other.to_string(),
+            line: None,
+        },
     }
 }
 
@@ -282,10 +285,14 @@ impl CaptureMeta {
             )));
         }
         if meta.width == 0 || meta.height == 0 {
-            return Err(CaptureError::InvalidField("width and height must be positive".into()));
+            return Err(CaptureError::InvalidField(
+                "width and height must be positive".into(),
+            ));
         }
         if !(meta.exposure_s.is_finite() && meta.exposure_s > 0.0) {
-            return Err(CaptureError::InvalidField("exposure_s must be positive".into()));
+            return Err(CaptureError::InvalidField(
+                "exposure_s must be positive".into(),
+            ));
         }
         if !(meta.gain.is_finite() && meta.gain > 0.0) {
             return Err(CaptureError::InvalidField("gain must be positive".into()));
@@ -302,7 +309,11 @@ impl CaptureMeta {
         if let Some(name) = meta.truth.as_ref().and_then(|t| t.truth_curve.as_ref()) {
             check_file_name(name)?;
         }
-        let off = meta.frames.iter().filter(|f| f.lasers_on.is_empty()).count();
+        let off = meta
+            .frames
+            .iter()
+            .filter(|f| f.lasers_on.is_empty())
+            .count();
         if off != 1 {
             return Err(CaptureError::OffFrameCount(off));
         }
@@ -332,8 +343,10 @@ impl Capture {
     /// Reads and checks a capture directory.
     pub fn read(dir: &Path) -> Result<Self, CaptureError> {
         let meta_path = dir.join(META_FILE);
-        let text = std::fs::read_to_string(&meta_path)
-            .map_err(|source| CaptureError::Io { path: meta_path.clone(), source })?;
+        let text = std::fs::read_to_string(&meta_path).map_err(|source| CaptureError::Io {
+            path: meta_path.clone(),
+            source,
+        })?;
         let meta = CaptureMeta::parse(&text)?;
         let calibration = meta.resolve_calibration(dir)?;
         let cam = (calibration.camera.width, calibration.camera.height);
@@ -346,14 +359,20 @@ impl Capture {
         let count = calibration.planes.len();
         for f in &meta.frames {
             if let Some(&plane) = f.lasers_on.iter().find(|&&p| p >= count) {
-                return Err(CaptureError::NoSuchPlane { file: f.file.clone(), plane, count });
+                return Err(CaptureError::NoSuchPlane {
+                    file: f.file.clone(),
+                    plane,
+                    count,
+                });
             }
         }
         let expected_maxval = (1u32 << meta.bit_depth) - 1;
         let mut frames = Vec::with_capacity(meta.frames.len());
         for f in &meta.frames {
-            let pgm = Pgm::read(&dir.join(&f.file))
-                .map_err(|source| CaptureError::Pgm { file: f.file.clone(), source })?;
+            let pgm = Pgm::read(&dir.join(&f.file)).map_err(|source| CaptureError::Pgm {
+                file: f.file.clone(),
+                source,
+            })?;
             if (pgm.width, pgm.height) != (meta.width as usize, meta.height as usize) {
                 return Err(CaptureError::FrameSizeMismatch {
                     file: f.file.clone(),
@@ -380,15 +399,22 @@ impl Capture {
             }
             None => None,
         };
-        Ok(Capture { meta, calibration, frames, truth_curve })
+        Ok(Capture {
+            meta,
+            calibration,
+            frames,
+            truth_curve,
+        })
     }
 
     /// Writes the capture into `dir` (created if needed): `capture.toml`, the frames, and
     /// the truth curve when present. An inline calibration is written from
     /// `self.calibration`; a calibration given by path is left where it is.
     pub fn write(&self, dir: &Path) -> Result<(), CaptureError> {
-        std::fs::create_dir_all(dir)
-            .map_err(|source| CaptureError::Io { path: dir.to_path_buf(), source })?;
+        std::fs::create_dir_all(dir).map_err(|source| CaptureError::Io {
+            path: dir.to_path_buf(),
+            source,
+        })?;
         if self.frames.len() != self.meta.frames.len() {
             return Err(CaptureError::InvalidField(format!(
                 "{} frames for {} frame entries",
@@ -399,11 +425,17 @@ impl Capture {
         for (entry, pgm) in self.meta.frames.iter().zip(&self.frames) {
             check_file_name(&entry.file)?;
             pgm.write(&dir.join(&entry.file))
-                .map_err(|source| CaptureError::Pgm { file: entry.file.clone(), source })?;
+                .map_err(|source| CaptureError::Pgm {
+                    file: entry.file.clone(),
+                    source,
+                })?;
         }
         if let (Some(points), Some(name)) = (
             &self.truth_curve,
-            self.meta.truth.as_ref().and_then(|t| t.truth_curve.as_ref()),
+            self.meta
+                .truth
+                .as_ref()
+                .and_then(|t| t.truth_curve.as_ref()),
         ) {
             check_file_name(name)?;
             let path = dir.join(name);
@@ -419,8 +451,8 @@ impl Capture {
         let mut meta = self.meta.clone();
         if matches!(meta.calibration, toml::Value::Table(_)) {
             let c = calibration_file::CalibrationToml::from_calibration(&self.calibration);
-            meta.calibration = toml::Value::try_from(c)
-                .map_err(|e| CaptureError::InvalidField(e.to_string()))?;
+            meta.calibration =
+                toml::Value::try_from(c).map_err(|e| CaptureError::InvalidField(e.to_string()))?;
         }
         toml::to_string(&meta).map_err(|e| CaptureError::InvalidField(e.to_string()))
     }
@@ -429,7 +461,12 @@ impl Capture {
     pub fn off_frame(&self) -> &Pgm {
         // `CaptureMeta::parse` guarantees exactly one; `position` cannot fail on read
         // captures, and a hand-built one falls back to the first frame.
-        let i = self.meta.frames.iter().position(|f| f.lasers_on.is_empty()).unwrap_or(0);
+        let i = self
+            .meta
+            .frames
+            .iter()
+            .position(|f| f.lasers_on.is_empty())
+            .unwrap_or(0);
         &self.frames[i]
     }
 
@@ -470,7 +507,12 @@ pub fn parse_truth_curve(text: &str, file: &str) -> Result<Vec<TruthPoint>, Capt
             f[k].parse::<f64>()
                 .ok()
                 .filter(|v| v.is_finite())
-                .ok_or_else(|| err(n, format!("field {} ({:?}) is not a finite number", k + 1, f[k])))
+                .ok_or_else(|| {
+                    err(
+                        n,
+                        format!("field {} ({:?}) is not a finite number", k + 1, f[k]),
+                    )
+                })
         };
         let int = |k: usize| -> Result<usize, CaptureError> {
             f[k].parse::<usize>()

@@ -4,6 +4,7 @@
 //! buffers allocated here ([`HostWorkspace`]); this module only picks the frames, converts
 //! units for people (millimetres, degrees) and names the flags.
 
+use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 
 use serde::Serialize;
@@ -276,14 +277,47 @@ pub struct Outcome {
     pub calibration: Calibration,
 }
 
-/// The laser-off frame and the laser-on frame that lights every plane of `planes`.
-fn frame_pair(capture: &Capture, planes: usize) -> Result<(&Pgm, &Pgm), MeasureError> {
-    let on = capture
-        .on_frames()
-        .find(|(lit, _)| (0..planes).all(|k| lit.contains(&k)))
-        .map(|(_, p)| p)
-        .ok_or(MeasureError::NoFullFrame(planes))?;
-    Ok((capture.off_frame(), on))
+/// The laser-off frame and a laser-on frame lighting every plane of `planes`: the capture's
+/// own when one frame lit them all (how the device captures), otherwise the composite of its
+/// per-plane frames (see [`composite_on_frame`]).
+fn frame_pair(capture: &Capture, planes: usize) -> Result<(&Pgm, Cow<'_, Pgm>), MeasureError> {
+    let off = capture.off_frame();
+    if let Some((_, on)) = capture.on_frames().find(|(lit, _)| (0..planes).all(|k| lit.contains(&k))) {
+        return Ok((off, Cow::Borrowed(on)));
+    }
+    composite_on_frame(capture, planes).map(|on| (off, Cow::Owned(on))).ok_or(MeasureError::NoFullFrame(planes))
+}
+
+/// Builds the laser-on frame of all `planes` from frames that lit them separately:
+/// `off + Σ_k (on_k − off)`, clamped to the sensor range. Each difference carries one plane's
+/// stripe; adding them keeps the ambient level of `off` and so the pipeline's subtraction
+/// returns both stripes, unbiased (the noise of the frames adds, as two exposures do).
+/// `None` when some plane is in no frame or the frames differ in size or depth.
+pub fn composite_on_frame(capture: &Capture, planes: usize) -> Option<Pgm> {
+    let off = capture.off_frame();
+    let mut chosen: Vec<&Pgm> = Vec::new();
+    for k in 0..planes {
+        let (_, f) = capture.on_frames().find(|(lit, _)| lit.contains(&k))?;
+        if !chosen.iter().any(|c| std::ptr::eq(*c, f)) {
+            chosen.push(f);
+        }
+    }
+    let off_px = off.to_u16();
+    let mut acc: Vec<i64> = off_px.iter().map(|&v| v as i64).collect();
+    for f in &chosen {
+        if (f.width, f.height, f.maxval) != (off.width, off.height, off.maxval) {
+            return None;
+        }
+        for ((a, &on), &o) in acc.iter_mut().zip(f.to_u16().iter()).zip(&off_px) {
+            *a += on as i64 - o as i64;
+        }
+    }
+    let max = off.maxval as i64;
+    let clamp = |v: i64| v.clamp(0, max);
+    match off.samples {
+        PgmSamples::U8(_) => Pgm::from_u8(off.width, off.height, off.maxval as u8, acc.iter().map(|&v| clamp(v) as u8).collect()).ok(),
+        PgmSamples::U16(_) => Pgm::from_u16(off.width, off.height, off.maxval, acc.iter().map(|&v| clamp(v) as u16).collect()).ok(),
+    }
 }
 
 fn run<P: Pixel>(
@@ -361,11 +395,11 @@ pub fn measure_loaded(
     let (off, on) = frame_pair(capture, calibration.planes.len())?;
     let (result, diff, curve, points) = match (&off.samples, &on.samples) {
         (PgmSamples::U8(a), PgmSamples::U8(b)) => {
-            let (r, hw) = run(a, b, on, &calibration, config, params);
+            let (r, hw) = run(a, b, &on, &calibration, config, params);
             (r, hw.diff.iter().map(|&v| v as u16).collect(), hw.curve, hw.points)
         }
         (PgmSamples::U16(a), PgmSamples::U16(b)) => {
-            let (r, hw) = run(a, b, on, &calibration, config, params);
+            let (r, hw) = run(a, b, &on, &calibration, config, params);
             (r, hw.diff, hw.curve, hw.points)
         }
         _ => return Err(MeasureError::MixedDepth),

@@ -102,15 +102,35 @@ pub struct Pgm {
 
 impl Pgm {
     /// An 8-bit greymap (`maxval` ≤ 255).
-    pub fn from_u8(width: usize, height: usize, maxval: u8, data: Vec<u8>) -> Result<Self, PgmError> {
-        let pgm = Pgm { width, height, maxval: maxval as u16, samples: PgmSamples::U8(data) };
+    pub fn from_u8(
+        width: usize,
+        height: usize,
+        maxval: u8,
+        data: Vec<u8>,
+    ) -> Result<Self, PgmError> {
+        let pgm = Pgm {
+            width,
+            height,
+            maxval: maxval as u16,
+            samples: PgmSamples::U8(data),
+        };
         pgm.check()?;
         Ok(pgm)
     }
 
     /// A 16-bit-storage greymap (`maxval` ≥ 256, e.g. 1023 for 10-bit data).
-    pub fn from_u16(width: usize, height: usize, maxval: u16, data: Vec<u16>) -> Result<Self, PgmError> {
-        let pgm = Pgm { width, height, maxval, samples: PgmSamples::U16(data) };
+    pub fn from_u16(
+        width: usize,
+        height: usize,
+        maxval: u16,
+        data: Vec<u16>,
+    ) -> Result<Self, PgmError> {
+        let pgm = Pgm {
+            width,
+            height,
+            maxval,
+            samples: PgmSamples::U16(data),
+        };
         pgm.check()?;
         Ok(pgm)
     }
@@ -144,10 +164,13 @@ impl Pgm {
         if self.maxval == 0 {
             return Err(PgmError::InvalidImage("maxval is 0".into()));
         }
-        let n = self.width.checked_mul(self.height).ok_or(PgmError::TooLarge {
-            width: self.width as u64,
-            height: self.height as u64,
-        })?;
+        let n = self
+            .width
+            .checked_mul(self.height)
+            .ok_or(PgmError::TooLarge {
+                width: self.width as u64,
+                height: self.height as u64,
+            })?;
         if self.width == 0 || self.height == 0 {
             return Err(PgmError::InvalidImage("zero width or height".into()));
         }
@@ -182,7 +205,10 @@ impl Pgm {
     fn first_above_maxval(&self) -> Option<(usize, u16)> {
         let m = self.maxval;
         match &self.samples {
-            PgmSamples::U8(d) => d.iter().position(|&v| v as u16 > m).map(|i| (i, d[i] as u16)),
+            PgmSamples::U8(d) => d
+                .iter()
+                .position(|&v| v as u16 > m)
+                .map(|i| (i, d[i] as u16)),
             PgmSamples::U16(d) => d.iter().position(|&v| v > m).map(|i| (i, d[i])),
         }
     }
@@ -212,10 +238,15 @@ impl Pgm {
             .and_then(|(w, h)| w.checked_mul(h))
             .ok_or(too_large)?;
         let bytes_per_sample = if maxval > 255 { 2 } else { 1 };
-        let expected = n.checked_mul(bytes_per_sample).ok_or(PgmError::TooLarge { width, height })?;
+        let expected = n
+            .checked_mul(bytes_per_sample)
+            .ok_or(PgmError::TooLarge { width, height })?;
         let raster = &bytes[pos..];
         if raster.len() < expected {
-            return Err(PgmError::Truncated { expected, actual: raster.len() });
+            return Err(PgmError::Truncated {
+                expected,
+                actual: raster.len(),
+            });
         }
         if raster.len() > expected {
             return Err(PgmError::TrailingData(raster.len() - expected));
@@ -256,7 +287,9 @@ impl Pgm {
         out.extend_from_slice(header.as_bytes());
         match &self.samples {
             PgmSamples::U8(d) => out.extend_from_slice(d),
-            PgmSamples::U16(d) => d.iter().for_each(|v| out.extend_from_slice(&v.to_be_bytes())),
+            PgmSamples::U16(d) => d
+                .iter()
+                .for_each(|v| out.extend_from_slice(&v.to_be_bytes())),
         }
         Ok(out)
     }
@@ -273,7 +306,10 @@ impl Pgm {
     /// Encodes and writes a file.
     pub fn write(&self, path: &Path) -> Result<(), PgmError> {
         let bytes = self.encode()?;
-        let io = |source| PgmError::Io { path: path.display().to_string(), source };
+        let io = |source| PgmError::Io {
+            path: path.display().to_string(),
+            source,
+        };
         let mut f = std::fs::File::create(path).map_err(io)?;
         f.write_all(&bytes).map_err(io)
     }

@@ -46,32 +46,63 @@ fn pgm_header_comments_and_whitespace() {
 
 #[test]
 fn pgm_errors() {
-    let ok = Pgm::from_u8(3, 2, 255, vec![9; 6]).unwrap().encode().unwrap();
-    assert!(matches!(Pgm::decode(b"P2\n3 2\n255\n"), Err(PgmError::BadMagic { found }) if found == "P2"));
+    let ok = Pgm::from_u8(3, 2, 255, vec![9; 6])
+        .unwrap()
+        .encode()
+        .unwrap();
+    assert!(
+        matches!(Pgm::decode(b"P2\n3 2\n255\n"), Err(PgmError::BadMagic { found }) if found == "P2")
+    );
     assert!(matches!(Pgm::decode(b""), Err(PgmError::BadMagic { .. })));
     match Pgm::decode(&ok[..ok.len() - 2]) {
-        Err(PgmError::Truncated { expected: 6, actual: 4 }) => {}
+        Err(PgmError::Truncated {
+            expected: 6,
+            actual: 4,
+        }) => {}
         other => panic!("expected Truncated {{6, 4}}, got {other:?}"),
     }
     let mut long = ok.clone();
     long.push(0);
     assert!(matches!(Pgm::decode(&long), Err(PgmError::TrailingData(1))));
-    assert!(matches!(Pgm::decode(b"P5\n3 2\n70000\n"), Err(PgmError::BadMaxval(70000))));
-    assert!(matches!(Pgm::decode(b"P5\n3 2\n0\n"), Err(PgmError::BadMaxval(0))));
-    assert!(matches!(Pgm::decode(b"P5\n3 x\n255\n"), Err(PgmError::BadHeader { field: "height" })));
-    assert!(matches!(Pgm::decode(b"P5\n0 2\n255\n"), Err(PgmError::BadHeader { field: "width" })));
-    assert!(matches!(Pgm::decode(b"P5\n3 2\n255"), Err(PgmError::BadHeader { field: "maxval" })));
+    assert!(matches!(
+        Pgm::decode(b"P5\n3 2\n70000\n"),
+        Err(PgmError::BadMaxval(70000))
+    ));
+    assert!(matches!(
+        Pgm::decode(b"P5\n3 2\n0\n"),
+        Err(PgmError::BadMaxval(0))
+    ));
+    assert!(matches!(
+        Pgm::decode(b"P5\n3 x\n255\n"),
+        Err(PgmError::BadHeader { field: "height" })
+    ));
+    assert!(matches!(
+        Pgm::decode(b"P5\n0 2\n255\n"),
+        Err(PgmError::BadHeader { field: "width" })
+    ));
+    assert!(matches!(
+        Pgm::decode(b"P5\n3 2\n255"),
+        Err(PgmError::BadHeader { field: "maxval" })
+    ));
     let mut above = b"P5\n2 1\n100\n".to_vec();
     above.extend_from_slice(&[50, 101]);
     assert!(matches!(
         Pgm::decode(&above),
-        Err(PgmError::SampleAboveMaxval { x: 1, y: 0, value: 101, maxval: 100 })
+        Err(PgmError::SampleAboveMaxval {
+            x: 1,
+            y: 0,
+            value: 101,
+            maxval: 100
+        })
     ));
     assert!(matches!(
         Pgm::decode(b"P5\n99999999999 99999999999\n255\n"),
         Err(PgmError::TooLarge { .. })
     ));
-    assert!(matches!(Pgm::from_u8(3, 2, 255, vec![0; 5]), Err(PgmError::InvalidImage(_))));
+    assert!(matches!(
+        Pgm::from_u8(3, 2, 255, vec![0; 5]),
+        Err(PgmError::InvalidImage(_))
+    ));
 }
 
 proptest! {
@@ -123,7 +154,15 @@ fn calibration_round_trip_is_exact() {
 #[test]
 fn calibration_units_are_in_the_keys() {
     let text = reference_text();
-    for key in ["fx_px", "cy_px", "width_px", "offset_m", "source_m", "[[planes]]", "[camera.distortion]"] {
+    for key in [
+        "fx_px",
+        "cy_px",
+        "width_px",
+        "offset_m",
+        "source_m",
+        "[[planes]]",
+        "[camera.distortion]",
+    ] {
         assert!(text.contains(key), "{key} missing in\n{text}");
     }
 }
@@ -131,7 +170,11 @@ fn calibration_units_are_in_the_keys() {
 #[test]
 fn calibration_unknown_key_names_key_and_line() {
     let text = reference_text().replace("fx_px", "fx_pixels");
-    let line = text.lines().position(|l| l.starts_with("fx_pixels")).unwrap() + 1;
+    let line = text
+        .lines()
+        .position(|l| l.starts_with("fx_pixels"))
+        .unwrap()
+        + 1;
     match calibration_file::parse(&text) {
         Err(CalibrationFileError::UnknownKey { key, line: Some(l) }) => {
             assert_eq!(key, "fx_pixels");
@@ -140,18 +183,35 @@ fn calibration_unknown_key_names_key_and_line() {
         other => panic!("expected UnknownKey, got {other:?}"),
     }
     let misspelt = reference_text().replace("k1 =", "kl =");
-    assert!(matches!(calibration_file::parse(&misspelt), Err(CalibrationFileError::UnknownKey { key, .. }) if key == "kl"));
+    assert!(
+        matches!(calibration_file::parse(&misspelt), Err(CalibrationFileError::UnknownKey { key, .. }) if key == "kl")
+    );
 }
 
 #[test]
 fn calibration_missing_planes_and_keys() {
     let text = reference_text();
     let no_planes: String = text.split("[[planes]]").next().unwrap().to_string();
-    assert!(matches!(calibration_file::parse(&no_planes), Err(CalibrationFileError::MissingPlanes)));
-    let no_fx: String = text.lines().filter(|l| !l.starts_with("fx_px")).collect::<Vec<_>>().join("\n");
-    assert!(matches!(calibration_file::parse(&no_fx), Err(CalibrationFileError::MissingKey { key, .. }) if key == "fx_px"));
-    let five = format!("{text}{}", &text[text.find("[[planes]]").unwrap()..].repeat(2));
-    assert!(matches!(calibration_file::parse(&five), Err(CalibrationFileError::TooManyPlanes(6))));
+    assert!(matches!(
+        calibration_file::parse(&no_planes),
+        Err(CalibrationFileError::MissingPlanes)
+    ));
+    let no_fx: String = text
+        .lines()
+        .filter(|l| !l.starts_with("fx_px"))
+        .collect::<Vec<_>>()
+        .join("\n");
+    assert!(
+        matches!(calibration_file::parse(&no_fx), Err(CalibrationFileError::MissingKey { key, .. }) if key == "fx_px")
+    );
+    let five = format!(
+        "{text}{}",
+        &text[text.find("[[planes]]").unwrap()..].repeat(2)
+    );
+    assert!(matches!(
+        calibration_file::parse(&five),
+        Err(CalibrationFileError::TooManyPlanes(6))
+    ));
 }
 
 #[test]
@@ -159,13 +219,22 @@ fn calibration_invalid_values_and_syntax() {
     let zero_normal = reference_text().replacen("normal = [", "normal = [0.0, 0.0, 0.0, ", 1);
     // Four components: a type error (array of 3 expected) is a syntax-level error.
     let r = calibration_file::parse(&zero_normal);
-    assert!(matches!(r, Err(CalibrationFileError::Syntax { .. })), "{r:?}");
+    assert!(
+        matches!(r, Err(CalibrationFileError::Syntax { .. })),
+        "{r:?}"
+    );
     let c = corpus::one_plane_calibration();
     let mut file = calibration_file::CalibrationToml::from_calibration(&c);
     file.planes[0].normal = [0.0, 0.0, 0.0];
     let text = toml::to_string(&file).unwrap();
-    assert!(matches!(calibration_file::parse(&text), Err(CalibrationFileError::Invalid(_))));
-    assert!(matches!(calibration_file::parse("id = ["), Err(CalibrationFileError::Syntax { line: Some(1), .. })));
+    assert!(matches!(
+        calibration_file::parse(&text),
+        Err(CalibrationFileError::Invalid(_))
+    ));
+    assert!(matches!(
+        calibration_file::parse("id = ["),
+        Err(CalibrationFileError::Syntax { line: Some(1), .. })
+    ));
 }
 
 proptest! {
@@ -198,10 +267,16 @@ const FRAME: (usize, usize) = (752, 480);
 fn hand_made(dir: &Path, extra_meta: &str, calibration: &str) {
     std::fs::create_dir_all(dir).unwrap();
     let (w, h) = FRAME;
-    Pgm::from_u8(w, h, 255, vec![10; w * h]).unwrap().write(&dir.join("off.pgm")).unwrap();
+    Pgm::from_u8(w, h, 255, vec![10; w * h])
+        .unwrap()
+        .write(&dir.join("off.pgm"))
+        .unwrap();
     let mut on = vec![10u8; w * h];
     on[240 * w..241 * w].fill(200);
-    Pgm::from_u8(w, h, 255, on).unwrap().write(&dir.join("on.pgm")).unwrap();
+    Pgm::from_u8(w, h, 255, on)
+        .unwrap()
+        .write(&dir.join("on.pgm"))
+        .unwrap();
     let text = format!(
         r#"format_version = 1
 sensor = "MT9V034"
@@ -275,17 +350,31 @@ fn edit_meta(dir: &Path, from: &str, to: &str) {
 fn capture_errors() {
     let cal = inline_calibration(&corpus::one_plane_calibration());
     let e = read_err("", &cal, |d| edit_meta(d, "exposure_s", "exposure_ms"));
-    assert!(matches!(e, CaptureError::UnknownKey { ref key, line: Some(6) } if key == "exposure_ms"), "{e}");
+    assert!(
+        matches!(e, CaptureError::UnknownKey { ref key, line: Some(6) } if key == "exposure_ms"),
+        "{e}"
+    );
     let e = read_err("", &cal, |d| edit_meta(d, "fx_px", "fx"));
     assert!(
         matches!(e, CaptureError::Calibration(CalibrationFileError::UnknownKey { ref key, .. }) if key == "fx"),
         "{e}"
     );
     let e = read_err("", &cal, |d| edit_meta(d, "gain = 1.0\n", ""));
-    assert!(matches!(e, CaptureError::MissingKey { ref key, .. } if key == "gain"), "{e}");
-    let e = read_err("", &cal, |d| edit_meta(d, "format_version = 1", "format_version = 2"));
+    assert!(
+        matches!(e, CaptureError::MissingKey { ref key, .. } if key == "gain"),
+        "{e}"
+    );
+    let e = read_err("", &cal, |d| {
+        edit_meta(d, "format_version = 1", "format_version = 2")
+    });
     assert!(matches!(e, CaptureError::UnsupportedVersion(2)), "{e}");
-    let e = read_err("", &cal, |d| edit_meta(d, "timestamp = 2025-06-01T10:00:00Z", "timestamp = 2025-06-01"));
+    let e = read_err("", &cal, |d| {
+        edit_meta(
+            d,
+            "timestamp = 2025-06-01T10:00:00Z",
+            "timestamp = 2025-06-01",
+        )
+    });
     assert!(matches!(e, CaptureError::InvalidField(_)), "{e}");
 
     // Size mismatch with the calibration.
@@ -293,19 +382,50 @@ fn capture_errors() {
     small.camera.width = 640;
     let e = read_err("", &inline_calibration(&small), |_| {});
     assert!(
-        matches!(e, CaptureError::CalibrationSizeMismatch { frames: (752, 480), calibration: (640, 480) }),
+        matches!(
+            e,
+            CaptureError::CalibrationSizeMismatch {
+                frames: (752, 480),
+                calibration: (640, 480)
+            }
+        ),
         "{e}"
     );
     // A frame of the wrong size.
     let e = read_err("", &cal, |d| {
-        Pgm::from_u8(10, 10, 255, vec![0; 100]).unwrap().write(&d.join("on.pgm")).unwrap()
+        Pgm::from_u8(10, 10, 255, vec![0; 100])
+            .unwrap()
+            .write(&d.join("on.pgm"))
+            .unwrap()
     });
-    assert!(matches!(e, CaptureError::FrameSizeMismatch { actual: (10, 10), .. }), "{e}");
+    assert!(
+        matches!(
+            e,
+            CaptureError::FrameSizeMismatch {
+                actual: (10, 10),
+                ..
+            }
+        ),
+        "{e}"
+    );
     // A 10-bit frame in an 8-bit capture.
     let e = read_err("", &cal, |d| {
-        Pgm::from_u16(752, 480, 1023, vec![0; 752 * 480]).unwrap().write(&d.join("on.pgm")).unwrap()
+        Pgm::from_u16(752, 480, 1023, vec![0; 752 * 480])
+            .unwrap()
+            .write(&d.join("on.pgm"))
+            .unwrap()
     });
-    assert!(matches!(e, CaptureError::WrongMaxval { expected: 255, actual: 1023, .. }), "{e}");
+    assert!(
+        matches!(
+            e,
+            CaptureError::WrongMaxval {
+                expected: 255,
+                actual: 1023,
+                ..
+            }
+        ),
+        "{e}"
+    );
     // A truncated frame.
     let e = read_err("", &cal, |d| {
         let p = d.join("off.pgm");
@@ -313,24 +433,65 @@ fn capture_errors() {
         std::fs::write(&p, &b[..b.len() - 100]).unwrap();
     });
     assert!(
-        matches!(e, CaptureError::Pgm { source: PgmError::Truncated { expected: 360960, actual: 360860 }, .. }),
+        matches!(
+            e,
+            CaptureError::Pgm {
+                source: PgmError::Truncated {
+                    expected: 360960,
+                    actual: 360860
+                },
+                ..
+            }
+        ),
         "{e}"
     );
     // Frame bookkeeping.
-    let e = read_err("", &cal, |d| edit_meta(d, "lasers_on = []", "lasers_on = [0]"));
+    let e = read_err("", &cal, |d| {
+        edit_meta(d, "lasers_on = []", "lasers_on = [0]")
+    });
     assert!(matches!(e, CaptureError::OffFrameCount(0)), "{e}");
-    let e = read_err("", &cal, |d| edit_meta(d, "lasers_on = [0]", "lasers_on = [1]"));
-    assert!(matches!(e, CaptureError::NoSuchPlane { plane: 1, count: 1, .. }), "{e}");
-    let e = read_err("", &cal, |d| edit_meta(d, "file = \"on.pgm\"", "file = \"../on.pgm\""));
+    let e = read_err("", &cal, |d| {
+        edit_meta(d, "lasers_on = [0]", "lasers_on = [1]")
+    });
+    assert!(
+        matches!(
+            e,
+            CaptureError::NoSuchPlane {
+                plane: 1,
+                count: 1,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    let e = read_err("", &cal, |d| {
+        edit_meta(d, "file = \"on.pgm\"", "file = \"../on.pgm\"")
+    });
     assert!(matches!(e, CaptureError::BadFileName(_)), "{e}");
     // Missing planes in the inline calibration.
-    let no_planes = cal.split("[[calibration.planes]]").next().unwrap().to_string();
+    let no_planes = cal
+        .split("[[calibration.planes]]")
+        .next()
+        .unwrap()
+        .to_string();
     let e = read_err("", &no_planes, |_| {});
-    assert!(matches!(e, CaptureError::Calibration(CalibrationFileError::MissingPlanes)), "{e}");
+    assert!(
+        matches!(
+            e,
+            CaptureError::Calibration(CalibrationFileError::MissingPlanes)
+        ),
+        "{e}"
+    );
     // A malformed truth curve.
     let truth = "[truth]\ntruth_curve = \"t.csv\"\n";
     let tail = format!("{cal}{truth}");
-    let e = read_err("", &tail, |d| std::fs::write(d.join("t.csv"), "plane,column,row_px,x_m,y_m,z_m,object\n0,1,nan,0,0,1,0\n").unwrap());
+    let e = read_err("", &tail, |d| {
+        std::fs::write(
+            d.join("t.csv"),
+            "plane,column,row_px,x_m,y_m,z_m,object\n0,1,nan,0,0,1,0\n",
+        )
+        .unwrap()
+    });
     assert!(matches!(e, CaptureError::TruthCurve { line: 2, .. }), "{e}");
 }
 
@@ -358,8 +519,15 @@ fn corpus_regenerates_bit_for_bit() {
     // One capture of each kind of feature that touches the byte stream: a plain stem, the
     // 10-bit one, a distorted lens with two-plane hand motion… rendering all 45 takes ~30 s
     // in release; three suffice to catch any change of the simulator's output.
-    let names = ["cyl-d300-z150-shade", "cyl-d300-z150-10bit", "cyl-d300-z150-tilt20-away-2p"];
-    let entries: Vec<_> = corpus::entries().into_iter().filter(|e| names.contains(&e.name.as_str())).collect();
+    let names = [
+        "cyl-d300-z150-shade",
+        "cyl-d300-z150-10bit",
+        "cyl-d300-z150-tilt20-away-2p",
+    ];
+    let entries: Vec<_> = corpus::entries()
+        .into_iter()
+        .filter(|e| names.contains(&e.name.as_str()))
+        .collect();
     assert_eq!(entries.len(), names.len());
     let tmp = tempfile::tempdir().unwrap();
     corpus::write_entries(&entries, tmp.path()).unwrap();
@@ -369,7 +537,10 @@ fn corpus_regenerates_bit_for_bit() {
             let committed = std::fs::read(corpus_dir().join(name).join(&file)).unwrap();
             let fresh = std::fs::read(tmp.path().join(name).join(&file))
                 .unwrap_or_else(|_| panic!("{name}/{file:?} not regenerated"));
-            assert!(committed == fresh, "{name}/{file:?} differs from its regeneration");
+            assert!(
+                committed == fresh,
+                "{name}/{file:?} differs from its regeneration"
+            );
         }
     }
 }

@@ -27,7 +27,11 @@ fn repo_root() -> PathBuf {
 fn firmware_elf() -> Option<PathBuf> {
     static ELF: OnceLock<Option<PathBuf>> = OnceLock::new();
     ELF.get_or_init(|| {
-        if Command::new("qemu-system-arm").arg("--version").output().is_err() {
+        if Command::new("qemu-system-arm")
+            .arg("--version")
+            .output()
+            .is_err()
+        {
             eprintln!(
                 "SKIPPED: qemu-system-arm is not installed (apt-get install qemu-system-arm); \
                  the emulated-firmware tests did not run"
@@ -90,7 +94,15 @@ impl Device {
         }
         let log = dir.path().join("semihosting.log");
         let mut child = Command::new("qemu-system-arm")
-            .args(["-M", "mps2-an500", "-display", "none", "-monitor", "none", "-nodefaults"])
+            .args([
+                "-M",
+                "mps2-an500",
+                "-display",
+                "none",
+                "-monitor",
+                "none",
+                "-nodefaults",
+            ])
             .args(["-net", "none", "-serial", "stdio"])
             .args(["-semihosting-config", "enable=on,target=native"])
             .arg("-kernel")
@@ -251,9 +263,10 @@ fn boot_banner_info_and_calibration_round_trip() {
     let mut new = cal.clone();
     new.id = 4242;
     new.camera.cx = 371.25;
-    dev.request(Request::WriteCalibration(WireCalibration::from(&new)), |r| {
-        assert_eq!(r, Response::Ack)
-    });
+    dev.request(
+        Request::WriteCalibration(WireCalibration::from(&new)),
+        |r| assert_eq!(r, Response::Ack),
+    );
     let back = dev.request(Request::ReadCalibration, |r| match r {
         Response::Calibration(c) => c,
         other => panic!("{other:?}"),
@@ -265,7 +278,9 @@ fn boot_banner_info_and_calibration_round_trip() {
     let mut bad = WireCalibration::from(&new);
     bad.intrinsics[0] = f64::NAN;
     dev.request(Request::WriteCalibration(bad), |r| match r {
-        Response::Error(DeviceError { code, .. }) => assert_eq!(code, ErrorCode::InvalidCalibration),
+        Response::Error(DeviceError { code, .. }) => {
+            assert_eq!(code, ErrorCode::InvalidCalibration)
+        }
         other => panic!("{other:?}"),
     });
     dev.request(Request::DeviceInfo, |r| match r {
@@ -296,7 +311,12 @@ fn frame_dump_equals_the_source_frames() {
                 max_len: FRAME_CHUNK_MAX as u16,
             };
             dev.request(request, |r| match r {
-                Response::FrameChunk { offset, total, data, .. } => {
+                Response::FrameChunk {
+                    offset,
+                    total,
+                    data,
+                    ..
+                } => {
                     assert_eq!(offset as usize, got.len());
                     assert_eq!(total as usize, want.len());
                     assert!(!data.is_empty() && data.len() <= FRAME_CHUNK_MAX);
@@ -308,10 +328,36 @@ fn frame_dump_equals_the_source_frames() {
         assert!(got == *want, "{sel:?} frame differs from its source");
     }
     // Past the end, and a capture that no longer exists.
-    let request = Request::ReadFrameChunk { capture: info.capture, frame: FrameSel::On, offset: off.len() as u32, max_len: 16 };
-    dev.request(request, |r| assert!(matches!(r, Response::Error(DeviceError { code: ErrorCode::OutOfRange, .. }))));
-    let request = Request::ReadFrameChunk { capture: info.capture + 1, frame: FrameSel::On, offset: 0, max_len: 16 };
-    dev.request(request, |r| assert!(matches!(r, Response::Error(DeviceError { code: ErrorCode::StaleCapture, .. }))));
+    let request = Request::ReadFrameChunk {
+        capture: info.capture,
+        frame: FrameSel::On,
+        offset: off.len() as u32,
+        max_len: 16,
+    };
+    dev.request(request, |r| {
+        assert!(matches!(
+            r,
+            Response::Error(DeviceError {
+                code: ErrorCode::OutOfRange,
+                ..
+            })
+        ))
+    });
+    let request = Request::ReadFrameChunk {
+        capture: info.capture + 1,
+        frame: FrameSel::On,
+        offset: 0,
+        max_len: 16,
+    };
+    dev.request(request, |r| {
+        assert!(matches!(
+            r,
+            Response::Error(DeviceError {
+                code: ErrorCode::StaleCapture,
+                ..
+            })
+        ))
+    });
 }
 
 #[test]
@@ -326,7 +372,13 @@ fn garbage_corruption_oversize_and_other_versions_are_counted_not_fatal() {
     dev.send_raw(&[0x13, 0x37, 0xFF, 0x42, 0x00]);
     // 2. A valid frame with one corrupted byte: malformed (CRC).
     let mut enc = protocol::FrameEncoder::new();
-    let mut frame = enc.encode(&ToDevice { tag: 99, request: Request::DeviceInfo }).unwrap().to_vec();
+    let mut frame = enc
+        .encode(&ToDevice {
+            tag: 99,
+            request: Request::DeviceInfo,
+        })
+        .unwrap()
+        .to_vec();
     frame[3] ^= 0x10;
     if frame[3] == 0 {
         frame[3] = 0x77;
@@ -337,7 +389,15 @@ fn garbage_corruption_oversize_and_other_versions_are_counted_not_fatal() {
     dev.send_raw(&[0x00]);
     // 4. A frame of protocol version 2: answered with UnsupportedVersion.
     let mut scratch = [0u8; protocol::MAX_RAW_LEN];
-    let raw = protocol::encode_raw(&ToDevice { tag: 7, request: Request::DeviceInfo }, 2, &mut scratch).unwrap();
+    let raw = protocol::encode_raw(
+        &ToDevice {
+            tag: 7,
+            request: Request::DeviceInfo,
+        },
+        2,
+        &mut scratch,
+    )
+    .unwrap();
     let mut out = [0u8; protocol::MAX_FRAME_LEN];
     let n = protocol::cobs_frame(raw, &mut out).unwrap();
     dev.send_raw(&out[..n]);
@@ -380,7 +440,10 @@ fn measure_without_calibration_is_a_clear_error() {
 /// with a 16-bit PGM).
 fn to_u8(pgm: &tangent_host::pgm::Pgm) -> Vec<u8> {
     let bits = pgm.bit_depth() as u32;
-    pgm.to_u16().into_iter().map(|v| (v >> bits.saturating_sub(8)).min(255) as u8).collect()
+    pgm.to_u16()
+        .into_iter()
+        .map(|v| (v >> bits.saturating_sub(8)).min(255) as u8)
+        .collect()
 }
 
 /// The firmware issue's CI check: the emulated firmware, running the shared pipeline in
@@ -414,11 +477,19 @@ fn on_device_measurements_equal_the_hosts() {
     let dir = tempfile::tempdir().unwrap();
     let mut pairs = Vec::new();
     let mut cases = Vec::new();
-    for entry in corpus::entries().into_iter().filter(|e| wanted.contains(&e.name.as_str())) {
+    for entry in corpus::entries()
+        .into_iter()
+        .filter(|e| wanted.contains(&e.name.as_str()))
+    {
         let (capture, _) = simulate(&entry.spec).expect("simulate the corpus capture");
         let off_pgm = capture.off_frame();
         let (lit, on_pgm) = capture.on_frames().next().expect("an on frame");
-        assert_eq!(lit.len(), capture.calibration.planes.len(), "{}: all planes lit in one frame", entry.name);
+        assert_eq!(
+            lit.len(),
+            capture.calibration.planes.len(),
+            "{}: all planes lit in one frame",
+            entry.name
+        );
         let (w, h) = (off_pgm.width, off_pgm.height);
         let (off, on) = (to_u8(off_pgm), to_u8(on_pgm));
         let off_path = dir.path().join(format!("{}-off.pgm", entry.name));
@@ -472,5 +543,8 @@ fn on_device_measurements_equal_the_hosts() {
             (h, r) => panic!("{name}: host {h:?}, device {r:?}"),
         });
     }
-    assert!(compared >= 5, "only {compared} captures measured on both sides");
+    assert!(
+        compared >= 5,
+        "only {compared} captures measured on both sides"
+    );
 }

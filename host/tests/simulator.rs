@@ -19,12 +19,20 @@ use tangent_host::simulate::sensor::{self, SensorParams};
 use tangent_host::simulate::{simulate, Exposure, SimParams, SimSpec};
 
 fn wall(z: f64, texture: Texture) -> Object {
-    Object::Plane(Plane { point_m: [0.0, 0.0, z], normal: [0.0, 0.0, -1.0], albedo: 0.5, texture, texture_contrast: 0.3 })
+    Object::Plane(Plane {
+        point_m: [0.0, 0.0, z],
+        normal: [0.0, 0.0, -1.0],
+        albedo: 0.5,
+        texture,
+        texture_contrast: 0.3,
+    })
 }
 
 fn spec(calibration: Calibration, objects: Vec<Object>, f: impl FnOnce(&mut SimParams)) -> SimSpec {
-    let mut params = SimParams::default();
-    params.lit_planes = (0..calibration.planes.len()).collect();
+    let mut params = SimParams {
+        lit_planes: (0..calibration.planes.len()).collect(),
+        ..SimParams::default()
+    };
     f(&mut params);
     SimSpec {
         mode: Mode::Cylinder,
@@ -56,7 +64,11 @@ fn frontal_wall_truth_is_the_analytic_row() {
             assert_eq!(pts.len(), cal.camera.width as usize, "plane {i}, z {z}");
             for p in pts {
                 // Bisection to 1e-12 px; 1e-9 px leaves room for the rounding of the ray.
-                assert!((p.row_px - v).abs() < 1e-9, "plane {i} z {z}: {} vs {v}", p.row_px);
+                assert!(
+                    (p.row_px - v).abs() < 1e-9,
+                    "plane {i} z {z}: {} vs {v}",
+                    p.row_px
+                );
                 assert!((p.point_m[2] - z).abs() < 1e-9);
             }
         }
@@ -74,7 +86,11 @@ fn truth_points_are_on_plane_and_surface_and_project_to_their_pixel() {
     let objects = vec![stem(2.0 * r * 1e3, 1.2, 0.05, axis)];
     let (cap, _) = simulate(&spec(cal.clone(), objects, |_| {})).unwrap();
     let truth = cap.truth_curve.unwrap();
-    assert!(truth.len() > 400, "both curves across the stem: {}", truth.len());
+    assert!(
+        truth.len() > 400,
+        "both curves across the stem: {}",
+        truth.len()
+    );
     let a = Vec3::new(axis[0], axis[1], axis[2]).normalize();
     let c = Vec3::new(0.05, 0.0, 1.2 + r);
     for p in &truth {
@@ -85,17 +101,27 @@ fn truth_points_are_on_plane_and_surface_and_project_to_their_pixel() {
         let radial = (rel - a * a.dot(&rel)).norm();
         assert!((radial - r).abs() < 1e-9, "radial distance {radial}");
         let px = cal.camera.project(x).unwrap();
-        assert!((px - Vec2::new(p.column as f64, p.row_px)).norm() < 1e-6, "{px:?} vs {p:?}");
+        assert!(
+            (px - Vec2::new(p.column as f64, p.row_px)).norm() < 1e-6,
+            "{px:?} vs {p:?}"
+        );
     }
 }
 
 #[test]
 fn same_seed_same_bytes_other_seed_other_noise() {
     let mk = |seed| {
-        spec(corpus::one_plane_calibration(), vec![stem(300.0, 1.0, 0.0, [0.0, 1.0, 0.0])], |p| {
-            p.seed = seed;
-            p.hand_motion = Some(HandMotion { rotation_rad: [0.001, 0.0, 0.0], translation_m: [0.0; 3] });
-        })
+        spec(
+            corpus::one_plane_calibration(),
+            vec![stem(300.0, 1.0, 0.0, [0.0, 1.0, 0.0])],
+            |p| {
+                p.seed = seed;
+                p.hand_motion = Some(HandMotion {
+                    rotation_rad: [0.001, 0.0, 0.0],
+                    translation_m: [0.0; 3],
+                });
+            },
+        )
     };
     let (a, _) = simulate(&mk(7)).unwrap();
     let (b, _) = simulate(&mk(7)).unwrap();
@@ -112,7 +138,9 @@ fn same_seed_same_bytes_other_seed_other_noise() {
 /// Mean and variance of `n` draws of `expose_pixel`.
 fn stats(s: &SensorParams, mean_e: f64, gain: f64, n: usize) -> (f64, f64) {
     let mut rng = Pcg64::seed_from_u64(42);
-    let xs: Vec<f64> = (0..n).map(|_| s.expose_pixel(mean_e, gain, &mut rng) as f64).collect();
+    let xs: Vec<f64> = (0..n)
+        .map(|_| s.expose_pixel(mean_e, gain, &mut rng) as f64)
+        .collect();
     let m = xs.iter().sum::<f64>() / n as f64;
     let v = xs.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1) as f64;
     (m, v)
@@ -124,13 +152,22 @@ fn sensor_noise_matches_the_model() {
     // approximation; the Poisson counts here are ≥ 500, where it holds).
     let n = 200_000;
     for (bits, gain, mean_e) in [(10u8, 1.0, 4000.0), (10, 2.0, 500.0), (8, 4.0, 2000.0)] {
-        let s = SensorParams { bit_depth: bits, ..SensorParams::default() };
+        let s = SensorParams {
+            bit_depth: bits,
+            ..SensorParams::default()
+        };
         let (pm, pv) = s.predicted_stats(mean_e, gain);
         let (m, v) = stats(&s, mean_e, gain, n);
         let se_m = (pv / n as f64).sqrt();
         let se_v = pv * (2.0 / n as f64).sqrt();
-        assert!((m - pm).abs() < 5.0 * se_m, "{bits} bit gain {gain}: mean {m} vs {pm}");
-        assert!((v - pv).abs() < 5.0 * se_v, "{bits} bit gain {gain}: var {v} vs {pv}");
+        assert!(
+            (m - pm).abs() < 5.0 * se_m,
+            "{bits} bit gain {gain}: mean {m} vs {pm}"
+        );
+        assert!(
+            (v - pv).abs() < 5.0 * se_v,
+            "{bits} bit gain {gain}: var {v} vs {pv}"
+        );
     }
     // Saturation: far above the full well every sample is full scale.
     let s = SensorParams::default();
@@ -144,7 +181,12 @@ fn radiometric_chain_of_a_uniform_wall() {
     // under diffuse light E_d receives E_d·(1 + n·up)/2 = E_d/2; the off frame's mean is
     // b + g·K·ρ·(E_d/2)·t (docs/simulator.md, "Radiometry"), K from the sensor model.
     let cal = corpus::one_plane_calibration();
-    let lighting = Lighting { diffuse_w_m2: 1.0, sun_w_m2: 0.0, sun_direction: [0.0, -1.0, 0.0], background_w_m2: 0.0 };
+    let lighting = Lighting {
+        diffuse_w_m2: 1.0,
+        sun_w_m2: 0.0,
+        sun_direction: [0.0, -1.0, 0.0],
+        background_w_m2: 0.0,
+    };
     let t = 0.004;
     let sp = spec(cal, vec![wall(1.5, Texture::None)], |p| {
         p.lighting = lighting;
@@ -158,9 +200,15 @@ fn radiometric_chain_of_a_uniform_wall() {
     let (pm, pv) = s.predicted_stats(mean_e, 1.0);
     let off = cap.off_frame();
     // Rows 0–99: far above the laser stripe (row ≈ 240 at 1.5 m).
-    let xs: Vec<f64> = (0..100).flat_map(|y| (0..752).map(move |x| (x, y))).map(|(x, y)| off.get(x, y).unwrap() as f64).collect();
+    let xs: Vec<f64> = (0..100)
+        .flat_map(|y| (0..752).map(move |x| (x, y)))
+        .map(|(x, y)| off.get(x, y).unwrap() as f64)
+        .collect();
     let m = xs.iter().sum::<f64>() / xs.len() as f64;
-    assert!((m - pm).abs() < 5.0 * (pv / xs.len() as f64).sqrt(), "mean {m} DN vs predicted {pm} DN");
+    assert!(
+        (m - pm).abs() < 5.0 * (pv / xs.len() as f64).sqrt(),
+        "mean {m} DN vs predicted {pm} DN"
+    );
     // K itself, by hand: A·QE·T·λ/(4N²hc) = 36e-12·0.4·0.9·650e-9/(4·2.4²·6.626e-34·2.998e8).
     let k = 36e-12 * 0.4 * 0.9 * 650e-9 / (4.0 * 2.4 * 2.4 * 6.626_070_15e-34 * 299_792_458.0);
     assert!((report.electrons_per_w_m2_s / k - 1.0).abs() < 1e-12);
@@ -187,7 +235,11 @@ fn speckle_cells_limits() {
     assert!((m * factor * factor - 1.0).abs() < 1e-4, "{m}");
     // Spectral decorrelation: 1 nm on 1 mm roughness.
     let c = sensor::spectral_speckle_contrast(650e-9, 1e-9, 1e-3);
-    assert!((c - (1.0 + (4.0 * std::f64::consts::PI * 1e-12 / 650e-9f64.powi(2)).powi(2)).powf(-0.25)).abs() < 1e-15);
+    assert!(
+        (c - (1.0 + (4.0 * std::f64::consts::PI * 1e-12 / 650e-9f64.powi(2)).powi(2)).powf(-0.25))
+            .abs()
+            < 1e-15
+    );
     assert!((0.17..0.19).contains(&c), "{c}");
 }
 
@@ -220,19 +272,37 @@ fn laser_sheet_carries_its_power() {
 /// Extracted points of plane 0 `(column, row)` from the core pipeline, or its error.
 fn extract(cap: &Capture) -> Vec<(u16, f64)> {
     let (w, h) = (cap.meta.width as usize, cap.meta.height as usize);
-    let (PgmSamples::U16(off), PgmSamples::U16(on)) = (&cap.off_frame().samples, &cap.on_frames().next().unwrap().1.samples) else {
+    let (PgmSamples::U16(off), PgmSamples::U16(on)) = (
+        &cap.off_frame().samples,
+        &cap.on_frames().next().unwrap().1.samples,
+    ) else {
         panic!("10-bit frames expected")
     };
     let bits = cap.meta.bit_depth;
-    let off = Frame::new(off.as_slice(), w, h, w).unwrap().with_bit_depth(bits).unwrap();
-    let on = Frame::new(on.as_slice(), w, h, w).unwrap().with_bit_depth(bits).unwrap();
+    let off = Frame::new(off.as_slice(), w, h, w)
+        .unwrap()
+        .with_bit_depth(bits)
+        .unwrap();
+    let on = Frame::new(on.as_slice(), w, h, w)
+        .unwrap()
+        .with_bit_depth(bits)
+        .unwrap();
     let sizes = WorkspaceSizes::new(w, h, bits, cap.calibration.planes.len());
     let mut diff = vec![0u16; sizes.pixels];
     let mut labels = vec![0u16; sizes.pixels];
     let mut histogram = vec![0u32; sizes.histogram];
     let mut label_table = vec![0u16; sizes.label_table];
     let mut objects = vec![tangent_core::image::segment::ObjectFeatures::empty(0); sizes.objects];
-    let mut curve = vec![CurvePoint { column: 0, row: 0.0, amplitude: 0.0, curve: 0, saturated: false }; sizes.points];
+    let mut curve = vec![
+        CurvePoint {
+            column: 0,
+            row: 0.0,
+            amplitude: 0.0,
+            curve: 0,
+            saturated: false
+        };
+        sizes.points
+    ];
     let mut points = vec![Vec3::zeros(); sizes.points];
     let mut scratch_points = vec![Vec2::zeros(); sizes.points];
     let mut scratch_values = vec![0.0; sizes.points];
@@ -266,7 +336,10 @@ fn core_extraction_matches_the_true_curve_on_clean_stripes() {
     // for the stripe's ends where the peak, hence the relative noise, is lower).
     let cases = [
         ("wall 1.2 m", vec![wall(1.2, Texture::None)]),
-        ("stem 400 mm at 1.0 m", vec![stem(400.0, 1.0, 0.0, [0.0, 1.0, 0.0])]),
+        (
+            "stem 400 mm at 1.0 m",
+            vec![stem(400.0, 1.0, 0.0, [0.0, 1.0, 0.0])],
+        ),
     ];
     for (name, mut objects) in cases {
         for o in &mut objects {
@@ -277,31 +350,51 @@ fn core_extraction_matches_the_true_curve_on_clean_stripes() {
         let sp = spec(corpus::one_plane_calibration(), objects, |p| {
             p.speckle = false;
             p.sensor.bit_depth = 10;
-            p.exposure = Exposure::Auto { peak_fraction: 0.8, max_s: 1.0 };
+            p.exposure = Exposure::Auto {
+                peak_fraction: 0.8,
+                max_s: 1.0,
+            };
         });
         let (cap, _) = simulate(&sp).unwrap();
         let truth = cap.truth_curve.clone().unwrap();
         let extracted = extract(&cap);
         let errors: Vec<f64> = extracted
             .iter()
-            .filter_map(|&(col, row)| truth.iter().find(|t| t.plane == 0 && t.column == col as u32).map(|t| row - t.row_px))
+            .filter_map(|&(col, row)| {
+                truth
+                    .iter()
+                    .find(|t| t.plane == 0 && t.column == col as u32)
+                    .map(|t| row - t.row_px)
+            })
             .collect();
         // Coverage: every column of the middle 80 % of the true curve is extracted. (At the
         // ends of a stem's lit arc the incidence grows to grazing and the stripe fades as
         // cos ι; the middle 80 % of the columns of a circle seen from afar is |ι| ≲ 53°,
         // cos ι ≥ 0.6, where the stripe is bright.)
-        let cols: Vec<u32> = truth.iter().filter(|t| t.plane == 0).map(|t| t.column).collect();
+        let cols: Vec<u32> = truth
+            .iter()
+            .filter(|t| t.plane == 0)
+            .map(|t| t.column)
+            .collect();
         let (c0, c1) = (cols[0] as f64, cols[cols.len() - 1] as f64);
         let (m0, m1) = (c0 + 0.1 * (c1 - c0), c1 - 0.1 * (c1 - c0));
         let missing: Vec<u32> = cols
             .iter()
             .copied()
-            .filter(|&c| (c as f64) >= m0 && (c as f64) <= m1 && !extracted.iter().any(|e| e.0 as u32 == c))
+            .filter(|&c| {
+                (c as f64) >= m0 && (c as f64) <= m1 && !extracted.iter().any(|e| e.0 as u32 == c)
+            })
             .collect();
-        assert!(missing.is_empty(), "{name}: columns not extracted: {missing:?}");
+        assert!(
+            missing.is_empty(),
+            "{name}: columns not extracted: {missing:?}"
+        );
         let mean = errors.iter().sum::<f64>() / errors.len() as f64;
         let rms = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt();
-        println!("{name}: {} points, mean error {mean:+.4} px, RMS {rms:.4} px", errors.len());
+        println!(
+            "{name}: {} points, mean error {mean:+.4} px, RMS {rms:.4} px",
+            errors.len()
+        );
         assert!(mean.abs() <= 0.02, "{name}: mean error {mean}");
         assert!(rms <= 0.04, "{name}: RMS {rms}");
     }

@@ -273,6 +273,48 @@ pub fn calibration_relative_sigma(
     total.sqrt()
 }
 
+/// σ of the radius of a geometric circle fit estimated from the data's own residuals: the
+/// heteroscedasticity-consistent sandwich `A⁻¹BA⁻¹` with `B = Σ dᵢ²JᵢJᵢᵀ·n/(n − 3)`
+/// (`dᵢ = |qᵢ − c| − r`, `J = (−nᵢ, −1)`; White 1980, with the `n/(n − 3)` small-sample
+/// correction). Unlike `σ̂²(JᵀJ)⁻¹` it does not assume equal noise on every point, so the
+/// noisy, dim ends of a curve count with the noise they really have
+/// (`docs/error-model.md`, "Data-driven fit uncertainty"). Points with `|dᵢ| > cutoff`
+/// (the robust fit's rejected outliers) are left out. Infinite if `A` is singular or fewer
+/// than 4 points remain.
+pub fn circle_radius_sigma_residuals(c: &Circle, points: &[Vec2], cutoff: Real) -> Real {
+    let mut a = Mat3::zeros();
+    let mut b = Mat3::zeros();
+    let mut n = 0usize;
+    for q in points {
+        let d = q - c.centre;
+        let len = d.norm();
+        if !(len > 0.0) {
+            continue;
+        }
+        let res = len - c.radius;
+        if !(res.abs() <= cutoff) {
+            continue;
+        }
+        let nn = d / len;
+        let j = Vec3::new(-nn.x, -nn.y, -1.0);
+        let jj = j * j.transpose();
+        a += jj;
+        b += jj * (res * res);
+        n += 1;
+    }
+    if n < 4 {
+        return Real::INFINITY;
+    }
+    let k = n as Real / (n - 3) as Real;
+    match a.try_inverse() {
+        Some(inv) => {
+            let cov = inv * b * inv;
+            (cov[(2, 2)] * k).max(0.0).sqrt()
+        }
+        None => Real::INFINITY,
+    }
+}
+
 /// σ of the radius of a geometric circle fit (unweighted least squares, as
 /// [`circle::fit_geometric`]) when each point `qᵢ` has an independent error along the
 /// vector `gᵢ` (1σ): the sandwich `A⁻¹BA⁻¹`, `A = ΣJJᵀ`, `B = Σ(nᵢ·gᵢ)²JJᵀ`,

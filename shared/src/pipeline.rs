@@ -38,9 +38,19 @@ pub struct PipelineConfig {
     /// Fraction of the brightest difference below which a pixel never counts as laser: the
     /// threshold is at least `relative_threshold × max_difference`.
     pub relative_threshold: Real,
-    /// The brightest difference must reach this many grey levels, or the pair is "dark" (the
-    /// laser did not reach anything in range).
+    /// Absolute floor of the darkness test: the brightest difference must reach at least this
+    /// many grey levels, or the pair is "dark" (the laser did not reach anything in range).
     pub min_contrast: u32,
+    /// Noise-relative darkness test: the brightest difference must also reach
+    /// `contrast_snr × σ̂`, with `σ̂` the difference image's noise estimated from its own
+    /// histogram ([`difference_noise`]). The max of `N` ≈ 3.6·10⁵ noise pixels is ≈ 4.5 σ, so
+    /// 8 σ is never reached by noise alone while a stripe 10 grey levels high over σ ≈ 0.8
+    /// passes (docs/pipeline.md, "Contrast and threshold").
+    pub contrast_snr: Real,
+    /// Noise-relative floor of the segmentation threshold: `threshold_snr × σ̂` (a Gaussian
+    /// pixel exceeds 5 σ with probability 3·10⁻⁷, i.e. < 1 false pixel per frame), so that dim
+    /// stripe ends are segmented as far as the noise allows.
+    pub threshold_snr: Real,
     /// Object selection (the per-object criteria; how many to keep is set by the pipeline).
     pub selection: SelectionParams,
     /// Candidates kept per plane before merging fragments of a broken curve.
@@ -66,7 +76,9 @@ impl Default for PipelineConfig {
             threshold: ThresholdMethod::Otsu,
             min_threshold: 6,
             relative_threshold: 0.08,
-            min_contrast: 20,
+            min_contrast: 8,
+            contrast_snr: 8.0,
+            threshold_snr: 5.0,
             selection: SelectionParams::default(),
             max_fragments: 4,
             max_fragment_gap: 40,
@@ -390,6 +402,26 @@ struct Candidate {
     plane: usize,
 }
 
+/// Noise σ (grey levels) of a difference image `max(on − off, 0)`, from its histogram.
+///
+/// With `on − off = X ~ N(0, σ²)` off the stripe, the clamped difference has
+/// `E[max(X, 0)] = σ/√(2π)`, so `σ̂ = √(2π)·mean`. The mean is taken over all pixels: the
+/// stripe's few hundred pixels inflate it slightly, which only makes the tests that use `σ̂`
+/// more conservative. Sensor noise, shot noise on bright ambient and the structure left by
+/// hand motion all count as noise here, as they should. Returns 0 for an empty histogram.
+pub fn difference_noise(histogram: &[u32]) -> Real {
+    let (mut n, mut sum) = (0u64, 0u64);
+    for (level, &count) in histogram.iter().enumerate() {
+        n += count as u64;
+        sum += count as u64 * level as u64;
+    }
+    if n == 0 {
+        return 0.0;
+    }
+    let two_pi: Real = 2.0 * crate::real::PI;
+    two_pi.sqrt() * (sum as Real / n as Real)
+}
+
 /// Runs the image part of the chain and triangulates the curves: `off` and `on` are the
 /// laser-off and laser-on frames (all of the calibration's planes lit in `on`).
 ///
@@ -423,7 +455,12 @@ pub fn extract_profile<P: Pixel>(
     let stats = subtract::subtract(on, off, &mut diff)?;
     let diff = diff.as_frame();
     let full_scale = on.max_value();
-    if stats.max_difference < config.min_contrast {
+    // The noise of the difference image, from its histogram (needed for both tests below).
+    threshold::histogram(&diff, ws.histogram)?;
+    let hist_len = threshold::histogram_len(&diff).min(ws.histogram.len());
+    let noise = difference_noise(&ws.histogram[..hist_len]);
+    let dark_floor = (config.min_contrast as Real).max(config.contrast_snr * noise);
+    if !((stats.max_difference as Real) >= dark_floor) {
         return Err(PipelineError::NoLaserLight { max_difference: stats.max_difference });
     }
     // The off frame's mean at full scale means most of it is clipped: nothing can be seen.
@@ -431,12 +468,13 @@ pub fn extract_profile<P: Pixel>(
         return Err(PipelineError::AmbientSaturated { fraction: stats.off_mean / full_scale as Real });
     }
 
-    // 2. Threshold (§5.3.2), floored so that sensor noise never becomes foreground.
-    threshold::histogram(&diff, ws.histogram)?;
-    let hist_len = threshold::histogram_len(&diff).min(ws.histogram.len());
+    // 2. Threshold (§5.3.2), floored so that sensor noise never becomes foreground: at
+    //    least `threshold_snr` noise σ's and `min_threshold` grey levels.
     let auto = config.threshold.threshold(&ws.histogram[..hist_len])?;
     let relative = (config.relative_threshold * stats.max_difference as Real) as u32;
-    let t = auto.max(config.min_threshold).max(relative);
+    let noise_floor = (config.threshold_snr * noise).ceil();
+    let noise_floor = if noise_floor.is_finite() && noise_floor > 0.0 { noise_floor as u32 } else { 0 };
+    let t = auto.max(config.min_threshold).max(relative).max(noise_floor);
 
     // 3. Segmentation with the 2×2 mask (§5.4) and feature extraction (§5.5).
     let mut labels = FrameMut::new(&mut ws.labels[..pixels], width, height, width)?;

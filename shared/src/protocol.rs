@@ -425,7 +425,13 @@ impl From<&Calibration> for WireCalibration {
             width: cam.width,
             height: cam.height,
             intrinsics: [cam.fx as f64, cam.fy as f64, cam.cx as f64, cam.cy as f64],
-            distortion: [d.k1 as f64, d.k2 as f64, d.k3 as f64, d.p1 as f64, d.p2 as f64],
+            distortion: [
+                d.k1 as f64,
+                d.k2 as f64,
+                d.k3 as f64,
+                d.p1 as f64,
+                d.p2 as f64,
+            ],
             planes,
         }
     }
@@ -964,7 +970,9 @@ mod tests {
             response: Response::Reading(reading(77)),
         };
         let mut scratch = [0u8; MAX_RAW_LEN];
-        let raw_len = encode_raw(&msg, PROTOCOL_VERSION, &mut scratch).unwrap().len();
+        let raw_len = encode_raw(&msg, PROTOCOL_VERSION, &mut scratch)
+            .unwrap()
+            .len();
         for bit in 0..raw_len * 8 {
             let mut raw = scratch;
             raw[bit / 8] ^= 1 << (bit % 8);
@@ -979,8 +987,15 @@ mod tests {
     #[test]
     fn another_version_is_named_not_called_noise() {
         let mut scratch = [0u8; MAX_RAW_LEN];
-        let raw = encode_raw(&ToDevice { tag: 1, request: Request::Measure }, 2, &mut scratch)
-            .unwrap();
+        let raw = encode_raw(
+            &ToDevice {
+                tag: 1,
+                request: Request::Measure,
+            },
+            2,
+            &mut scratch,
+        )
+        .unwrap();
         let mut out = [0u8; MAX_FRAME_LEN];
         let n = cobs_frame(raw, &mut out).unwrap();
         let r: Result<ToDevice, _> = decode(&mut out[..n]);
@@ -1045,7 +1060,11 @@ mod tests {
                     }
                 }
             }
-            assert_eq!(&got[..], &[1, 2, 3, 4, 5, 6, 7, 8, 9, 10][..], "piece {piece}");
+            assert_eq!(
+                &got[..],
+                &[1, 2, 3, 4, 5, 6, 7, 8, 9, 10][..],
+                "piece {piece}"
+            );
             assert_eq!(dec.stats().frames_ok, 10);
         }
     }

@@ -66,7 +66,9 @@ async fn main(_spawner: Spawner) {
         // clock ≥ 2.5 × 26.66 MHz PIXCLK), HSI48 trimmed from USB SOF for the OTG FS.
         config.rcc.hsi = Some(HSIPrescaler::DIV1);
         config.rcc.csi = true;
-        config.rcc.hsi48 = Some(Hsi48Config { sync_from_usb: true });
+        config.rcc.hsi48 = Some(Hsi48Config {
+            sync_from_usb: true,
+        });
         config.rcc.pll1 = Some(Pll {
             source: PllSource::HSI,
             prediv: PllPreDiv::DIV4,
@@ -106,8 +108,21 @@ async fn main(_spawner: Spawner) {
     dcmi_config.vsync_level = dcmi::VSyncDataInvalidLevel::Low;
     dcmi_config.hsync_level = dcmi::HSyncDataInvalidLevel::Low;
     let dcmi = Dcmi::new_8bit(
-        p.DCMI, p.DMA1_CH0, Irqs, p.PC6, p.PC7, p.PE0, p.PE1, p.PE4, p.PD3, p.PE5, p.PE6, p.PB7,
-        p.PA4, p.PA6, dcmi_config,
+        p.DCMI,
+        p.DMA1_CH0,
+        Irqs,
+        p.PC6,
+        p.PC7,
+        p.PE0,
+        p.PE1,
+        p.PE4,
+        p.PD3,
+        p.PE5,
+        p.PE6,
+        p.PB7,
+        p.PA4,
+        p.PA6,
+        dcmi_config,
     );
     let exposure_pin = Output::new(p.PD12, Level::Low, Speed::High);
     let camera = Mt9v034::new(i2c, dcmi, exposure_pin);

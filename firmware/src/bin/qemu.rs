@@ -22,7 +22,8 @@ const MAX_FRAME: usize = 752 * 480;
 
 static mut OFF: [u8; MAX_FRAME] = [0; MAX_FRAME];
 static mut ON: [u8; MAX_FRAME] = [0; MAX_FRAME];
-static mut RX: [u8; tangent_core::protocol::MAX_FRAME_LEN] = [0; tangent_core::protocol::MAX_FRAME_LEN];
+static mut RX: [u8; tangent_core::protocol::MAX_FRAME_LEN] =
+    [0; tangent_core::protocol::MAX_FRAME_LEN];
 static mut CMDLINE: [u8; 4096] = [0; 4096];
 /// Pipeline working memory for a full frame and two planes.
 const POINTS: usize = measure::points_for(752, 2);
@@ -74,7 +75,10 @@ fn main() -> ! {
             "--bench" => bench = true,
             f => {
                 if files.push(f).is_err() {
-                    qemu::log(format_args!("too many frame files (max {})", 2 * qemu::MAX_SCENES));
+                    qemu::log(format_args!(
+                        "too many frame files (max {})",
+                        2 * qemu::MAX_SCENES
+                    ));
                     qemu::exit(false)
                 }
             }
@@ -99,7 +103,9 @@ fn main() -> ! {
     };
     let n_scenes = camera.scene_count();
     // The workspace covers the camera's frame size (at most MAX_FRAME pixels).
-    let pixels = tangent_firmware::hal::Camera::geometry(&camera).frame_len().min(MAX_FRAME);
+    let pixels = tangent_firmware::hal::Camera::geometry(&camera)
+        .frame_len()
+        .min(MAX_FRAME);
     let calibration = match calib_path {
         Some(p) => match qemu::load_calibration(p) {
             Some(c) => Some(c),
@@ -122,7 +128,12 @@ fn main() -> ! {
         store: RamStore::new(calibration),
         watchdog: qemu::NoWatchdog,
     };
-    let measurer = PipelineMeasurer::new(measure::workspace(&mut diff[..pixels], &mut labels[..pixels], objects, small));
+    let measurer = PipelineMeasurer::new(measure::workspace(
+        &mut diff[..pixels],
+        &mut labels[..pixels],
+        objects,
+        small,
+    ));
     let mut app = App::new(dev, measurer, Buffers { off, on, rx });
 
     if bench {

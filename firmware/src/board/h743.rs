@@ -18,9 +18,9 @@ use embassy_stm32::gpio::Output;
 use embassy_stm32::i2c::{I2c, Master};
 use embassy_stm32::mode::Blocking as BlockingMode;
 use embassy_stm32::peripherals::DCMI;
+use embassy_stm32::peripherals::USB_OTG_FS;
 use embassy_stm32::usb::Driver;
 use embassy_stm32::wdg::IndependentWatchdog;
-use embassy_stm32::peripherals::USB_OTG_FS;
 use embassy_time::{Duration, Instant, Timer};
 use embassy_usb::class::cdc_acm::CdcAcmClass;
 use embassy_usb::driver::EndpointError;
@@ -214,7 +214,9 @@ impl hal::CalibrationStore for FlashStore {
         self.flash
             .blocking_erase(CALIB_OFFSET, CALIB_OFFSET + CALIB_SECTOR)
             .map_err(|_| 3u32)?;
-        self.flash.blocking_write(CALIB_OFFSET, data).map_err(|_| 4u32)?;
+        self.flash
+            .blocking_write(CALIB_OFFSET, data)
+            .map_err(|_| 4u32)?;
         // Read back: a record that does not verify is not stored.
         match self.load() {
             Some(ref c) if c == calibration => Ok(()),
@@ -365,8 +367,10 @@ impl hal::Camera for Mt9v034 {
             self.write(reg::TOTAL_SHUTTER_WIDTH, rows)?;
             self.shutter_rows = rows;
         }
-        let words: &mut [u32] = bytemuck::try_cast_slice_mut(buf.get_mut(..FRAME_BYTES).ok_or(CameraError::BufferSize)?)
-            .map_err(|_| CameraError::BufferSize)?;
+        let words: &mut [u32] = bytemuck::try_cast_slice_mut(
+            buf.get_mut(..FRAME_BYTES).ok_or(CameraError::BufferSize)?,
+        )
+        .map_err(|_| CameraError::BufferSize)?;
         let pin = &mut self.exposure_pin;
         let expose = async {
             // Snapshot: the rising edge of EXPOSURE starts integration, which lasts the

@@ -30,21 +30,42 @@ pub struct Args {
 }
 
 const TRUTH_COLOURS: [[u8; 3]; 4] = [[0, 230, 0], [0, 220, 255], [255, 255, 0], [255, 160, 0]];
-const EXTRACTED_COLOURS: [[u8; 3]; 4] = [[255, 40, 40], [255, 0, 255], [255, 255, 255], [160, 80, 255]];
+const EXTRACTED_COLOURS: [[u8; 3]; 4] = [
+    [255, 40, 40],
+    [255, 0, 255],
+    [255, 255, 255],
+    [160, 80, 255],
+];
 
 /// Extracted curve points per plane: `(plane, column, row)`, or the pipeline's error text.
 fn extract(capture: &Capture, on: &Pgm) -> Result<Vec<(usize, f64, f64)>, String> {
-    fn run<P: Pixel>(off: &[P], on: &[P], bits: u8, c: &Capture) -> Result<Vec<(usize, f64, f64)>, String> {
+    fn run<P: Pixel>(
+        off: &[P],
+        on: &[P],
+        bits: u8,
+        c: &Capture,
+    ) -> Result<Vec<(usize, f64, f64)>, String> {
         let (w, h) = (c.meta.width as usize, c.meta.height as usize);
-        let off = Frame::new(off, w, h, w).and_then(|f| f.with_bit_depth(bits)).map_err(|e| e.to_string())?;
-        let on = Frame::new(on, w, h, w).and_then(|f| f.with_bit_depth(bits)).map_err(|e| e.to_string())?;
+        let off = Frame::new(off, w, h, w)
+            .and_then(|f| f.with_bit_depth(bits))
+            .map_err(|e| e.to_string())?;
+        let on = Frame::new(on, w, h, w)
+            .and_then(|f| f.with_bit_depth(bits))
+            .map_err(|e| e.to_string())?;
         let sizes = WorkspaceSizes::new(w, h, bits, c.calibration.planes.len());
         let mut diff = vec![P::default(); sizes.pixels];
         let mut labels = vec![0u16; sizes.pixels];
         let mut histogram = vec![0u32; sizes.histogram];
         let mut label_table = vec![0u16; sizes.label_table];
-        let mut objects = vec![tangent_core::image::segment::ObjectFeatures::empty(0); sizes.objects];
-        let blank = CurvePoint { column: 0, row: 0.0, amplitude: 0.0, curve: 0, saturated: false };
+        let mut objects =
+            vec![tangent_core::image::segment::ObjectFeatures::empty(0); sizes.objects];
+        let blank = CurvePoint {
+            column: 0,
+            row: 0.0,
+            amplitude: 0.0,
+            curve: 0,
+            saturated: false,
+        };
         let mut curve = vec![blank; sizes.points];
         let mut points = vec![tangent_core::real::Vec3::zeros(); sizes.points];
         let mut scratch_points = vec![tangent_core::real::Vec2::zeros(); sizes.points];
@@ -60,13 +81,19 @@ fn extract(capture: &Capture, on: &Pgm) -> Result<Vec<(usize, f64, f64)>, String
             scratch_points: &mut scratch_points,
             scratch_values: &mut scratch_values,
         };
-        let profile = pipeline::extract_profile(&off, &on, &c.calibration, &PipelineConfig::default(), &mut ws)
-            .map_err(|e| e.to_string())?;
+        let profile = pipeline::extract_profile(
+            &off,
+            &on,
+            &c.calibration,
+            &PipelineConfig::default(),
+            &mut ws,
+        )
+        .map_err(|e| e.to_string())?;
         let mut out = Vec::new();
         for plane in 0..profile.planes {
             let (s, e) = profile.plane_points[plane];
             for p in ws.curve.get(s..e).unwrap_or(&[]) {
-                out.push((plane, p.column as f64, p.row as f64));
+                out.push((plane, f64::from(p.column), p.row));
             }
         }
         Ok(out)
@@ -96,7 +123,8 @@ fn put(img: &mut RgbImage, x: i64, y: i64, c: [u8; 3]) {
 
 /// Runs `tangent inspect`.
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
-    let c = Capture::read(&args.capture).with_context(|| format!("reading {}", args.capture.display()))?;
+    let c = Capture::read(&args.capture)
+        .with_context(|| format!("reading {}", args.capture.display()))?;
     let (w, h) = (c.meta.width, c.meta.height);
     let off = c.off_frame();
     let (lit, on) = c.on_frames().next().context("no laser-on frame")?;
@@ -129,19 +157,35 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         .collect();
     let extracted = extract(&c, on);
     for &(plane, u, v) in &truth {
-        put(&mut img, u as i64, (2 * h) as i64 + v.round() as i64, TRUTH_COLOURS[plane % 4]);
+        put(
+            &mut img,
+            u as i64,
+            (2 * h) as i64 + v.round() as i64,
+            TRUTH_COLOURS[plane % 4],
+        );
     }
     if let Ok(points) = &extracted {
         for &(plane, u, v) in points {
-            put(&mut img, u as i64, (2 * h) as i64 + v.round() as i64 + 2, EXTRACTED_COLOURS[plane % 4]);
+            put(
+                &mut img,
+                u as i64,
+                (2 * h) as i64 + v.round() as i64 + 2,
+                EXTRACTED_COLOURS[plane % 4],
+            );
         }
     }
 
     // ×4 zoom around the middle truth point (or the image centre).
     let zoom = 4.0;
     let (cw, ch) = (w as f64 / zoom, h as f64 / zoom);
-    let first: Vec<_> = truth.iter().filter(|t| Some(t.0) == truth.first().map(|f| f.0)).collect();
-    let centre = first.get(first.len() / 2).map(|&&(_, u, v)| (u, v)).unwrap_or((w as f64 / 2.0, h as f64 / 2.0));
+    let first: Vec<_> = truth
+        .iter()
+        .filter(|t| Some(t.0) == truth.first().map(|f| f.0))
+        .collect();
+    let centre = first
+        .get(first.len() / 2)
+        .map(|&&(_, u, v)| (u, v))
+        .unwrap_or((w as f64 / 2.0, h as f64 / 2.0));
     let x0 = (centre.0 - cw / 2.0).clamp(-0.5, w as f64 - 0.5 - cw);
     let y0 = (centre.1 - ch / 2.0).clamp(-0.5, h as f64 - 0.5 - ch);
     for py in 0..h {
@@ -149,7 +193,10 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             // Panel pixel (px, py) shows image point (x0 + (px + 0.5)/zoom, …), nearest pixel.
             let u = x0 + (px as f64 + 0.5) / zoom;
             let v = y0 + (py as f64 + 0.5) / zoom;
-            let (i, j) = (u.round().clamp(0.0, w as f64 - 1.0) as usize, v.round().clamp(0.0, h as f64 - 1.0) as usize);
+            let (i, j) = (
+                u.round().clamp(0.0, w as f64 - 1.0) as usize,
+                v.round().clamp(0.0, h as f64 - 1.0) as usize,
+            );
             let d = diff[j * w as usize + i];
             let g = (d.max(0.0) / top * 255.0).clamp(0.0, 255.0) as u8;
             img.put_pixel(px, 3 * h + py, Rgb([g, g, g]));
@@ -159,7 +206,12 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     for &(plane, u, v) in &truth {
         let (px, py) = to_panel(u, v);
         for dx in -1..=1 {
-            put(&mut img, px.round() as i64 + dx, (3 * h) as i64 + py.round() as i64, TRUTH_COLOURS[plane % 4]);
+            put(
+                &mut img,
+                px.round() as i64 + dx,
+                (3 * h) as i64 + py.round() as i64,
+                TRUTH_COLOURS[plane % 4],
+            );
         }
     }
     if let Ok(points) = &extracted {
@@ -170,7 +222,10 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
                     if dx == 0 && dy == 0 {
                         continue;
                     }
-                    let (x, y) = (px.round() as i64 + dx, (3 * h) as i64 + py.round() as i64 + dy);
+                    let (x, y) = (
+                        px.round() as i64 + dx,
+                        (3 * h) as i64 + py.round() as i64 + dy,
+                    );
                     put(&mut img, x, y, EXTRACTED_COLOURS[plane % 4]);
                 }
             }
@@ -178,13 +233,23 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     }
 
     let out = args.out.unwrap_or_else(|| {
-        let name = args.capture.file_name().map_or("capture".into(), |n| n.to_string_lossy().into_owned());
+        let name = args
+            .capture
+            .file_name()
+            .map_or("capture".into(), |n| n.to_string_lossy().into_owned());
         PathBuf::from(format!("{name}.png"))
     });
-    img.save(&out).with_context(|| format!("writing {}", out.display()))?;
+    img.save(&out)
+        .with_context(|| format!("writing {}", out.display()))?;
     println!("{}: {}", out.display(), c.meta.description);
-    println!("panels: off | on | on − off (×{:.1}) with curves | ×4 zoom", 255.0 / top);
-    println!("true curve: {} points (green = plane 0, cyan = plane 1)", truth.len());
+    println!(
+        "panels: off | on | on − off (×{:.1}) with curves | ×4 zoom",
+        255.0 / top
+    );
+    println!(
+        "true curve: {} points (green = plane 0, cyan = plane 1)",
+        truth.len()
+    );
     match &extracted {
         Ok(p) => println!("extracted curve (tangent_core::pipeline): {} points (red = plane 0, magenta = plane 1; drawn 2 px low in panel 3)", p.len()),
         Err(e) => println!("extracted curve: none ({e})"),

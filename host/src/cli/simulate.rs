@@ -102,7 +102,9 @@ enum Light {
 fn write(spec: &SimSpec, out: &std::path::Path) -> anyhow::Result<()> {
     let start = std::time::Instant::now();
     let (capture, report) = simulate(spec)?;
-    capture.write(out).with_context(|| format!("writing {}", out.display()))?;
+    capture
+        .write(out)
+        .with_context(|| format!("writing {}", out.display()))?;
     println!(
         "{}: exposure {:.3} ms, {} truth points, {:.2} s",
         out.display(),
@@ -137,16 +139,32 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             }
             println!("{} captures written to {}", entries.len(), out.display());
         }
-        What::Stem { diameter_mm, distance_m, tilt_deg, azimuth_deg, two_planes, light, seed, out } => {
-            let calibration =
-                if two_planes { corpus::two_plane_calibration() } else { corpus::one_plane_calibration() };
+        What::Stem {
+            diameter_mm,
+            distance_m,
+            tilt_deg,
+            azimuth_deg,
+            two_planes,
+            light,
+            seed,
+            out,
+        } => {
+            let calibration = if two_planes {
+                corpus::two_plane_calibration()
+            } else {
+                corpus::one_plane_calibration()
+            };
             let lighting = match light {
                 Light::Dusk => dark(),
                 Light::Shade => Lighting::shade(),
                 Light::Sunfleck => sun(0.3),
                 Light::Sun => sun(1.0),
             };
-            let mut params = SimParams { seed, lighting, ..SimParams::default() };
+            let mut params = SimParams {
+                seed,
+                lighting,
+                ..SimParams::default()
+            };
             params.lit_planes = (0..calibration.planes.len()).collect();
             let spec = SimSpec {
                 mode: Mode::Cylinder,
@@ -163,14 +181,23 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             };
             write(&spec, &out)?;
         }
-        What::Random { count, seed, tilt_max_deg, out } => {
+        What::Random {
+            count,
+            seed,
+            tilt_max_deg,
+            out,
+        } => {
             (0..count).into_par_iter().try_for_each(|k| {
                 let s = seed + k;
-                write(&corpus::random_stem(s, tilt_max_deg), &out.join(format!("random-{s}")))
+                write(
+                    &corpus::random_stem(s, tilt_max_deg),
+                    &out.join(format!("random-{s}")),
+                )
             })?;
         }
         What::Again { capture, seed, out } => {
-            let c = Capture::read(&capture).with_context(|| format!("reading {}", capture.display()))?;
+            let c = Capture::read(&capture)
+                .with_context(|| format!("reading {}", capture.display()))?;
             let mut spec = SimSpec::from_capture(&c)?;
             spec.params.seed = seed;
             write(&spec, &out)?;

@@ -1,6 +1,9 @@
 //! The line laser: a Gaussian sheet of light fanned from its source point
 //! (`docs/simulator.md`, "Laser").
 
+// `!(x > 0.0)` is deliberate: it is also true for NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use serde::{Deserialize, Serialize};
 use tangent_core::laser_plane::LaserPlane;
 use tangent_core::real::Vec3;

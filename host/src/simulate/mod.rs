@@ -21,8 +21,8 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use tangent_core::calibration::{Calibration, MAX_PLANES};
 
-use crate::capture::{Capture, CaptureMeta, FrameEntry, Mode, Truth, FORMAT_VERSION};
 use crate::calibration_file::CalibrationToml;
+use crate::capture::{Capture, CaptureMeta, FrameEntry, Mode, Truth, FORMAT_VERSION};
 use crate::pgm::Pgm;
 use laser::LaserParams;
 use render::{HandMotion, Lighting, RenderSetup};
@@ -95,7 +95,10 @@ impl Default for SimParams {
             laser: LaserParams::default(),
             optics: OpticsParams::default(),
             sensor: SensorParams::default(),
-            exposure: Exposure::Auto { peak_fraction: 0.7, max_s: 0.03 },
+            exposure: Exposure::Auto {
+                peak_fraction: 0.7,
+                max_s: 0.03,
+            },
             gain: 1.0,
             speckle: true,
             surface_roughness_m: 1e-3,
@@ -149,7 +152,9 @@ pub struct SimReport {
 }
 
 fn rng_for(seed: u64, stream: u64, row: u64) -> Pcg64 {
-    Pcg64::seed_from_u64(splitmix(seed ^ splitmix(stream.wrapping_mul(0x1_0000_0001) ^ (row << 20))))
+    Pcg64::seed_from_u64(splitmix(
+        seed ^ splitmix(stream.wrapping_mul(0x1_0000_0001) ^ (row << 20)),
+    ))
 }
 
 impl SimSpec {
@@ -167,7 +172,11 @@ impl SimSpec {
             description: meta.description.clone(),
             timestamp: meta.timestamp.to_string(),
             calibration: capture.calibration.clone(),
-            objects: meta.truth.as_ref().map(|t| t.objects.clone()).unwrap_or_default(),
+            objects: meta
+                .truth
+                .as_ref()
+                .map(|t| t.objects.clone())
+                .unwrap_or_default(),
             params,
         })
     }
@@ -180,10 +189,19 @@ pub fn simulate(spec: &SimSpec) -> Result<(Capture, SimReport), SimError> {
     cal.validate().map_err(|e| SimError::Param(e.to_string()))?;
     let nplanes = cal.planes.len();
     if p.lit_planes.is_empty() || p.lit_planes.iter().any(|&i| i >= nplanes) {
-        return Err(SimError::Param(format!("lit_planes {:?} must name planes 0..{nplanes}", p.lit_planes)));
+        return Err(SimError::Param(format!(
+            "lit_planes {:?} must name planes 0..{nplanes}",
+            p.lit_planes
+        )));
     }
-    if !(1..=16).contains(&p.sensor.bit_depth) || !(p.gain > 0.0) || p.supersampling == 0 {
-        return Err(SimError::Param("bit_depth 1..=16, gain > 0 and supersampling ≥ 1 required".into()));
+    if !(1..=16).contains(&p.sensor.bit_depth)
+        || p.gain.is_nan()
+        || p.gain <= 0.0
+        || p.supersampling == 0
+    {
+        return Err(SimError::Param(
+            "bit_depth 1..=16, gain > 0 and supersampling ≥ 1 required".into(),
+        ));
     }
     let scene = Scene::new(&spec.objects, p.seed)?;
     let setup = RenderSetup {
@@ -214,7 +232,10 @@ pub fn simulate(spec: &SimSpec) -> Result<(Capture, SimReport), SimError> {
     let exposure_s = match p.exposure {
         Exposure::Fixed { seconds } if seconds > 0.0 => seconds,
         Exposure::Fixed { .. } => return Err(SimError::Param("exposure must be positive".into())),
-        Exposure::Auto { peak_fraction, max_s } => {
+        Exposure::Auto {
+            peak_fraction,
+            max_s,
+        } => {
             let peak = (0..w * h)
                 .map(|j| on.ambient[j] + p.lit_planes.iter().map(|&i| on.lasers[i][j]).sum::<f64>())
                 .fold(0.0, f64::max)
@@ -239,7 +260,11 @@ pub fn simulate(spec: &SimSpec) -> Result<(Capture, SimReport), SimError> {
         p.surface_roughness_m,
     );
     let contrast = c_lambda / cells_pixel.sqrt();
-    let cells = if contrast > 0.0 { 1.0 / (contrast * contrast) } else { f64::INFINITY };
+    let cells = if contrast > 0.0 {
+        1.0 / (contrast * contrast)
+    } else {
+        f64::INFINITY
+    };
     // Speckle: one factor per pixel and laser (independent lasers, independent patterns).
     let speckle: Vec<Vec<f64>> = (0..nplanes)
         .map(|i| {
@@ -250,7 +275,9 @@ pub fn simulate(spec: &SimSpec) -> Result<(Capture, SimReport), SimError> {
                 .into_par_iter()
                 .flat_map_iter(|row| {
                     let mut rng = rng_for(p.seed, 100 + i as u64, row as u64);
-                    (0..w).map(move |_| sensor::speckle_factor(cells, &mut rng)).collect::<Vec<_>>()
+                    (0..w)
+                        .map(move |_| sensor::speckle_factor(cells, &mut rng))
+                        .collect::<Vec<_>>()
                 })
                 .collect()
         })
@@ -271,10 +298,17 @@ pub fn simulate(spec: &SimSpec) -> Result<(Capture, SimReport), SimError> {
                     let j = row * w + col;
                     let mut rate = ambient[j];
                     for &i in planes {
-                        let s = speckle.get(i).and_then(|v| v.get(j)).copied().unwrap_or(1.0);
+                        let s = speckle
+                            .get(i)
+                            .and_then(|v| v.get(j))
+                            .copied()
+                            .unwrap_or(1.0);
                         rate += on.lasers[i][j] * s;
                     }
-                    out.push(p.sensor.expose_pixel(rate * k * exposure_s, p.gain, &mut rng));
+                    out.push(
+                        p.sensor
+                            .expose_pixel(rate * k * exposure_s, p.gain, &mut rng),
+                    );
                 }
                 out
             })
@@ -283,7 +317,12 @@ pub fn simulate(spec: &SimSpec) -> Result<(Capture, SimReport), SimError> {
     let to_pgm = |data: Vec<u16>| -> Result<Pgm, SimError> {
         let maxval = p.sensor.max_dn();
         let r = if maxval <= 255 {
-            Pgm::from_u8(w, h, maxval as u8, data.into_iter().map(|v| v as u8).collect())
+            Pgm::from_u8(
+                w,
+                h,
+                maxval as u8,
+                data.into_iter().map(|v| v as u8).collect(),
+            )
         } else {
             Pgm::from_u16(w, h, maxval, data)
         };
@@ -291,15 +330,27 @@ pub fn simulate(spec: &SimSpec) -> Result<(Capture, SimReport), SimError> {
     };
 
     let mut frames = vec![to_pgm(expose(0, &[], &off_ambient))?];
-    let mut entries = vec![FrameEntry { file: "off.pgm".into(), lasers_on: vec![] }];
+    let mut entries = vec![FrameEntry {
+        file: "off.pgm".into(),
+        lasers_on: vec![],
+    }];
     for (n, set) in frame_sets.iter().enumerate() {
         frames.push(to_pgm(expose(1 + n as u64, set, &on.ambient))?);
         let file = if frame_sets.len() == 1 {
             "on.pgm".to_string()
         } else {
-            format!("on-{}.pgm", set.iter().map(|i| i.to_string()).collect::<Vec<_>>().join("-"))
+            format!(
+                "on-{}.pgm",
+                set.iter()
+                    .map(|i| i.to_string())
+                    .collect::<Vec<_>>()
+                    .join("-")
+            )
         };
-        entries.push(FrameEntry { file, lasers_on: set.clone() });
+        entries.push(FrameEntry {
+            file,
+            lasers_on: set.clone(),
+        });
     }
 
     let truth_curve = render::truth_curve(&setup, &p.lit_planes);
@@ -323,9 +374,24 @@ pub fn simulate(spec: &SimSpec) -> Result<(Capture, SimReport), SimError> {
         description: spec.description.clone(),
         frames: entries,
         calibration,
-        truth: Some(Truth { truth_curve: Some("truth-curve.csv".into()), objects: spec.objects.clone() }),
+        truth: Some(Truth {
+            truth_curve: Some("truth-curve.csv".into()),
+            objects: spec.objects.clone(),
+        }),
         simulation: Some(simulation),
     };
-    let capture = Capture { meta, calibration: cal.clone(), frames, truth_curve: Some(truth_curve) };
-    Ok((capture, SimReport { exposure_s, electrons_per_w_m2_s: k, speckle_cells: cells }))
+    let capture = Capture {
+        meta,
+        calibration: cal.clone(),
+        frames,
+        truth_curve: Some(truth_curve),
+    };
+    Ok((
+        capture,
+        SimReport {
+            exposure_s,
+            electrons_per_w_m2_s: k,
+            speckle_cells: cells,
+        },
+    ))
 }

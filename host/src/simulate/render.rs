@@ -37,7 +37,12 @@ pub struct Lighting {
 impl Lighting {
     /// Dim forest shade: 0.3 W/m² diffuse in band (≈ 2 % of full sun), no direct sun.
     pub fn shade() -> Self {
-        Lighting { diffuse_w_m2: 0.3, sun_w_m2: 0.0, sun_direction: [0.3, -1.0, -0.3], background_w_m2: 0.06 }
+        Lighting {
+            diffuse_w_m2: 0.3,
+            sun_w_m2: 0.0,
+            sun_direction: [0.3, -1.0, -0.3],
+            background_w_m2: 0.06,
+        }
     }
 }
 
@@ -57,8 +62,16 @@ impl HandMotion {
     /// Origin and direction, in the scene (laser-on) frame, of the ray whose direction in
     /// the displaced camera frame is `d`: `X = Rᵀ(s·d − t)`.
     fn transform_ray(&self, d: Vec3) -> (Vec3, Vec3) {
-        let rv = Vec3::new(self.rotation_rad[0], self.rotation_rad[1], self.rotation_rad[2]);
-        let t = Vec3::new(self.translation_m[0], self.translation_m[1], self.translation_m[2]);
+        let rv = Vec3::new(
+            self.rotation_rad[0],
+            self.rotation_rad[1],
+            self.rotation_rad[2],
+        );
+        let t = Vec3::new(
+            self.translation_m[0],
+            self.translation_m[1],
+            self.translation_m[2],
+        );
         // Rᵀ = rotation by −θ about the same axis (Rodrigues' formula).
         let theta = rv.norm();
         let rot_t = |v: Vec3| {
@@ -124,8 +137,14 @@ impl RenderSetup<'_> {
     }
 
     fn corner(&self, u: f64, v: f64, motion: Option<&HandMotion>, lasers: bool) -> Corner {
-        let mut c = Corner { object: -2, s: [f64::INFINITY; MAX_PLANES], w: [0.0; MAX_PLANES] };
-        let Some(d) = ray(&self.calibration.camera, u, v) else { return c };
+        let mut c = Corner {
+            object: -2,
+            s: [f64::INFINITY; MAX_PLANES],
+            w: [0.0; MAX_PLANES],
+        };
+        let Some(d) = ray(&self.calibration.camera, u, v) else {
+            return c;
+        };
         let (o, dir) = self.origin_dir(d, motion);
         match self.scene.intersect(o, dir, f64::INFINITY) {
             None => c.object = -1,
@@ -142,10 +161,25 @@ impl RenderSetup<'_> {
         c
     }
 
-    fn sample(&self, u: f64, v: f64, motion: Option<&HandMotion>, lit: &[bool; MAX_PLANES]) -> Sample {
-        let mut out = Sample { ambient: 0.0, laser: [0.0; MAX_PLANES] };
-        let Some(d) = ray(&self.calibration.camera, u, v) else { return out };
-        let vig = if self.vignetting { 1.0 / d.norm_squared().powi(2) } else { 1.0 };
+    fn sample(
+        &self,
+        u: f64,
+        v: f64,
+        motion: Option<&HandMotion>,
+        lit: &[bool; MAX_PLANES],
+    ) -> Sample {
+        let mut out = Sample {
+            ambient: 0.0,
+            laser: [0.0; MAX_PLANES],
+        };
+        let Some(d) = ray(&self.calibration.camera, u, v) else {
+            return out;
+        };
+        let vig = if self.vignetting {
+            1.0 / d.norm_squared().powi(2)
+        } else {
+            1.0
+        };
         let (o, dir) = self.origin_dir(d, motion);
         let l = self.lighting;
         let Some(h) = self.scene.intersect(o, dir, f64::INFINITY) else {
@@ -205,18 +239,27 @@ impl RenderSetup<'_> {
             .map(|j| {
                 (0..w)
                     .map(|i| {
-                        let cs = [corners[j][i], corners[j][i + 1], corners[j + 1][i], corners[j + 1][i + 1]];
+                        let cs = [
+                            corners[j][i],
+                            corners[j][i + 1],
+                            corners[j + 1][i],
+                            corners[j + 1][i + 1],
+                        ];
                         let edge = cs.iter().any(|c| c.object != cs[0].object);
                         let stripe = (0..nplanes).any(|p| {
                             lit[p] && {
                                 let lo = cs.iter().map(|c| c.s[p]).fold(f64::INFINITY, f64::min);
-                                let hi = cs.iter().map(|c| c.s[p]).fold(f64::NEG_INFINITY, f64::max);
+                                let hi =
+                                    cs.iter().map(|c| c.s[p]).fold(f64::NEG_INFINITY, f64::max);
                                 let wmax = cs.iter().map(|c| c.w[p]).fold(0.0, f64::max);
                                 lo <= 3.0 * wmax && hi >= -3.0 * wmax
                             }
                         });
                         if (edge || stripe) && n > 1 {
-                            let mut acc = Sample { ambient: 0.0, laser: [0.0; MAX_PLANES] };
+                            let mut acc = Sample {
+                                ambient: 0.0,
+                                laser: [0.0; MAX_PLANES],
+                            };
                             for b in 0..n {
                                 for a in 0..n {
                                     let du = (a as f64 + 0.5) / n as f64 - 0.5;
@@ -276,17 +319,26 @@ pub fn truth_curve(setup: &RenderSetup<'_>, planes: &[usize]) -> Vec<TruthPoint>
         .into_par_iter()
         .map(|i| {
             let u = i as f64;
-            let vs: Vec<f64> = (0..=steps).map(|k| (-0.5 + k as f64 * TRUTH_STEP_PX).min(h as f64 - 0.5)).collect();
+            let vs: Vec<f64> = (0..=steps)
+                .map(|k| (-0.5 + k as f64 * TRUTH_STEP_PX).min(h as f64 - 0.5))
+                .collect();
             let hits: Vec<_> = vs.iter().map(|&v| hit_at(u, v)).collect();
             let mut out = Vec::new();
             for &p in planes {
-                let Some(plane) = setup.calibration.planes.get(p) else { continue };
+                let Some(plane) = setup.calibration.planes.get(p) else {
+                    continue;
+                };
                 for k in 0..steps {
-                    let (Some(ha), Some(hb)) = (hits[k], hits[k + 1]) else { continue };
+                    let (Some(ha), Some(hb)) = (hits[k], hits[k + 1]) else {
+                        continue;
+                    };
                     if ha.object != hb.object {
                         continue;
                     }
-                    let (sa, sb) = (plane.signed_distance(ha.point), plane.signed_distance(hb.point));
+                    let (sa, sb) = (
+                        plane.signed_distance(ha.point),
+                        plane.signed_distance(hb.point),
+                    );
                     // A crossing in (a, b]: strict sign change, or an exact zero at b (a zero
                     // at a belongs to the previous bracket, so no root is counted twice).
                     if !(sa * sb < 0.0 || (sb == 0.0 && sa != 0.0)) {
@@ -319,16 +371,29 @@ pub fn truth_curve(setup: &RenderSetup<'_>, planes: &[usize]) -> Vec<TruthPoint>
                     let Some(hm) = hit_at(u, v) else { continue };
                     let x = hm.point;
                     let facing = hm.normal.dot(&(plane.source - x)) > 0.0;
-                    if !facing || !setup.laser.in_fan(plane, x) || setup.scene.occluded(x, plane.source) {
+                    if !facing
+                        || !setup.laser.in_fan(plane, x)
+                        || setup.scene.occluded(x, plane.source)
+                    {
                         continue;
                     }
-                    out.push(TruthPoint { plane: p, column: i as u32, row_px: v, point_m: [x.x, x.y, x.z], object: hm.object });
+                    out.push(TruthPoint {
+                        plane: p,
+                        column: i as u32,
+                        row_px: v,
+                        point_m: [x.x, x.y, x.z],
+                        object: hm.object,
+                    });
                 }
             }
             out
         })
         .collect();
     let mut all: Vec<TruthPoint> = columns.into_iter().flatten().collect();
-    all.sort_by(|a, b| (a.plane, a.column).cmp(&(b.plane, b.column)).then(a.row_px.total_cmp(&b.row_px)));
+    all.sort_by(|a, b| {
+        (a.plane, a.column)
+            .cmp(&(b.plane, b.column))
+            .then(a.row_px.total_cmp(&b.row_px))
+    });
     all
 }

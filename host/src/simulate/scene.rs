@@ -4,6 +4,9 @@
 //! of [`Object`] is also the `[[truth.objects]]` entry of `capture.toml`
 //! (`docs/formats.md`), so the truth of a capture is exactly what was rendered.
 
+// `!(x > 0.0)` is deliberate: it is also true for NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use serde::{Deserialize, Serialize};
 use tangent_core::real::Vec3;
 
@@ -186,10 +189,32 @@ pub struct Hit {
 
 #[derive(Debug, Clone)]
 enum Shape {
-    Cylinder { c: Vec3, axis: Vec3, m: Vec3, k: Vec3, a: f64, b: f64, extent: Option<[f64; 2]> },
-    Sphere { c: Vec3, r: f64 },
-    Plane { p: Vec3, n: Vec3, u: Vec3, w: Vec3 },
-    Road { z0: f64, waves: Vec<Wave>, amp: f64, min_wavelength: f64, max_slope: f64 },
+    Cylinder {
+        c: Vec3,
+        axis: Vec3,
+        m: Vec3,
+        k: Vec3,
+        a: f64,
+        b: f64,
+        extent: Option<[f64; 2]>,
+    },
+    Sphere {
+        c: Vec3,
+        r: f64,
+    },
+    Plane {
+        p: Vec3,
+        n: Vec3,
+        u: Vec3,
+        w: Vec3,
+    },
+    Road {
+        z0: f64,
+        waves: Vec<Wave>,
+        amp: f64,
+        min_wavelength: f64,
+        max_slope: f64,
+    },
 }
 
 #[derive(Debug, Clone)]
@@ -216,7 +241,10 @@ impl Scene {
     pub fn new(objects: &[Object], seed: u64) -> Result<Self, SceneError> {
         let mut out = Vec::with_capacity(objects.len());
         for (index, o) in objects.iter().enumerate() {
-            let bad = |message: &str| SceneError::Invalid { index, message: message.to_string() };
+            let bad = |message: &str| SceneError::Invalid {
+                index,
+                message: message.to_string(),
+            };
             let (albedo, texture, contrast) = match o {
                 Object::Cylinder(c) => (c.albedo, c.texture, c.texture_contrast),
                 Object::Sphere(s) => (s.albedo, s.texture, s.texture_contrast),
@@ -232,7 +260,11 @@ impl Scene {
                     let (a, b, major) = match (c.radius_m, c.semi_axes_m) {
                         (Some(r), None) => {
                             // Any perpendicular direction will do for a circle.
-                            let helper = if axis.x.abs() < 0.9 { Vec3::x() } else { Vec3::y() };
+                            let helper = if axis.x.abs() < 0.9 {
+                                Vec3::x()
+                            } else {
+                                Vec3::y()
+                            };
                             (r, r, helper)
                         }
                         (None, Some([a, b])) => {
@@ -253,37 +285,69 @@ impl Scene {
                     }
                     let m = m / mn;
                     let k = axis.cross(&m);
-                    Shape::Cylinder { c: v3(c.axis_point_m), axis, m, k, a, b, extent: c.extent_m }
+                    Shape::Cylinder {
+                        c: v3(c.axis_point_m),
+                        axis,
+                        m,
+                        k,
+                        a,
+                        b,
+                        extent: c.extent_m,
+                    }
                 }
                 Object::Sphere(s) => {
                     if !(s.radius_m.is_finite() && s.radius_m > 0.0) {
                         return Err(bad("radius must be positive"));
                     }
-                    Shape::Sphere { c: v3(s.centre_m), r: s.radius_m }
+                    Shape::Sphere {
+                        c: v3(s.centre_m),
+                        r: s.radius_m,
+                    }
                 }
                 Object::Plane(p) => {
                     let n = unit(p.normal).ok_or_else(|| bad("zero normal"))?;
-                    let helper = if n.y.abs() < 0.9 { Vec3::y() } else { Vec3::x() };
+                    let helper = if n.y.abs() < 0.9 {
+                        Vec3::y()
+                    } else {
+                        Vec3::x()
+                    };
                     let u = helper.cross(&n).normalize();
                     let w = n.cross(&u);
-                    Shape::Plane { p: v3(p.point_m), n, u, w }
+                    Shape::Plane {
+                        p: v3(p.point_m),
+                        n,
+                        u,
+                        w,
+                    }
                 }
                 Object::Road(r) => {
                     if !(r.distance_m.is_finite() && r.distance_m > 0.0) {
                         return Err(bad("distance_m must be positive"));
                     }
-                    if r.waves.iter().any(|w| !(w.wavelength_m > 0.0 && w.amplitude_m.is_finite())) {
+                    if r.waves
+                        .iter()
+                        .any(|w| !(w.wavelength_m > 0.0 && w.amplitude_m.is_finite()))
+                    {
                         return Err(bad("wave wavelengths must be positive"));
                     }
                     let amp = r.waves.iter().map(|w| w.amplitude_m.abs()).sum();
-                    let min_wavelength =
-                        r.waves.iter().map(|w| w.wavelength_m).fold(f64::INFINITY, f64::min);
+                    let min_wavelength = r
+                        .waves
+                        .iter()
+                        .map(|w| w.wavelength_m)
+                        .fold(f64::INFINITY, f64::min);
                     let max_slope = r
                         .waves
                         .iter()
                         .map(|w| 2.0 * std::f64::consts::PI * w.amplitude_m.abs() / w.wavelength_m)
                         .sum();
-                    Shape::Road { z0: r.distance_m, waves: r.waves.clone(), amp, min_wavelength, max_slope }
+                    Shape::Road {
+                        z0: r.distance_m,
+                        waves: r.waves.clone(),
+                        amp,
+                        min_wavelength,
+                        max_slope,
+                    }
                 }
             };
             out.push(Prepared {
@@ -303,8 +367,17 @@ impl Scene {
         for (i, o) in self.objects.iter().enumerate() {
             let limit = best.map_or(t_max, |h| h.t);
             if let Some((t, normal)) = o.shape.intersect(origin, dir, limit) {
-                let n = if normal.dot(&dir) > 0.0 { -normal } else { normal };
-                best = Some(Hit { t, point: origin + dir * t, normal: n, object: i });
+                let n = if normal.dot(&dir) > 0.0 {
+                    -normal
+                } else {
+                    normal
+                };
+                best = Some(Hit {
+                    t,
+                    point: origin + dir * t,
+                    normal: n,
+                    object: i,
+                });
             }
         }
         best
@@ -314,14 +387,18 @@ impl Scene {
     pub fn occluded(&self, from: Vec3, to: Vec3) -> bool {
         let d = to - from;
         // t runs over (T_MIN, 1 − 1e-6): the far end (a light source) is not an occluder.
-        self.objects
-            .iter()
-            .any(|o| o.shape.intersect(from, d, 1.0 - 1e-6).is_some_and(|(t, _)| t * d.norm() > T_MIN))
+        self.objects.iter().any(|o| {
+            o.shape
+                .intersect(from, d, 1.0 - 1e-6)
+                .is_some_and(|(t, _)| t * d.norm() > T_MIN)
+        })
     }
 
     /// Albedo of object `object` at `point`, texture included.
     pub fn albedo(&self, object: usize, point: Vec3) -> f64 {
-        let Some(o) = self.objects.get(object) else { return 0.0 };
+        let Some(o) = self.objects.get(object) else {
+            return 0.0;
+        };
         if o.texture == Texture::None || o.contrast == 0.0 {
             return o.albedo;
         }
@@ -345,7 +422,15 @@ impl Shape {
     fn intersect(&self, o: Vec3, d: Vec3, t_max: f64) -> Option<(f64, Vec3)> {
         let accept = |t: f64| t.is_finite() && t > T_MIN / d.norm().max(1e-300) && t < t_max;
         match self {
-            Shape::Cylinder { c, axis, m, k, a, b, extent } => {
+            Shape::Cylinder {
+                c,
+                axis,
+                m,
+                k,
+                a,
+                b,
+                extent,
+            } => {
                 let rel = o - c;
                 let (ox, oy, os) = (rel.dot(m) / a, rel.dot(k) / b, rel.dot(axis));
                 let (dx, dy, ds) = (d.dot(m) / a, d.dot(k) / b, d.dot(axis));
@@ -396,7 +481,10 @@ impl Shape {
                 if t0 > t1 {
                     std::mem::swap(&mut t0, &mut t1);
                 }
-                [t0, t1].into_iter().find(|&t| accept(t)).map(|t| (t, (o + d * t - c) / *r))
+                [t0, t1]
+                    .into_iter()
+                    .find(|&t| accept(t))
+                    .map(|t| (t, (o + d * t - c) / *r))
             }
             Shape::Plane { p, n, .. } => {
                 let den = n.dot(&d);
@@ -406,7 +494,13 @@ impl Shape {
                 let t = n.dot(&(p - o)) / den;
                 accept(t).then_some((t, *n))
             }
-            Shape::Road { z0, waves, amp, min_wavelength, max_slope } => {
+            Shape::Road {
+                z0,
+                waves,
+                amp,
+                min_wavelength,
+                max_slope,
+            } => {
                 // g(t) = z(t) − surface(x(t), y(t)); the surface lies within z0 ± amp, so the
                 // first root is in the t-range where z crosses that slab. March to the first
                 // sign change, then refine by regula falsi.
@@ -428,8 +522,12 @@ impl Shape {
                 // no root lies within |g|/L of t (conservative advancement).
                 let dxy = (d.x * d.x + d.y * d.y).sqrt();
                 let lipschitz = d.z + dxy * max_slope;
-                let dt_min = if dxy > 0.0 { min_wavelength / 16.0 / dxy } else { f64::INFINITY }
-                    .min((t_hi - t_lo) / 16.0);
+                let dt_min = if dxy > 0.0 {
+                    min_wavelength / 16.0 / dxy
+                } else {
+                    f64::INFINITY
+                }
+                .min((t_hi - t_lo) / 16.0);
                 let (mut ta, mut ga) = (t_lo, g(t_lo));
                 if ga >= 0.0 {
                     return None; // ray starts behind the surface
@@ -481,7 +579,15 @@ impl Shape {
 
     fn surface_coords(&self, p: Vec3) -> (f64, f64) {
         match self {
-            Shape::Cylinder { c, axis, m, k, a, b, .. } => {
+            Shape::Cylinder {
+                c,
+                axis,
+                m,
+                k,
+                a,
+                b,
+                ..
+            } => {
                 let rel = p - c;
                 let ang = (rel.dot(k) / b).atan2(rel.dot(m) / a);
                 (rel.dot(axis), ang * 0.5 * (a + b))
@@ -506,7 +612,8 @@ pub fn road_height(waves: &[Wave], x: f64, y: f64) -> f64 {
         .map(|w| {
             let (s, c) = w.direction_rad.sin_cos();
             w.amplitude_m
-                * (2.0 * std::f64::consts::PI * (x * c + y * s) / w.wavelength_m + w.phase_rad).sin()
+                * (2.0 * std::f64::consts::PI * (x * c + y * s) / w.wavelength_m + w.phase_rad)
+                    .sin()
         })
         .sum()
 }
@@ -530,7 +637,9 @@ pub fn splitmix(mut z: u64) -> u64 {
 }
 
 fn lattice(ix: i64, iy: i64, seed: u64) -> f64 {
-    let h = splitmix(seed ^ splitmix((ix as u64).wrapping_mul(0x1000_0000_01B3) ^ (iy as u64).rotate_left(32)));
+    let h = splitmix(
+        seed ^ splitmix((ix as u64).wrapping_mul(0x1000_0000_01B3) ^ (iy as u64).rotate_left(32)),
+    );
     (h >> 11) as f64 / (1u64 << 53) as f64
 }
 

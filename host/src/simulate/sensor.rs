@@ -1,6 +1,9 @@
 //! Optics and sensor: radiometry, PSF, speckle statistics, shot/read noise, gain,
 //! quantisation, saturation (`docs/simulator.md`, "Optics" and "Sensor").
 
+// `!(x > 0.0)` is deliberate: it is also true for NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use rand::{Rng, RngExt};
 use rand_distr::{Distribution, Gamma, Poisson, StandardNormal};
 use serde::{Deserialize, Serialize};
@@ -26,7 +29,12 @@ pub struct OpticsParams {
 impl Default for OpticsParams {
     /// An f/2.4 M12 lens with a 90 %-transmission interference filter and a 0.5 px PSF.
     fn default() -> Self {
-        OpticsParams { f_number: 2.4, filter_transmission: 0.9, psf_sigma_px: 0.5, vignetting: true }
+        OpticsParams {
+            f_number: 2.4,
+            filter_transmission: 0.9,
+            psf_sigma_px: 0.5,
+            vignetting: true,
+        }
     }
 }
 
@@ -152,8 +160,13 @@ pub fn speckle_cells(pitch_m: f64, sigma_c_m: f64) -> f64 {
 /// of RMS `σ_h`, reflection so the path differences are `2h`):
 /// `C_λ = [1 + (2π·Δλ·2σ_h/λ²)²]^(−1/4)`. A multimode 650 nm diode (`Δλ` ≈ 1 nm, coherence
 /// length λ²/Δλ ≈ 0.4 mm) on bark (σ_h ≈ 1 mm) leaves C_λ ≈ 0.18.
-pub fn spectral_speckle_contrast(wavelength_m: f64, spectral_width_m: f64, roughness_m: f64) -> f64 {
-    let x = 2.0 * std::f64::consts::PI * spectral_width_m * 2.0 * roughness_m / (wavelength_m * wavelength_m);
+pub fn spectral_speckle_contrast(
+    wavelength_m: f64,
+    spectral_width_m: f64,
+    roughness_m: f64,
+) -> f64 {
+    let x = 2.0 * std::f64::consts::PI * spectral_width_m * 2.0 * roughness_m
+        / (wavelength_m * wavelength_m);
     (1.0 + x * x).powf(-0.25)
 }
 
@@ -163,7 +176,9 @@ pub fn speckle_factor<R: Rng + ?Sized>(cells: f64, rng: &mut R) -> f64 {
     if !cells.is_finite() {
         return 1.0;
     }
-    Gamma::new(cells, 1.0 / cells).map(|g| g.sample(rng)).unwrap_or(1.0)
+    Gamma::new(cells, 1.0 / cells)
+        .map(|g| g.sample(rng))
+        .unwrap_or(1.0)
 }
 
 /// Separable Gaussian blur (σ in pixels, kernel ±⌈3σ⌉, edges clamped) of a `w × h` image.
@@ -172,7 +187,9 @@ pub fn gaussian_blur(img: &mut [f64], w: usize, h: usize, sigma: f64) {
         return;
     }
     let r = (3.0 * sigma).ceil() as isize;
-    let kernel: Vec<f64> = (-r..=r).map(|i| (-(i * i) as f64 / (2.0 * sigma * sigma)).exp()).collect();
+    let kernel: Vec<f64> = (-r..=r)
+        .map(|i| (-(i * i) as f64 / (2.0 * sigma * sigma)).exp())
+        .collect();
     let sum: f64 = kernel.iter().sum();
     let kernel: Vec<f64> = kernel.iter().map(|k| k / sum).collect();
     let mut tmp = vec![0.0; w * h];

@@ -1,0 +1,522 @@
+//! The field log: an append-only, crash-safe journal of plots and tree readings, and its
+//! export to what inventory software imports.
+//!
+//! ## Journal format (`docs/field-guide.md`)
+//!
+//! ```text
+//! TANGENT-FIELDLOG 1\n                         first line: magic and format version
+//! <crc32 as 8 hex digits> <JSON record>\n       one line per record
+//! ```
+//!
+//! The CRC-32 (ISO-HDLC, the zlib CRC) covers the JSON bytes. A record is a plot header
+//! (`{"type":"plot",...}`, starts a plot) or a tree reading (`{"type":"tree",...}`).
+//!
+//! **Crash safety.** Each record is written with one `write` on a file opened for appending
+//! and then `fsync`ed (`File::sync_data`) before [`FieldLog::append`] returns — the record
+//! is on disk before the reading is shown to the forester (write-ahead). A process killed
+//! at any point leaves whole records plus at most one incomplete last line; a power cut can
+//! leave a torn or garbled last record (the file grew but its data did not all reach the
+//! disk). On [`FieldLog::open`], trailing lines that are incomplete or fail their CRC are
+//! cut off (the cut bytes are saved next to the log as `<log>.torn`, never destroyed),
+//! so every record that `append` confirmed is kept and the log stays appendable. A bad line
+//! *followed by good ones* cannot come from an append that was cut short; it is skipped and
+//! counted in [`FieldLog::skipped`] (storage damage), and the rest is read.
+//!
+//! Why hand-written rather than a database crate: the format must be readable with a text
+//! editor in the field and by any language, a single append + fsync is all the durability
+//! machinery needed, and SQLite would be a C dependency for one table.
+
+use std::fs::{File, OpenOptions};
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use tangent_core::protocol::calibration_record::CRC32;
+use tangent_core::solvers::cylinder::Flags;
+
+/// First line of every field log.
+pub const MAGIC_LINE: &str = "TANGENT-FIELDLOG 1\n";
+
+/// A plot header: the trees recorded after it belong to this plot.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PlotHeader {
+    /// Plot id as the inventory names it (e.g. `"P-017"`).
+    pub plot_id: String,
+    /// When the plot was started (RFC 3339, UTC).
+    pub started: String,
+    /// Free-text note.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub note: String,
+}
+
+/// One tree reading.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TreeRecord {
+    /// Plot the tree belongs to.
+    pub plot_id: String,
+    /// Tree number within the plot.
+    pub tree_id: u32,
+    /// Species code (the inventory's code list, e.g. `PIAB` or `50`).
+    pub species: String,
+    /// Diameter (millimetres).
+    pub diameter_mm: f64,
+    /// Standard uncertainty of the diameter (millimetres).
+    pub uncertainty_mm: f64,
+    /// Stem tilt from the laser-plane normal (degrees; 0 when not measured).
+    pub tilt_deg: f64,
+    /// Quality flags (bits of `solvers::cylinder::Flags`).
+    pub flags: u16,
+    /// Host time of the reading (RFC 3339, UTC).
+    pub time: String,
+    /// Device id (USB serial number, or the board name).
+    pub device_id: String,
+    /// Calibration id the reading was computed with.
+    pub calib_id: u32,
+    /// Device sequence number of the reading.
+    pub seq: u32,
+    /// Device time of the reading (ms since its boot).
+    pub device_time_ms: u64,
+}
+
+/// One journal record.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum Record {
+    /// A plot header.
+    Plot(PlotHeader),
+    /// A tree reading.
+    Tree(TreeRecord),
+}
+
+/// Why the field log could not be used.
+#[derive(Debug, thiserror::Error)]
+pub enum FieldLogError {
+    /// File system error.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The file is not a field log.
+    #[error("{0} is not a Tangent field log (its first line is not `TANGENT-FIELDLOG 1`)")]
+    NotAFieldLog(PathBuf),
+    /// Another process has the log open for writing.
+    #[error("{0} is in use by another tangent process")]
+    Locked(PathBuf),
+    /// A tree was appended before any plot header.
+    #[error("no plot started: give a plot id (--plot-id)")]
+    NoPlot,
+}
+
+/// The names of the quality flags, for people and exports.
+pub const FLAG_NAMES: [(Flags, &str); 13] = [
+    (Flags::ARC_TOO_SHORT, "ARC_TOO_SHORT"),
+    (Flags::POOR_FIT, "POOR_FIT"),
+    (Flags::TILT_IGNORED, "TILT_IGNORED"),
+    (Flags::INCONSISTENT, "INCONSISTENT"),
+    (Flags::THREE_TANGENT_FAILED, "THREE_TANGENT_FAILED"),
+    (Flags::FIT_FAILED, "FIT_FAILED"),
+    (Flags::RANGE_LIMIT, "RANGE_LIMIT"),
+    (Flags::TILT_FIT_FAILED, "TILT_FIT_FAILED"),
+    (Flags::LARGE_TILT, "LARGE_TILT"),
+    (Flags::SEVERAL_OBJECTS, "SEVERAL_OBJECTS"),
+    (Flags::STRIPE_SATURATED, "STRIPE_SATURATED"),
+    (Flags::AMBIENT_BRIGHT, "AMBIENT_BRIGHT"),
+    (Flags::OTHER_OBJECTS, "OTHER_OBJECTS"),
+];
+
+/// Flag names joined by `+` (unknown bits as hex); empty when no flag is set.
+pub fn flag_names(flags: u16) -> String {
+    let mut names = Vec::new();
+    let mut rest = flags;
+    for (f, name) in FLAG_NAMES {
+        if flags & f.0 != 0 {
+            names.push(name.to_string());
+            rest &= !f.0;
+        }
+    }
+    if rest != 0 {
+        names.push(format!("0x{rest:04X}"));
+    }
+    names.join("+")
+}
+
+/// An open field log.
+pub struct FieldLog {
+    path: PathBuf,
+    file: File,
+    records: Vec<Record>,
+    torn_bytes: usize,
+    skipped: usize,
+}
+
+fn io(path: &Path) -> impl FnOnce(std::io::Error) -> FieldLogError + '_ {
+    move |source| FieldLogError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// Encodes one record as its journal line.
+pub fn encode_line(record: &Record) -> String {
+    // Serialising plain structs of strings and numbers cannot fail.
+    let json = serde_json::to_string(record).unwrap_or_default();
+    format!("{:08x} {json}\n", CRC32.checksum(json.as_bytes()))
+}
+
+/// Decodes one journal line (without its newline); `None` if it is damaged.
+pub fn decode_line(line: &[u8]) -> Option<Record> {
+    let text = std::str::from_utf8(line).ok()?;
+    let (crc, json) = text.split_once(' ')?;
+    if crc.len() != 8 || u32::from_str_radix(crc, 16).ok()? != CRC32.checksum(json.as_bytes()) {
+        return None;
+    }
+    serde_json::from_str(json).ok()
+}
+
+impl FieldLog {
+    /// Opens (creating if needed) the log at `path` for appending, recovering from a
+    /// crash: a torn last record is cut off and saved to `<path>.torn`. Takes an exclusive
+    /// lock so two processes never interleave records.
+    pub fn open(path: &Path) -> Result<FieldLog, FieldLogError> {
+        let created = !path.exists();
+        let mut file = OpenOptions::new()
+            .read(true)
+            .append(true)
+            .create(true)
+            .open(path)
+            .map_err(io(path))?;
+        match file.try_lock() {
+            Ok(()) => {}
+            Err(std::fs::TryLockError::WouldBlock) => {
+                return Err(FieldLogError::Locked(path.to_path_buf()))
+            }
+            Err(std::fs::TryLockError::Error(e)) => return Err(io(path)(e)),
+        }
+        let mut bytes = Vec::new();
+        file.read_to_end(&mut bytes).map_err(io(path))?;
+        let magic = MAGIC_LINE.as_bytes();
+        if bytes.len() < magic.len() && magic.starts_with(&bytes) {
+            // New, or killed while writing the magic line.
+            file.set_len(0).map_err(io(path))?;
+            file.write_all(magic).map_err(io(path))?;
+            file.sync_all().map_err(io(path))?;
+            if created {
+                sync_parent(path)?;
+            }
+            bytes = magic.to_vec();
+        } else if !bytes.starts_with(magic) {
+            return Err(FieldLogError::NotAFieldLog(path.to_path_buf()));
+        }
+        let (records, good_len, skipped) = parse_body(&bytes, magic.len());
+        let torn_bytes = bytes.len() - good_len;
+        if torn_bytes > 0 {
+            let mut torn_path = path.as_os_str().to_owned();
+            torn_path.push(".torn");
+            let torn_path = PathBuf::from(torn_path);
+            let mut saved = OpenOptions::new()
+                .append(true)
+                .create(true)
+                .open(&torn_path)
+                .map_err(io(&torn_path))?;
+            saved
+                .write_all(&bytes[good_len..])
+                .and_then(|()| saved.sync_all())
+                .map_err(io(&torn_path))?;
+            file.set_len(good_len as u64).map_err(io(path))?;
+            file.sync_all().map_err(io(path))?;
+        }
+        Ok(FieldLog {
+            path: path.to_path_buf(),
+            file,
+            records,
+            torn_bytes,
+            skipped,
+        })
+    }
+
+    /// Reads a log without modifying or locking it (for export); a torn tail is ignored.
+    pub fn read(path: &Path) -> Result<Vec<Record>, FieldLogError> {
+        let bytes = std::fs::read(path).map_err(io(path))?;
+        if !bytes.starts_with(MAGIC_LINE.as_bytes()) {
+            return Err(FieldLogError::NotAFieldLog(path.to_path_buf()));
+        }
+        Ok(parse_body(&bytes, MAGIC_LINE.len()).0)
+    }
+
+    /// The log's path.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Every record, in order.
+    pub fn records(&self) -> &[Record] {
+        &self.records
+    }
+
+    /// Bytes of a torn last record cut off when opening (0 after a clean shutdown).
+    pub fn torn_bytes(&self) -> usize {
+        self.torn_bytes
+    }
+
+    /// Damaged lines in the middle of the log that were skipped.
+    pub fn skipped(&self) -> usize {
+        self.skipped
+    }
+
+    /// The current plot (the last header), if any.
+    pub fn current_plot(&self) -> Option<&PlotHeader> {
+        self.records.iter().rev().find_map(|r| match r {
+            Record::Plot(p) => Some(p),
+            Record::Tree(_) => None,
+        })
+    }
+
+    /// The last tree of plot `plot_id`.
+    pub fn last_tree_in(&self, plot_id: &str) -> Option<&TreeRecord> {
+        self.records.iter().rev().find_map(|r| match r {
+            Record::Tree(t) if t.plot_id == plot_id => Some(t),
+            _ => None,
+        })
+    }
+
+    /// The last tree recorded from `device_id` (any plot).
+    pub fn last_tree_from(&self, device_id: &str) -> Option<&TreeRecord> {
+        self.records.iter().rev().find_map(|r| match r {
+            Record::Tree(t) if t.device_id == device_id => Some(t),
+            _ => None,
+        })
+    }
+
+    /// Appends a record durably: one write, then fsync. When this returns `Ok`, the record
+    /// survives a crash or power cut.
+    pub fn append(&mut self, record: Record) -> Result<(), FieldLogError> {
+        if let Record::Tree(t) = &record {
+            if self.current_plot().is_none() {
+                return Err(FieldLogError::NoPlot);
+            }
+            debug_assert!(!t.plot_id.is_empty());
+        }
+        let line = encode_line(&record);
+        self.file
+            .write_all(line.as_bytes())
+            .and_then(|()| self.file.sync_data())
+            .map_err(io(&self.path))?;
+        self.records.push(record);
+        Ok(())
+    }
+}
+
+/// Parses the records after the magic line: returns them, the length of the good prefix of
+/// the file (up to the end of the last good record) and the number of damaged lines that
+/// good lines follow.
+fn parse_body(bytes: &[u8], start: usize) -> (Vec<Record>, usize, usize) {
+    let mut records = Vec::new();
+    let mut good_len = start;
+    let mut bad_since_good = 0;
+    let mut skipped = 0;
+    let mut pos = start;
+    while pos < bytes.len() {
+        let Some(nl) = bytes[pos..].iter().position(|&b| b == b'\n') else {
+            break; // incomplete last line: torn
+        };
+        let line = &bytes[pos..pos + nl];
+        pos += nl + 1;
+        match decode_line(line) {
+            Some(r) => {
+                records.push(r);
+                skipped += bad_since_good;
+                bad_since_good = 0;
+                good_len = pos;
+            }
+            None => bad_since_good += 1,
+        }
+    }
+    (records, good_len, skipped)
+}
+
+fn sync_parent(path: &Path) -> Result<(), FieldLogError> {
+    // The new directory entry must reach the disk too, or a crash could lose the file.
+    let parent = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    File::open(parent)
+        .and_then(|d| d.sync_all())
+        .map_err(io(parent))
+}
+
+/// Export formats.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ExportFormat {
+    /// Comma-separated.
+    Csv,
+    /// Tab-separated (Field-Map and Haglöf imports).
+    Tsv,
+    /// JSON: plots with their trees.
+    Json,
+}
+
+/// The tree-level columns of the CSV/TSV exports, in order.
+pub const TREE_COLUMNS: [&str; 11] = [
+    "tree_id",
+    "species",
+    "dbh_mm",
+    "uncertainty_mm",
+    "tilt_deg",
+    "flags",
+    "time",
+    "device_id",
+    "calib_id",
+    "seq",
+    "plot_id",
+];
+
+/// A plot with its trees, as exported.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ExportPlot<'a> {
+    /// Plot id.
+    pub plot_id: &'a str,
+    /// When it was started.
+    pub started: &'a str,
+    /// Note.
+    pub note: &'a str,
+    /// The trees, in recording order.
+    pub trees: Vec<&'a TreeRecord>,
+}
+
+/// Groups records into plots (a plot id that appears in several headers is one plot, at
+/// its first header), in order of first appearance.
+pub fn plots(records: &[Record]) -> Vec<ExportPlot<'_>> {
+    let mut out: Vec<ExportPlot> = Vec::new();
+    for r in records {
+        match r {
+            Record::Plot(p) => {
+                if !out.iter().any(|e| e.plot_id == p.plot_id) {
+                    out.push(ExportPlot {
+                        plot_id: &p.plot_id,
+                        started: &p.started,
+                        note: &p.note,
+                        trees: Vec::new(),
+                    });
+                }
+            }
+            Record::Tree(t) => {
+                if let Some(e) = out.iter_mut().find(|e| e.plot_id == t.plot_id) {
+                    e.trees.push(t);
+                }
+            }
+        }
+    }
+    out
+}
+
+fn field(value: &str, sep: char) -> String {
+    // RFC 4180 quoting for CSV; TSV fields cannot hold tabs or newlines, so they become
+    // spaces there.
+    if sep == '\t' {
+        return value.replace(['\t', '\n', '\r'], " ");
+    }
+    if value.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", value.replace('"', "\"\""))
+    } else {
+        value.to_string()
+    }
+}
+
+/// Exports the log.
+///
+/// CSV/TSV follow the two-level layout of caliper software (Haglöf Versio "header" and
+/// "data" levels; Field-Map's "lines to skip" before the tree columns): for each plot, a
+/// header block of `key<sep>value` lines (`plot_id`, `started`, `note`, `trees`), a blank
+/// line, the tree column names ([`TREE_COLUMNS`]) and one row per tree; plots are separated
+/// by a blank line. Diameters and uncertainties in mm to 0.1 mm, tilt in degrees to 0.1°,
+/// flags as names joined by `+`. JSON is `{"format":"tangent-field-log","version":1,
+/// "plots":[{plot_id, started, note, trees:[{...TreeRecord, flag_names}]}]}`.
+pub fn export(records: &[Record], format: ExportFormat) -> String {
+    let plots = plots(records);
+    match format {
+        ExportFormat::Json => export_json(&plots),
+        ExportFormat::Csv => export_table(&plots, ','),
+        ExportFormat::Tsv => export_table(&plots, '\t'),
+    }
+}
+
+fn export_table(plots: &[ExportPlot], sep: char) -> String {
+    let mut out = String::new();
+    for (i, p) in plots.iter().enumerate() {
+        if i > 0 {
+            out.push('\n');
+        }
+        let s = sep;
+        out += &format!("plot_id{s}{}\n", field(p.plot_id, s));
+        out += &format!("started{s}{}\n", field(p.started, s));
+        out += &format!("note{s}{}\n", field(p.note, s));
+        out += &format!("trees{s}{}\n\n", p.trees.len());
+        out += &TREE_COLUMNS.join(&sep.to_string());
+        out.push('\n');
+        for t in &p.trees {
+            let row = [
+                t.tree_id.to_string(),
+                field(&t.species, s),
+                format!("{:.1}", t.diameter_mm),
+                format!("{:.1}", t.uncertainty_mm),
+                format!("{:.1}", t.tilt_deg),
+                flag_names(t.flags),
+                field(&t.time, s),
+                field(&t.device_id, s),
+                t.calib_id.to_string(),
+                t.seq.to_string(),
+                field(&t.plot_id, s),
+            ];
+            out += &row.join(&sep.to_string());
+            out.push('\n');
+        }
+    }
+    out
+}
+
+fn export_json(plots: &[ExportPlot]) -> String {
+    let plots: Vec<serde_json::Value> = plots
+        .iter()
+        .map(|p| {
+            let trees: Vec<serde_json::Value> = p
+                .trees
+                .iter()
+                .map(|t| {
+                    let mut v = serde_json::to_value(t).unwrap_or_default();
+                    if let Some(obj) = v.as_object_mut() {
+                        let names: Vec<&str> = FLAG_NAMES
+                            .iter()
+                            .filter(|(f, _)| t.flags & f.0 != 0)
+                            .map(|(_, n)| *n)
+                            .collect();
+                        obj.insert("flag_names".into(), names.into());
+                    }
+                    v
+                })
+                .collect();
+            serde_json::json!({
+                "plot_id": p.plot_id,
+                "started": p.started,
+                "note": p.note,
+                "trees": trees,
+            })
+        })
+        .collect();
+    let doc = serde_json::json!({
+        "format": "tangent-field-log",
+        "version": 1,
+        "plots": plots,
+    });
+    let mut s = serde_json::to_string_pretty(&doc).unwrap_or_default();
+    s.push('\n');
+    s
+}
+
+/// Now, as RFC 3339 UTC with seconds (`2025-06-01T10:00:00Z`).
+pub fn now_rfc3339() -> String {
+    humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string()
+}

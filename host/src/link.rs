@@ -1,0 +1,1057 @@
+//! The serial link to a Tangent: open a port by path, speak the wire protocol
+//! (`tangent_core::protocol`, `docs/protocol.md`), survive the field.
+//!
+//! What "survive" means, and how:
+//!
+//! * **Garbage, dropped or corrupted bytes, partial frames.** Frames end at 0x00 (COBS), so
+//!   the receiver throws away at most the frame in progress; the CRC rejects corrupted ones.
+//!   The host sends a lone 0x00 after opening so the device drops any half-received frame.
+//! * **Lost frames.** Requests wait for the reply carrying their tag and are re-sent (with a
+//!   fresh tag) after [`LinkConfig::reply_timeout`]; only idempotent requests are re-sent.
+//!   Readings carry a sequence number: a gap (or an idle link, which could hide a lost
+//!   *last* reading) makes the link ask `History { after_seq }` and the device re-sends what
+//!   it kept (its last 64 readings). Duplicates (a reading seen twice) are dropped. So the
+//!   caller of [`Link::next_reading`] sees every reading once, in sequence order.
+//! * **Cable yanked / port gone.** A read or write error closes the port; the link re-opens
+//!   the same path until [`LinkConfig::reconnect_timeout`], repeats the handshake (protocol
+//!   version, reboot detection), restarts a running stream and recovers the readings made
+//!   meanwhile from the history.
+//! * **Device rebooted.** Sequence numbers restart at 1 after a reboot; the link notices
+//!   (boot banner, `last_seq` or uptime going backwards) and starts counting afresh.
+//! * **Another protocol version / not a Tangent.** A CRC-valid frame of another version is
+//!   a [`LinkError::VersionMismatch`] naming both versions; a port that answers nothing
+//!   valid is a [`LinkError::NotATangent`].
+//!
+//! The receive side splits the byte stream at 0x00 itself and decodes each frame with
+//! [`protocol::decode`] rather than holding a [`protocol::Decoder`]: the decoder borrows a
+//! caller-owned buffer, which a long-lived host struct cannot own alongside it without a
+//! self-referential type; the framing rules (delimiter, oversize discard, counters) are the
+//! same.
+
+use std::collections::{BTreeMap, VecDeque};
+use std::io::{ErrorKind, Read, Write};
+use std::time::{Duration, Instant};
+
+use tangent_core::protocol::{
+    self, Board, DeviceError, ErrorCode, FrameEncoder, FrameSel, FrameSetInfo, FromDevice,
+    LinkStats, ProtocolError, Reading, Request, Response, SelfTestReport, ToDevice,
+    WireCalibration, FRAME_CHUNK_MAX, MAX_FRAME_LEN, PROTOCOL_VERSION, UNSOLICITED,
+};
+
+/// USB vendor id of the Tangent (pid.codes, `firmware/src/bin/h743.rs`).
+pub const TANGENT_USB_VID: u16 = 0x1209;
+/// USB product id of the Tangent (`firmware/src/bin/h743.rs`).
+pub const TANGENT_USB_PID: u16 = 0x7A6E;
+
+/// Line rate set on the port. USB CDC-ACM and ptys ignore it; a USB–UART adapter wired to
+/// the board's UART would need it.
+pub const BAUD: u32 = 115_200;
+
+/// How long one `read` on the port may block: bounds the latency of deadlines.
+const POLL: Duration = Duration::from_millis(20);
+
+/// Timing of the link.
+#[derive(Debug, Clone)]
+pub struct LinkConfig {
+    /// How long to wait for the reply to one attempt of a request.
+    pub reply_timeout: Duration,
+    /// Attempts of an idempotent request before giving up.
+    pub attempts: u32,
+    /// How long to keep trying to re-open a port that went away (`None`: forever).
+    pub reconnect_timeout: Option<Duration>,
+    /// After this long without any frame, ask the device for readings we may have missed
+    /// (a lost last reading has no successor to reveal the gap).
+    pub idle_check: Duration,
+}
+
+impl Default for LinkConfig {
+    fn default() -> Self {
+        LinkConfig {
+            reply_timeout: Duration::from_millis(1500),
+            attempts: 4,
+            reconnect_timeout: Some(Duration::from_secs(30)),
+            idle_check: Duration::from_millis(1000),
+        }
+    }
+}
+
+/// Why the link failed.
+#[derive(Debug, thiserror::Error)]
+pub enum LinkError {
+    /// The port could not be opened.
+    #[error("cannot open {path}: {source} (is the Tangent plugged in? `tangent devices` lists the ports that look like one)")]
+    Open {
+        /// The port.
+        path: String,
+        /// Why.
+        source: serialport::Error,
+    },
+    /// Nothing on the port speaks the Tangent protocol.
+    #[error("{path} does not look like a Tangent: no valid answer within {waited:?} ({bytes} bytes received, {malformed} malformed frames). Check the port with `tangent devices`")]
+    NotATangent {
+        /// The port.
+        path: String,
+        /// How long we waited.
+        waited: Duration,
+        /// Bytes received meanwhile.
+        bytes: usize,
+        /// Frames that failed COBS/CRC.
+        malformed: u32,
+    },
+    /// The device speaks another version of the protocol.
+    #[error("the device on {path} speaks protocol version {device}, this tangent speaks version {host}: {}", if *device > *host { "update the host software" } else { "update the firmware (`tangent flash`)" })]
+    VersionMismatch {
+        /// The port.
+        path: String,
+        /// The device's version.
+        device: u8,
+        /// Ours ([`PROTOCOL_VERSION`]).
+        host: u8,
+    },
+    /// A request got no reply.
+    #[error("no answer to {what} from {path} after {attempts} attempt(s) of {each:?}")]
+    Timeout {
+        /// The port.
+        path: String,
+        /// The request.
+        what: &'static str,
+        /// Attempts made.
+        attempts: u32,
+        /// Wait per attempt.
+        each: Duration,
+    },
+    /// The port went away and did not come back.
+    #[error("lost the device on {path} and it did not come back within {waited:?}")]
+    Disconnected {
+        /// The port.
+        path: String,
+        /// How long we tried to re-open it.
+        waited: Duration,
+    },
+    /// The device answered with an error.
+    #[error("the device refused {what}: {}", describe_device_error(.error))]
+    Device {
+        /// The request.
+        what: &'static str,
+        /// The device's error.
+        error: DeviceError,
+    },
+    /// The device answered something that does not fit the request.
+    #[error("unexpected answer to {what}: {got}")]
+    Unexpected {
+        /// The request.
+        what: &'static str,
+        /// What came back (debug form).
+        got: String,
+    },
+}
+
+/// A sentence for a device error, with what to do about it.
+pub fn describe_device_error(e: &DeviceError) -> String {
+    let d = e.detail;
+    match e.code {
+        ErrorCode::UnsupportedVersion => {
+            format!("it does not speak protocol version {d} (update one side)")
+        }
+        ErrorCode::NoCalibration => {
+            "it has no calibration (push one with `tangent calib push --port P FILE`)".into()
+        }
+        ErrorCode::InvalidCalibration => match d {
+            2 => "the calibration does not match the device's sensor size".into(),
+            _ => "the calibration is invalid (check it with `tangent calibrate`)".into(),
+        },
+        ErrorCode::StorageFailure => format!("its calibration storage failed (code {d})"),
+        ErrorCode::CameraTimeout => "the camera delivered no frame in time".into(),
+        ErrorCode::CameraFailure => format!("the camera failed (driver code {d})"),
+        ErrorCode::LaserTimeout => "a laser stayed on too long and was forced off".into(),
+        ErrorCode::MeasurementFailed => format!(
+            "no stem was measured (pipeline code {d}): aim the lines at the stem, 0.5–3 m away"
+        ),
+        ErrorCode::NoFrames => "no frame pair has been captured yet".into(),
+        ErrorCode::StaleCapture => "a newer capture replaced the one being read".into(),
+        ErrorCode::OutOfRange => "the read went past the end of the frame".into(),
+        ErrorCode::Busy => "it is busy (e.g. streaming); try again".into(),
+    }
+}
+
+/// Device identity and health ([`protocol::DeviceInfo`], owned).
+#[derive(Debug, Clone, PartialEq)]
+pub struct DeviceIdentity {
+    /// Protocol version of the firmware.
+    pub protocol_version: u8,
+    /// Firmware version.
+    pub fw_version: String,
+    /// Board.
+    pub board: Board,
+    /// Active calibration id.
+    pub calib_id: Option<u32>,
+    /// Frame width (pixels).
+    pub frame_width: u16,
+    /// Frame height (pixels).
+    pub frame_height: u16,
+    /// Device uptime (ms).
+    pub uptime_ms: u64,
+    /// Highest sequence number issued.
+    pub last_seq: u32,
+    /// The device's receive counters.
+    pub link: LinkStats,
+}
+
+/// A device message, owned ([`Response`] borrows from the receive buffer).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Reply {
+    /// [`Response::Info`].
+    Info(DeviceIdentity),
+    /// [`Response::Reading`].
+    Reading(Reading),
+    /// [`Response::Error`].
+    Error(DeviceError),
+    /// [`Response::Ack`].
+    Ack,
+    /// [`Response::HistoryEnd`].
+    HistoryEnd {
+        /// Highest sequence number issued.
+        last_seq: u32,
+    },
+    /// [`Response::FramesReady`].
+    FramesReady(FrameSetInfo),
+    /// [`Response::FrameChunk`].
+    FrameChunk {
+        /// Capture number.
+        capture: u32,
+        /// Which frame.
+        frame: FrameSel,
+        /// Offset of `data`.
+        offset: u32,
+        /// Frame size.
+        total: u32,
+        /// Pixels.
+        data: Vec<u8>,
+    },
+    /// [`Response::Calibration`].
+    Calibration(WireCalibration),
+    /// [`Response::SelfTest`].
+    SelfTest(SelfTestReport),
+}
+
+impl From<Response<'_>> for Reply {
+    fn from(r: Response<'_>) -> Self {
+        match r {
+            Response::Info(i) => Reply::Info(DeviceIdentity {
+                protocol_version: i.protocol_version,
+                fw_version: i.fw_version.to_string(),
+                board: i.board,
+                calib_id: i.calib_id,
+                frame_width: i.frame_width,
+                frame_height: i.frame_height,
+                uptime_ms: i.uptime_ms,
+                last_seq: i.last_seq,
+                link: i.link,
+            }),
+            Response::Reading(r) => Reply::Reading(r),
+            Response::Error(e) => Reply::Error(e),
+            Response::Ack => Reply::Ack,
+            Response::HistoryEnd { last_seq } => Reply::HistoryEnd { last_seq },
+            Response::FramesReady(f) => Reply::FramesReady(f),
+            Response::FrameChunk {
+                capture,
+                frame,
+                offset,
+                total,
+                data,
+            } => Reply::FrameChunk {
+                capture,
+                frame,
+                offset,
+                total,
+                data: data.to_vec(),
+            },
+            Response::Calibration(c) => Reply::Calibration(c),
+            Response::SelfTest(s) => Reply::SelfTest(s),
+        }
+    }
+}
+
+/// Something the user may want to hear about while the link copes on its own.
+#[derive(Debug, Clone, PartialEq)]
+pub enum LinkEvent {
+    /// The port failed; re-opening it.
+    Lost(String),
+    /// The port is back (after this many attempts).
+    Reconnected {
+        /// Open attempts.
+        attempts: u32,
+    },
+    /// The device rebooted: its sequence numbers restart.
+    Rebooted,
+    /// Readings could not be recovered (they fell out of the device's history).
+    Unrecoverable {
+        /// First missing sequence number.
+        from: u32,
+        /// Last missing sequence number.
+        to: u32,
+    },
+}
+
+/// Host-side counters.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct LinkCounters {
+    /// Frames received and decoded.
+    pub frames_ok: u64,
+    /// Frames rejected (COBS, CRC, too short, undecodable).
+    pub malformed: u64,
+    /// Frames longer than [`MAX_FRAME_LEN`].
+    pub oversize: u64,
+    /// Frames of another protocol version.
+    pub version_mismatch: u64,
+    /// Readings received more than once and dropped.
+    pub duplicates: u64,
+    /// Readings obtained through `History` after a gap or a reconnect.
+    pub history_requests: u64,
+    /// Readings lost for good (out of the device's history).
+    pub lost: u64,
+    /// Times the port was re-opened.
+    pub reconnects: u64,
+    /// Reboots of the device noticed.
+    pub reboots: u64,
+    /// Request attempts that timed out and were re-sent.
+    pub retries: u64,
+}
+
+/// Readings in sequence order, once each.
+#[derive(Debug, Default)]
+struct SeqTracker {
+    /// Highest sequence number delivered (or skipped as lost).
+    last: u32,
+    /// Received ahead of a gap.
+    pending: BTreeMap<u32, Reading>,
+    /// In order, ready for the caller.
+    ready: VecDeque<Reading>,
+    /// Highest device timestamp seen (reboot detection).
+    newest_ms: u64,
+}
+
+impl SeqTracker {
+    /// Takes a reading; returns whether it was a duplicate.
+    fn accept(&mut self, r: Reading) -> bool {
+        if r.seq <= self.last || self.pending.contains_key(&r.seq) {
+            return true;
+        }
+        self.newest_ms = self.newest_ms.max(r.timestamp_ms);
+        self.pending.insert(r.seq, r);
+        self.drain();
+        false
+    }
+
+    fn drain(&mut self) {
+        while let Some(r) = self.pending.remove(&(self.last.wrapping_add(1))) {
+            self.last = r.seq;
+            self.ready.push_back(r);
+        }
+    }
+
+    fn has_gap(&self) -> bool {
+        !self.pending.is_empty()
+    }
+
+    /// After a history replay that ended at `device_last`: everything the device issued up to
+    /// it that we still miss is lost; returns the missing ranges.
+    fn give_up_until(&mut self, device_last: u32) -> Vec<(u32, u32)> {
+        let mut lost = Vec::new();
+        loop {
+            self.drain();
+            let next_have = self.pending.keys().next().copied();
+            let target = match next_have {
+                Some(s) => s - 1,
+                None if device_last > self.last => device_last,
+                None => break,
+            };
+            if target > self.last {
+                lost.push((self.last + 1, target));
+            }
+            self.last = target;
+        }
+        lost
+    }
+
+    fn restart(&mut self) {
+        self.last = 0;
+        self.pending.clear();
+        self.newest_ms = 0;
+    }
+}
+
+/// A link to one Tangent on one serial port.
+pub struct Link {
+    path: String,
+    cfg: LinkConfig,
+    port: Option<Box<dyn serialport::SerialPort>>,
+    rx: Vec<u8>,
+    discarding: bool,
+    enc: FrameEncoder,
+    next_tag: u16,
+    identity: DeviceIdentity,
+    seq: SeqTracker,
+    streaming: bool,
+    last_frame_at: Instant,
+    last_check_at: Instant,
+    counters: LinkCounters,
+    bytes_in: usize,
+    peer_version: Option<u8>,
+    on_event: Option<Box<dyn FnMut(&LinkEvent) + Send>>,
+}
+
+/// What one frame turned out to be.
+enum Incoming {
+    Message(u16, Reply),
+    Rejected,
+}
+
+impl Link {
+    /// Opens `path`, checks that a Tangent of our protocol version answers, and starts
+    /// taking readings after the device's current last sequence number.
+    pub fn open(path: &str, cfg: LinkConfig) -> Result<Link, LinkError> {
+        let port = open_port(path)?;
+        let now = Instant::now();
+        let mut link = Link {
+            path: path.to_string(),
+            cfg,
+            port: Some(port),
+            rx: Vec::with_capacity(2 * MAX_FRAME_LEN),
+            discarding: false,
+            enc: FrameEncoder::new(),
+            next_tag: 1,
+            identity: DeviceIdentity {
+                protocol_version: PROTOCOL_VERSION,
+                fw_version: String::new(),
+                board: Board::Emulated,
+                calib_id: None,
+                frame_width: 0,
+                frame_height: 0,
+                uptime_ms: 0,
+                last_seq: 0,
+                link: LinkStats::default(),
+            },
+            seq: SeqTracker::default(),
+            streaming: false,
+            last_frame_at: now,
+            last_check_at: now,
+            counters: LinkCounters::default(),
+            bytes_in: 0,
+            peer_version: None,
+            on_event: None,
+        };
+        link.handshake()?;
+        link.seq.last = link.identity.last_seq;
+        Ok(link)
+    }
+
+    /// Calls `f` for every [`LinkEvent`] (e.g. to tell the user the cable came loose).
+    pub fn on_event(&mut self, f: impl FnMut(&LinkEvent) + Send + 'static) {
+        self.on_event = Some(Box::new(f));
+    }
+
+    /// The port path.
+    pub fn path(&self) -> &str {
+        &self.path
+    }
+
+    /// The device, as of the last handshake or `DeviceInfo`.
+    pub fn identity(&self) -> &DeviceIdentity {
+        &self.identity
+    }
+
+    /// Host-side counters.
+    pub fn counters(&self) -> LinkCounters {
+        self.counters
+    }
+
+    /// Highest sequence number delivered (or given up on).
+    pub fn last_seq(&self) -> u32 {
+        self.seq.last
+    }
+
+    /// Delivers readings after `seq` from now on (e.g. the last one already in the field
+    /// log, so readings taken while the host was away are recovered from the device's
+    /// history). Values above the device's `last_seq` are ignored.
+    pub fn resume_after(&mut self, seq: u32) {
+        if seq <= self.identity.last_seq {
+            self.seq.restart();
+            self.seq.last = seq;
+        }
+    }
+
+    fn emit(&mut self, e: LinkEvent) {
+        if let Some(f) = self.on_event.as_mut() {
+            f(&e);
+        }
+    }
+
+    /// `DeviceInfo` with a version check and reboot detection; what opening and re-opening
+    /// do.
+    fn handshake(&mut self) -> Result<(), LinkError> {
+        let started = Instant::now();
+        // A lone delimiter ends whatever partial frame the device holds.
+        self.write_bytes(&[protocol::DELIMITER])?;
+        let was = self.identity.clone();
+        let info = match self.request_inner(Request::DeviceInfo, "DeviceInfo", true) {
+            Ok(Reply::Info(i)) => i,
+            Ok(other) => {
+                return Err(LinkError::Unexpected {
+                    what: "DeviceInfo",
+                    got: format!("{other:?}"),
+                })
+            }
+            Err(LinkError::Timeout { .. }) => {
+                if let Some(v) = self.peer_version {
+                    return Err(self.version_error(v));
+                }
+                return Err(LinkError::NotATangent {
+                    path: self.path.clone(),
+                    waited: started.elapsed(),
+                    bytes: self.bytes_in,
+                    malformed: self.counters.malformed as u32,
+                });
+            }
+            Err(e) => return Err(e),
+        };
+        if info.protocol_version != PROTOCOL_VERSION {
+            return Err(self.version_error(info.protocol_version));
+        }
+        let rebooted = !was.fw_version.is_empty()
+            && (info.last_seq < self.seq.last || info.uptime_ms < self.seq.newest_ms);
+        self.identity = info;
+        if rebooted {
+            self.device_rebooted();
+        }
+        Ok(())
+    }
+
+    fn version_error(&self, device: u8) -> LinkError {
+        LinkError::VersionMismatch {
+            path: self.path.clone(),
+            device,
+            host: PROTOCOL_VERSION,
+        }
+    }
+
+    fn device_rebooted(&mut self) {
+        self.counters.reboots += 1;
+        self.seq.restart();
+        self.streaming = false;
+        self.emit(LinkEvent::Rebooted);
+    }
+
+    fn write_bytes(&mut self, bytes: &[u8]) -> Result<(), LinkError> {
+        loop {
+            let r = match self.port.as_mut() {
+                Some(p) => p.write_all(bytes).and_then(|()| p.flush()),
+                None => Err(std::io::Error::new(ErrorKind::NotConnected, "port closed")),
+            };
+            match r {
+                Ok(()) => return Ok(()),
+                Err(e) => self.reconnect(&e.to_string())?,
+            }
+        }
+    }
+
+    fn send(&mut self, request: Request) -> Result<u16, LinkError> {
+        let tag = self.next_tag;
+        self.next_tag = self.next_tag.checked_add(1).unwrap_or(1);
+        let frame = self
+            .enc
+            .encode(&ToDevice { tag, request })
+            .map(|b| b.to_vec())
+            .map_err(|e| LinkError::Unexpected {
+                what: "encode",
+                got: e.to_string(),
+            })?;
+        self.write_bytes(&frame)?;
+        Ok(tag)
+    }
+
+    /// Re-opens the port (until the reconnect timeout), then re-does the handshake,
+    /// restarts a running stream and asks for the readings missed meanwhile.
+    fn reconnect(&mut self, why: &str) -> Result<(), LinkError> {
+        self.port = None;
+        self.rx.clear();
+        self.discarding = false;
+        self.emit(LinkEvent::Lost(why.to_string()));
+        let started = Instant::now();
+        let mut attempts = 0;
+        loop {
+            attempts += 1;
+            std::thread::sleep(Duration::from_millis(100));
+            if let Ok(p) = open_port(&self.path) {
+                self.port = Some(p);
+                break;
+            }
+            if let Some(limit) = self.cfg.reconnect_timeout {
+                if started.elapsed() > limit {
+                    return Err(LinkError::Disconnected {
+                        path: self.path.clone(),
+                        waited: started.elapsed(),
+                    });
+                }
+            }
+        }
+        self.counters.reconnects += 1;
+        self.emit(LinkEvent::Reconnected { attempts });
+        // The handshake itself may hit another disconnect: it then recurses through
+        // `write_bytes`, bounded by the reconnect timeout.
+        self.handshake()?;
+        if self.streaming {
+            self.request_inner(Request::StartStream, "StartStream", true)?;
+        }
+        self.recover()?;
+        Ok(())
+    }
+
+    /// Reads until one frame ends or `deadline` passes.
+    fn pump(&mut self, deadline: Instant) -> Result<Option<Incoming>, LinkError> {
+        loop {
+            if let Some(i) = self.rx.iter().position(|&b| b == protocol::DELIMITER) {
+                let mut frame: Vec<u8> = self.rx.drain(..=i).collect();
+                frame.pop();
+                if std::mem::take(&mut self.discarding) {
+                    self.counters.oversize += 1;
+                    return Ok(Some(Incoming::Rejected));
+                }
+                if frame.is_empty() {
+                    continue;
+                }
+                return Ok(Some(self.decode(&mut frame)));
+            }
+            if self.rx.len() > MAX_FRAME_LEN {
+                self.rx.clear();
+                self.discarding = true;
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return Ok(None);
+            }
+            let mut buf = [0u8; 1024];
+            let timeout = (deadline - now).min(POLL);
+            let r = match self.port.as_mut() {
+                Some(p) => p.set_timeout(timeout).map_err(std::io::Error::from).and_then(|()| p.read(&mut buf)),
+                None => Err(std::io::Error::new(ErrorKind::NotConnected, "port closed")),
+            };
+            match r {
+                Ok(0) => self.reconnect("end of file")?,
+                Ok(n) => {
+                    self.bytes_in += n;
+                    if !self.discarding {
+                        self.rx.extend_from_slice(&buf[..n]);
+                    } else if let Some(z) = buf[..n].iter().position(|&b| b == 0) {
+                        // Keep the delimiter that ends the discarded frame and what follows.
+                        self.rx.extend_from_slice(&buf[z..n]);
+                    }
+                }
+                Err(e) if e.kind() == ErrorKind::TimedOut || e.kind() == ErrorKind::Interrupted => {}
+                Err(e) => self.reconnect(&e.to_string())?,
+            }
+        }
+    }
+
+    fn decode(&mut self, frame: &mut [u8]) -> Incoming {
+        match protocol::decode::<FromDevice>(frame) {
+            Ok(msg) => {
+                self.counters.frames_ok += 1;
+                self.last_frame_at = Instant::now();
+                Incoming::Message(msg.tag, Reply::from(msg.response))
+            }
+            Err(ProtocolError::VersionMismatch { received }) => {
+                self.counters.version_mismatch += 1;
+                self.peer_version = Some(received);
+                Incoming::Rejected
+            }
+            Err(_) => {
+                self.counters.malformed += 1;
+                Incoming::Rejected
+            }
+        }
+    }
+
+    /// Handles a message that is not the awaited reply: readings go to the tracker, a
+    /// boot banner means a reboot.
+    fn side_message(&mut self, tag: u16, reply: Reply) {
+        match reply {
+            Reply::Reading(r) => {
+                if self.seq.accept(r) {
+                    self.counters.duplicates += 1;
+                }
+            }
+            Reply::Info(i) if tag == UNSOLICITED => {
+                // The boot banner.
+                let had_any = self.seq.last > 0 || self.seq.has_gap();
+                self.identity = i;
+                if had_any {
+                    self.device_rebooted();
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// Sends `request` and returns the reply with its tag; re-sends idempotent requests.
+    fn request_inner(
+        &mut self,
+        request: Request,
+        what: &'static str,
+        idempotent: bool,
+    ) -> Result<Reply, LinkError> {
+        let attempts = if idempotent { self.cfg.attempts.max(1) } else { 1 };
+        for attempt in 0..attempts {
+            if attempt > 0 {
+                self.counters.retries += 1;
+            }
+            let tag = self.send(request.clone())?;
+            let deadline = Instant::now() + self.cfg.reply_timeout;
+            while let Some(incoming) = self.pump(deadline)? {
+                match incoming {
+                    Incoming::Message(t, reply) if t == tag => {
+                        if let Reply::Reading(r) = &reply {
+                            if self.seq.accept(*r) {
+                                self.counters.duplicates += 1;
+                            }
+                        }
+                        return Ok(reply);
+                    }
+                    Incoming::Message(t, Reply::Error(e))
+                        if t == UNSOLICITED && e.code == ErrorCode::UnsupportedVersion =>
+                    {
+                        // The device could not read our frame: it speaks another version.
+                        return Err(self.version_error(self.peer_version.unwrap_or(0)));
+                    }
+                    Incoming::Message(t, reply) => self.side_message(t, reply),
+                    Incoming::Rejected => {
+                        if let (Some(v), true) = (self.peer_version, self.identity.fw_version.is_empty()) {
+                            return Err(self.version_error(v));
+                        }
+                    }
+                }
+            }
+        }
+        Err(LinkError::Timeout {
+            path: self.path.clone(),
+            what,
+            attempts,
+            each: self.cfg.reply_timeout,
+        })
+    }
+
+    /// Asks the device for the readings after our last one; gives up (and reports) those
+    /// that fell out of its history.
+    fn recover(&mut self) -> Result<(), LinkError> {
+        self.counters.history_requests += 1;
+        self.last_check_at = Instant::now();
+        let after_seq = self.seq.last;
+        let reply = self.request_inner(Request::History { after_seq }, "History", true)?;
+        let Reply::HistoryEnd { last_seq } = reply else {
+            return Err(LinkError::Unexpected {
+                what: "History",
+                got: format!("{reply:?}"),
+            });
+        };
+        if last_seq < self.seq.last {
+            // Sequence numbers went backwards: a reboot we had not noticed.
+            self.device_rebooted();
+            return self.recover();
+        }
+        for (from, to) in self.seq.give_up_until(last_seq) {
+            self.counters.lost += (to - from + 1) as u64;
+            self.emit(LinkEvent::Unrecoverable { from, to });
+        }
+        Ok(())
+    }
+
+    /// The next reading, in sequence order, each exactly once; `None` when `timeout`
+    /// passes without one. Recovers gaps and checks for lost trailing readings when idle.
+    pub fn next_reading(&mut self, timeout: Duration) -> Result<Option<Reading>, LinkError> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if let Some(r) = self.seq.ready.pop_front() {
+                return Ok(Some(r));
+            }
+            let now = Instant::now();
+            if self.seq.has_gap()
+                || (now.duration_since(self.last_frame_at) >= self.cfg.idle_check
+                    && now.duration_since(self.last_check_at) >= self.cfg.idle_check)
+            {
+                self.recover()?;
+                continue;
+            }
+            if now >= deadline {
+                return Ok(None);
+            }
+            let wake = deadline.min(self.last_check_at.max(self.last_frame_at) + self.cfg.idle_check);
+            if let Some(Incoming::Message(tag, reply)) = self.pump(wake.max(now))? {
+                self.side_message(tag, reply);
+            }
+        }
+    }
+
+    /// Refreshes [`Link::identity`].
+    pub fn device_info(&mut self) -> Result<DeviceIdentity, LinkError> {
+        match self.request_inner(Request::DeviceInfo, "DeviceInfo", true)? {
+            Reply::Info(i) => {
+                self.identity = i.clone();
+                Ok(i)
+            }
+            other => Err(unexpected("DeviceInfo", other)),
+        }
+    }
+
+    /// One measurement (as a trigger press). The reading itself is delivered by
+    /// [`Link::next_reading`], so a reply lost on the wire is recovered from the history
+    /// rather than measured twice; a device error is returned.
+    pub fn measure(&mut self) -> Result<(), LinkError> {
+        match self.request_inner(Request::Measure, "Measure", false) {
+            Ok(Reply::Reading(_)) => Ok(()),
+            Ok(Reply::Error(error)) => Err(LinkError::Device {
+                what: "Measure",
+                error,
+            }),
+            Ok(other) => Err(unexpected("Measure", other)),
+            // Not re-sent (it would measure twice): if the device did measure, the
+            // reading comes through the history.
+            Err(LinkError::Timeout { .. }) => self.recover(),
+            Err(e) => Err(e),
+        }
+    }
+
+    /// Starts continuous measurement (as a held trigger); restarted after reconnects.
+    pub fn start_stream(&mut self) -> Result<(), LinkError> {
+        self.expect_ack(Request::StartStream, "StartStream")?;
+        self.streaming = true;
+        Ok(())
+    }
+
+    /// Stops continuous measurement.
+    pub fn stop_stream(&mut self) -> Result<(), LinkError> {
+        self.streaming = false;
+        self.expect_ack(Request::StopStream, "StopStream")
+    }
+
+    fn expect_ack(&mut self, request: Request, what: &'static str) -> Result<(), LinkError> {
+        match self.request_inner(request, what, true)? {
+            Reply::Ack => Ok(()),
+            Reply::Error(error) => Err(LinkError::Device { what, error }),
+            other => Err(unexpected(what, other)),
+        }
+    }
+
+    /// The device's calibration (`None` when it has none).
+    pub fn read_calibration(&mut self) -> Result<Option<WireCalibration>, LinkError> {
+        match self.request_inner(Request::ReadCalibration, "ReadCalibration", true)? {
+            Reply::Calibration(c) => Ok(Some(c)),
+            Reply::Error(DeviceError {
+                code: ErrorCode::NoCalibration,
+                ..
+            }) => Ok(None),
+            Reply::Error(error) => Err(LinkError::Device {
+                what: "ReadCalibration",
+                error,
+            }),
+            other => Err(unexpected("ReadCalibration", other)),
+        }
+    }
+
+    /// Stores and activates a calibration on the device.
+    pub fn write_calibration(&mut self, cal: &WireCalibration) -> Result<(), LinkError> {
+        self.expect_ack(Request::WriteCalibration(cal.clone()), "WriteCalibration")?;
+        self.identity.calib_id = Some(cal.id);
+        Ok(())
+    }
+
+    /// Fixes the exposure (µs) or returns to auto-exposure (`None`).
+    pub fn set_exposure(&mut self, us: Option<u32>) -> Result<(), LinkError> {
+        self.expect_ack(Request::SetExposure(us), "SetExposure")
+    }
+
+    /// Runs the device self-test.
+    pub fn self_test(&mut self) -> Result<SelfTestReport, LinkError> {
+        match self.request_inner(Request::SelfTest, "SelfTest", true)? {
+            Reply::SelfTest(s) => Ok(s),
+            other => Err(unexpected("SelfTest", other)),
+        }
+    }
+
+    /// Captures a raw frame pair (laser off, laser on) into the device's buffers.
+    pub fn capture_frames(&mut self) -> Result<FrameSetInfo, LinkError> {
+        // Not re-sent blindly: a second capture would replace the first. A lost reply just
+        // means asking again, which is harmless here since nothing was read yet.
+        match self.request_inner(Request::CaptureFrames, "CaptureFrames", true)? {
+            Reply::FramesReady(f) => Ok(f),
+            Reply::Error(error) => Err(LinkError::Device {
+                what: "CaptureFrames",
+                error,
+            }),
+            other => Err(unexpected("CaptureFrames", other)),
+        }
+    }
+
+    /// Reads one frame of the captured pair `info`, chunk by chunk (a lost chunk is asked
+    /// for again); `progress` gets the bytes read so far.
+    pub fn read_frame(
+        &mut self,
+        info: &FrameSetInfo,
+        frame: FrameSel,
+        mut progress: impl FnMut(usize),
+    ) -> Result<Vec<u8>, LinkError> {
+        let total = info.width as usize * info.height as usize;
+        let mut data = Vec::with_capacity(total);
+        while data.len() < total {
+            let request = Request::ReadFrameChunk {
+                capture: info.capture,
+                frame,
+                offset: data.len() as u32,
+                max_len: FRAME_CHUNK_MAX as u16,
+            };
+            match self.request_inner(request, "ReadFrameChunk", true)? {
+                Reply::FrameChunk {
+                    capture,
+                    frame: f,
+                    offset,
+                    total: t,
+                    data: chunk,
+                } if capture == info.capture
+                    && f == frame
+                    && offset as usize == data.len()
+                    && t as usize == total
+                    && !chunk.is_empty() =>
+                {
+                    let take = chunk.len().min(total - data.len());
+                    data.extend_from_slice(&chunk[..take]);
+                    progress(data.len());
+                }
+                Reply::Error(error) => {
+                    return Err(LinkError::Device {
+                        what: "ReadFrameChunk",
+                        error,
+                    })
+                }
+                other => return Err(unexpected("ReadFrameChunk", other)),
+            }
+        }
+        Ok(data)
+    }
+}
+
+fn unexpected(what: &'static str, got: Reply) -> LinkError {
+    LinkError::Unexpected {
+        what,
+        got: format!("{got:?}"),
+    }
+}
+
+fn open_port(path: &str) -> Result<Box<dyn serialport::SerialPort>, LinkError> {
+    serialport::new(path, BAUD)
+        .timeout(POLL)
+        .open()
+        .map_err(|source| LinkError::Open {
+            path: path.to_string(),
+            source,
+        })
+}
+
+/// A serial port that may be a Tangent.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PortCandidate {
+    /// Path to open.
+    pub path: String,
+    /// USB vendor/product id, when it is a USB port.
+    pub usb: Option<(u16, u16)>,
+    /// USB serial number (the device id in the field log), when known.
+    pub serial_number: Option<String>,
+    /// USB product string.
+    pub product: Option<String>,
+    /// Whether the VID/PID is the Tangent's.
+    pub is_tangent: bool,
+}
+
+/// Every serial port the system knows, Tangents (by USB VID/PID) first.
+pub fn list_ports() -> Result<Vec<PortCandidate>, serialport::Error> {
+    let mut out: Vec<PortCandidate> = serialport::available_ports()?
+        .into_iter()
+        .map(|p| {
+            let (usb, serial_number, product) = match p.port_type {
+                serialport::SerialPortType::UsbPort(u) => {
+                    (Some((u.vid, u.pid)), u.serial_number, u.product)
+                }
+                _ => (None, None, None),
+            };
+            PortCandidate {
+                is_tangent: usb == Some((TANGENT_USB_VID, TANGENT_USB_PID)),
+                path: p.port_name,
+                usb,
+                serial_number,
+                product,
+            }
+        })
+        .collect();
+    out.sort_by(|a, b| b.is_tangent.cmp(&a.is_tangent).then(a.path.cmp(&b.path)));
+    Ok(out)
+}
+
+/// The USB serial number of the port at `path`, if the system knows one.
+pub fn usb_serial_number(path: &str) -> Option<String> {
+    let canonical = std::fs::canonicalize(path).ok();
+    list_ports().ok()?.into_iter().find_map(|p| {
+        let same = p.path == path || std::fs::canonicalize(&p.path).ok() == canonical;
+        if same {
+            p.serial_number
+        } else {
+            None
+        }
+    })
+}
+
+/// A stable id for the device in the field log: its USB serial number, else the board.
+pub fn device_id(path: &str, identity: &DeviceIdentity) -> String {
+    usb_serial_number(path).unwrap_or_else(|| match identity.board {
+        Board::H743 => "H743".to_string(),
+        Board::Emulated => "emulated".to_string(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tangent_core::protocol::Method;
+
+    fn r(seq: u32) -> Reading {
+        Reading {
+            seq,
+            timestamp_ms: seq as u64 * 10,
+            calib_id: 1,
+            method: Method::CircleFit,
+            diameter_m: 0.3,
+            uncertainty_m: 0.001,
+            distance_m: 1.0,
+            tilt_rad: 0.0,
+            flags: 0,
+            exposure_us: 100,
+            stats: None,
+        }
+    }
+
+    #[test]
+    fn tracker_orders_dedups_and_gives_up_on_lost() {
+        let mut t = SeqTracker::default();
+        assert!(!t.accept(r(1)));
+        assert!(t.accept(r(1)));
+        assert!(!t.accept(r(4)));
+        assert!(t.has_gap());
+        assert!(!t.accept(r(3)));
+        assert!(t.accept(r(3)));
+        let seqs: Vec<u32> = t.ready.iter().map(|r| r.seq).collect();
+        assert_eq!(seqs, [1]);
+        // History ended at 6 without 2, 5, 6: they are lost; 3 and 4 come out in order.
+        assert_eq!(t.give_up_until(6), vec![(2, 2), (5, 6)]);
+        let seqs: Vec<u32> = t.ready.iter().map(|r| r.seq).collect();
+        assert_eq!(seqs, [1, 3, 4]);
+        assert_eq!(t.last, 6);
+        assert!(!t.has_gap());
+    }
+}
