@@ -247,6 +247,56 @@ impl CalibrationToml {
     }
 }
 
+impl CameraToml {
+    /// The core camera, validated (`Camera::validate`: positive focal lengths, distortion
+    /// one-to-one over the image).
+    pub fn to_camera(&self) -> Result<Camera, CalibrationFileError> {
+        let d = self.distortion;
+        let camera = Camera {
+            width: self.width_px,
+            height: self.height_px,
+            fx: self.fx_px as Real,
+            fy: self.fy_px as Real,
+            cx: self.cx_px as Real,
+            cy: self.cy_px as Real,
+            distortion: Distortion {
+                k1: d.k1 as Real,
+                k2: d.k2 as Real,
+                k3: d.k3 as Real,
+                p1: d.p1 as Real,
+                p2: d.p2 as Real,
+            },
+        };
+        camera
+            .validate()
+            .map_err(|e| CalibrationFileError::Invalid(CalibrationError::Camera(e)))?;
+        Ok(camera)
+    }
+}
+
+/// The camera part of a calibration file: `id` and `[camera]`, with or without
+/// `[[planes]]` (`docs/formats.md`, "Camera-only calibration"). This is what
+/// `tangent calibrate camera` writes before the laser planes are calibrated, and what
+/// `tangent calibrate laser --camera FILE` reads; planes present are parsed and validated
+/// too (a broken file is rejected, not half-read) and returned as they are.
+pub fn parse_camera(text: &str) -> Result<(u32, Camera, Vec<PlaneToml>), CalibrationFileError> {
+    let file: CalibrationToml = toml::from_str(text).map_err(|e| map_toml_error(&e, text))?;
+    let camera = file.camera.to_camera()?;
+    if !file.planes.is_empty() {
+        file.to_calibration()?;
+    }
+    Ok((file.id, camera, file.planes))
+}
+
+/// Reads a camera-only (or complete) calibration file; see [`parse_camera`].
+pub fn read_camera(path: &Path) -> Result<(u32, Camera, Vec<PlaneToml>), CalibrationFileError> {
+    let text = std::fs::read_to_string(path).map_err(|source| CalibrationFileError::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    parse_camera(&text)
+}
+
 /// Maps a `toml` deserialisation error to the precise variants.
 ///
 /// serde reports unknown and missing fields only as messages (`unknown field `x`, expected

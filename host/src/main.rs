@@ -18,6 +18,18 @@ enum Command {
     // Each variant: `Name(cli::name::Args)`; keep one per line, alphabetical.
     /// Camera and laser-plane calibration (`calibrate camera`, `calibrate laser`).
     Calibrate(cli::calibrate::Args),
+    /// Store the calibration on the device or read it back (`calib push|pull`).
+    Calib(cli::calib::Args),
+    /// List the serial ports that look like a Tangent.
+    Devices(cli::devices::Args),
+    /// Build the firmware and flash it through probe-rs.
+    Flash(cli::flash::Args),
+    /// Receive readings from the device, print them and append them to the field log.
+    Listen(cli::listen::Args),
+    /// The field log (`log export --format csv|tsv|json`).
+    Log(cli::log::Args),
+    /// Record raw frame pairs from the device as capture directories.
+    Record(cli::record::Args),
     /// Plot the error model's predicted diameter error against distance (PNG).
     Accuracy(cli::accuracy::Args),
     /// Accuracy against the simulator's truth on fresh random stems (writes docs/accuracy.md).
@@ -37,6 +49,12 @@ fn main() -> std::process::ExitCode {
     let result: anyhow::Result<std::process::ExitCode> = match cli.command {
         // Each arm: `Command::Name(args) => cli::name::run(args),`
         Command::Calibrate(args) => cli::calibrate::run(args),
+        Command::Calib(args) => cli::calib::run(args),
+        Command::Devices(args) => cli::devices::run(args),
+        Command::Flash(args) => cli::flash::run(args),
+        Command::Listen(args) => cli::listen::run(args),
+        Command::Log(args) => cli::log::run(args),
+        Command::Record(args) => cli::record::run(args),
         Command::Accuracy(args) => cli::accuracy::run(args),
         Command::Evaluate(args) => cli::evaluate::run(args),
         Command::Inspect(args) => cli::inspect::run(args),

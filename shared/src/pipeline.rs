@@ -419,7 +419,7 @@ pub fn difference_noise(histogram: &[u32]) -> Real {
         return 0.0;
     }
     let two_pi: Real = 2.0 * crate::real::PI;
-    two_pi.sqrt() * (sum as Real / n as Real)
+    <Real as crate::real::Float>::sqrt(two_pi) * (sum as Real / n as Real)
 }
 
 /// Runs the image part of the chain and triangulates the curves: `off` and `on` are the
@@ -472,7 +472,7 @@ pub fn extract_profile<P: Pixel>(
     //    least `threshold_snr` noise σ's and `min_threshold` grey levels.
     let auto = config.threshold.threshold(&ws.histogram[..hist_len])?;
     let relative = (config.relative_threshold * stats.max_difference as Real) as u32;
-    let noise_floor = (config.threshold_snr * noise).ceil();
+    let noise_floor: Real = <Real as crate::real::Float>::ceil(config.threshold_snr * noise);
     let noise_floor = if noise_floor.is_finite() && noise_floor > 0.0 { noise_floor as u32 } else { 0 };
     let t = auto.max(config.min_threshold).max(relative).max(noise_floor);
 
@@ -530,7 +530,19 @@ pub fn extract_profile<P: Pixel>(
         // A clipped laser-on pixel shows as full scale minus the ambient level (see ExtractParams).
         extract_params.saturation = Some(full_scale.saturating_sub(stats.off_mean as u32 + 1));
     }
-    let n = curve::extract(&diff, &labels, &labels_used[..n_used], &extract_params, ws.curve)?;
+    // Only the union of the used objects' bounding boxes holds their labels: scanning it
+    // instead of every column's `height` labels gives the same points (curve::extract_window).
+    let (mut x0, mut x1, mut y0, mut y1) = (usize::MAX, 0usize, usize::MAX, 0usize);
+    for &label in &labels_used[..n_used] {
+        // features[i].label == i + 1 (segment::Segmentation).
+        if let Some(f) = objects.get((label as usize).wrapping_sub(1)).filter(|f| f.pixel_count > 0) {
+            x0 = x0.min(f.min_x as usize);
+            x1 = x1.max(f.max_x as usize + 1);
+            y0 = y0.min(f.min_y as usize);
+            y1 = y1.max(f.max_y as usize + 1);
+        }
+    }
+    let n = curve::extract_window(&diff, &labels, &labels_used[..n_used], x0..x1, y0..y1, &extract_params, ws.curve)?;
     need("points", n, ws.points.len())?;
 
     // Reorder in place so that each plane's points are contiguous and ordered by column:
@@ -909,5 +921,36 @@ mod tests {
         b.points.truncate(10);
         let err = extract_profile(&off_f, &on_f, &cal, &PipelineConfig::default(), &mut b.ws()).unwrap_err();
         assert!(matches!(err, PipelineError::WorkspaceTooSmall { buffer: "points", .. }), "{err:?}");
+    }
+
+    /// `difference_noise` recovers σ of Gaussian noise from the clamped difference's histogram
+    /// (E[max(X,0)] = σ/√(2π)); 1-DN rounding adds ≈ 1/12 DN² of variance, so the tolerance
+    /// is 5 % at σ = 3 DN. A dim stripe (12 DN, below the old fixed 20 DN contrast floor)
+    /// over that noise's equivalent at σ ≈ 0.8 DN is measured, not reported as dark.
+    #[test]
+    fn contrast_test_is_relative_to_the_noise() {
+        let mut hist = vec![0u32; 256];
+        let mut rng = crate::solvers::circle::tests::Rng::new(7);
+        let sigma = 3.0;
+        for _ in 0..200_000 {
+            let x = (sigma * rng.gauss()).round().max(0.0) as usize;
+            hist[x.min(255)] += 1;
+        }
+        let est = difference_noise(&hist);
+        assert!((est / sigma - 1.0).abs() < 0.05, "σ̂ = {est}");
+        assert_eq!(difference_noise(&[0; 4]), 0.0);
+
+        let cal = calibration(1);
+        let (off, mut on) = render(&cal, &[0], 2.5, 300..450, 12.0, 4);
+        // ±1 DN noise on the laser-on frame (σ ≈ 0.8 DN).
+        for (i, v) in on.iter_mut().enumerate() {
+            let n = (i * 2_654_435_761usize >> 7) % 3;
+            *v = (*v as i32 + n as i32 - 1).clamp(0, 255) as u8;
+        }
+        let (off_f, on_f) = frames(&off, &on);
+        let mut b = Buffers::new(1);
+        let mut ws = b.ws();
+        let prof = extract_profile(&off_f, &on_f, &cal, &PipelineConfig::default(), &mut ws).unwrap();
+        assert!(prof.points(ws.points, 0).len() >= 140, "{:?}", prof.plane_points);
     }
 }

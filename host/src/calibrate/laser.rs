@@ -8,13 +8,16 @@
 //! (iteratively reweighted orthogonal regression with Tukey's biweight). The repeatability
 //! study (thesis §6.3.4) is a leave-one-pose-out jackknife of baseline, tilt and roll.
 
+use image::GrayImage;
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use tangent_core::camera::Camera;
 use tangent_core::laser_plane::LaserPlane;
 use tangent_core::peaks::{self, DEFAULT_ESTIMATOR};
 use tangent_core::real::{Vec2, Vec3};
 
-use super::{zhang, Board, CalibrateError, Pose, View};
+use super::{corners, zhang, Board, CalibrateError, Pose, View};
+use crate::capture::Capture;
+use crate::pgm::Pgm;
 
 /// Fewest stripe points a plane fit accepts: three define a plane, but a calibration from
 /// a handful of pixels would be dominated by their noise; 50 is a fraction of one stripe.
@@ -428,4 +431,104 @@ pub fn calibrate_plane(
         per_pose,
         repeatability,
     })
+}
+
+/// A PGM frame as an 8-bit grey image for the corner detector (scaled by `255 / maxval`)
+/// and as raw `f64` samples for the stripe (no rescaling: the stripe threshold is relative).
+pub fn pgm_gray(p: &Pgm) -> (GrayImage, Vec<f64>) {
+    let raw = p.to_u16();
+    let scale = 255.0 / p.maxval.max(1) as f64;
+    let bytes = raw
+        .iter()
+        .map(|&v| (v as f64 * scale).round().min(255.0) as u8)
+        .collect();
+    let img = GrayImage::from_raw(p.width as u32, p.height as u32, bytes).unwrap_or_default();
+    (img, raw.iter().map(|&v| v as f64).collect())
+}
+
+/// One board capture prepared for the laser calibration: the board's corners (laser-off
+/// frame) and, per laser-on frame lighting a single laser, that laser's stripe pixels.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BoardCapture {
+    /// The laser-off frame (8-bit), for the report.
+    pub image: GrayImage,
+    /// Corners of the board in the laser-off frame.
+    pub view: View,
+    /// `(laser index, stripe pixels)` per single-laser laser-on frame.
+    pub stripes: Vec<(usize, Vec<Vec2>)>,
+}
+
+/// Extracts the board corners and the stripes of a capture (`docs/calibration.md`, §8).
+/// Frames lighting several lasers at once are ignored (their stripes cannot be told
+/// apart by the calibration); an error names what is missing.
+pub fn board_capture(
+    camera: &Camera,
+    board: &Board,
+    capture: &Capture,
+    name: &str,
+) -> Result<BoardCapture, String> {
+    let (off_img, off) = pgm_gray(capture.off_frame());
+    if (off_img.width(), off_img.height()) != (camera.width, camera.height) {
+        return Err(format!(
+            "frame {}x{} differs from the camera's {}x{}",
+            off_img.width(),
+            off_img.height(),
+            camera.width,
+            camera.height
+        ));
+    }
+    let view = corners::detect(&off_img, board, name).map_err(|e| format!("board: {e}"))?;
+    let mut stripes = Vec::new();
+    for (lasers, frame) in capture.on_frames() {
+        let [k] = lasers[..] else { continue };
+        let (_, on) = pgm_gray(frame);
+        if on.len() != off.len() {
+            return Err("laser-on and laser-off frames differ in size".into());
+        }
+        let diff: Vec<f64> = on.iter().zip(&off).map(|(a, b)| a - b).collect();
+        stripes.push((k, stripe_pixels(&diff, frame.width, frame.height)));
+    }
+    if stripes.is_empty() {
+        return Err("no laser-on frame lights a single laser".into());
+    }
+    Ok(BoardCapture {
+        image: off_img,
+        view,
+        stripes,
+    })
+}
+
+/// Calibrates every laser seen in `captures`: plane `k` from the frames lighting laser `k`
+/// alone, with the default source point (see [`laser_plane`]). Lasers must be numbered
+/// `0..n` without gaps (plane `i` of the calibration is laser output `i`).
+pub fn calibrate_lasers(
+    camera: &Camera,
+    board: &Board,
+    captures: &[BoardCapture],
+) -> Result<Vec<LaserCalibration>, CalibrateError> {
+    let n = captures
+        .iter()
+        .flat_map(|c| c.stripes.iter().map(|s| s.0 + 1))
+        .max()
+        .unwrap_or(0);
+    if n == 0 {
+        return Err(CalibrateError::TooFewViews {
+            found: 0,
+            needed: 2,
+        });
+    }
+    (0..n)
+        .map(|k| {
+            let poses: Vec<(View, Vec<Vec2>)> = captures
+                .iter()
+                .flat_map(|c| {
+                    c.stripes
+                        .iter()
+                        .filter(|s| s.0 == k)
+                        .map(|s| (c.view.clone(), s.1.clone()))
+                })
+                .collect();
+            calibrate_plane(camera, board, &poses, None)
+        })
+        .collect()
 }

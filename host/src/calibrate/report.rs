@@ -1,7 +1,8 @@
 //! The calibration report: text summary and PNG figures.
 //!
-//! Figures are drawn directly with the `image` crate (no text in them, so no font is needed
-//! on the machine); the text report says what each figure shows.
+//! Figures are drawn with the `image` crate; their captions with plotters and the font
+//! shipped with the crate ([`crate::plot::init_fonts`]), so no system font is needed. The
+//! text report says in full what each figure shows.
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -9,7 +10,7 @@ use std::path::Path;
 use image::{GrayImage, Rgb, RgbImage};
 use tangent_core::real::Vec2;
 
-use super::laser::LaserCalibration;
+use super::laser::{BoardCapture, LaserCalibration};
 use super::refine::{CameraCalibration, INTRINSIC_NAMES};
 
 /// Magnification of the residual vectors drawn on the per-view overlays.
@@ -301,11 +302,111 @@ pub fn write_camera_report(
         "view_NN.png: detected corners (green) and residuals magnified {RESIDUAL_MAGNIFICATION}x (red), views in the order above.\n"
     ));
     std::fs::write(dir.join("report.txt"), text)?;
-    summary_figure(cal).save(dir.join("residuals.png"))?;
+    let mut summary = summary_figure(cal);
+    caption(
+        &mut summary,
+        &format!(
+            "corner residuals (circles 0.25/0.5/1 px) | RMS per view, overall {:.3} px",
+            cal.rms
+        ),
+    );
+    summary.save(dir.join("residuals.png"))?;
     for (k, img) in images.iter().enumerate() {
         if let (Some(img), Some(res)) = (img, cal.residuals.get(k)) {
-            view_overlay(img, res).save(dir.join(format!("view_{k:02}.png")))?;
+            let mut fig = view_overlay(img, res);
+            let name = cal.view_names.get(k).map_or("", String::as_str);
+            let rms = cal.per_view_rms.get(k).copied().unwrap_or(f64::NAN);
+            caption(
+                &mut fig,
+                &format!("{name}: RMS {rms:.3} px, residuals x{RESIDUAL_MAGNIFICATION}"),
+            );
+            fig.save(dir.join(format!("view_{k:02}.png")))?;
         }
+    }
+    Ok(())
+}
+
+/// Colours of the stripes of lasers 0, 1, 2, 3 on the laser report figures.
+const LASER_COLOURS: [Rgb<u8>; 4] = [
+    Rgb([255, 40, 40]),
+    Rgb([40, 140, 255]),
+    Rgb([0, 200, 0]),
+    Rgb([220, 0, 220]),
+];
+
+/// Writes a caption in the top-left corner of a figure (white on a dark band), with the
+/// shipped font. Drawing errors only lose the caption, never the figure.
+pub fn caption(img: &mut RgbImage, text: &str) {
+    use plotters::prelude::*;
+    crate::plot::init_fonts();
+    let (w, h) = img.dimensions();
+    for y in 0..h.min(22) {
+        for x in 0..w {
+            let p = img.get_pixel_mut(x, y);
+            p.0 = p.0.map(|c| c / 4);
+        }
+    }
+    let root = BitMapBackend::with_buffer(img, (w, h)).into_drawing_area();
+    let style = ("sans-serif", 16).into_font().color(&WHITE);
+    let _ = root.draw(&Text::new(text.to_string(), (6, 3), style));
+    let _ = root.present();
+}
+
+/// Per capture figure of the laser calibration: the laser-off frame (dimmed), the detected
+/// corners (green crosses) and each laser's stripe pixels (red = laser 0, blue = laser 1,
+/// green = 2, magenta = 3), captioned.
+pub fn laser_capture_figure(capture: &BoardCapture) -> RgbImage {
+    let mut out = RgbImage::from_fn(capture.image.width(), capture.image.height(), |x, y| {
+        let v = (capture.image.get_pixel(x, y)[0] as f64 * 0.6) as u8;
+        Rgb([v, v, v])
+    });
+    for c in &capture.view.corners {
+        let p = c.pixel;
+        let g = Rgb([0, 230, 0]);
+        line(&mut out, p - Vec2::new(4.0, 0.0), p + Vec2::new(4.0, 0.0), g);
+        line(&mut out, p - Vec2::new(0.0, 4.0), p + Vec2::new(0.0, 4.0), g);
+    }
+    for (k, pixels) in &capture.stripes {
+        let colour = LASER_COLOURS[k % LASER_COLOURS.len()];
+        for p in pixels {
+            put(&mut out, p.x.round() as i64, p.y.round() as i64, colour);
+        }
+    }
+    let stripes: Vec<String> = capture
+        .stripes
+        .iter()
+        .map(|(k, p)| format!("laser {k}: {} px", p.len()))
+        .collect();
+    caption(
+        &mut out,
+        &format!(
+            "{}: {} corners; {}",
+            capture.view.name,
+            capture.view.corners.len(),
+            stripes.join(", ")
+        ),
+    );
+    out
+}
+
+/// Writes `laser-report.txt` (the given text plus a legend) and `capture_NN.png` per
+/// capture ([`laser_capture_figure`]) into `dir`, creating it.
+pub fn write_laser_report(
+    dir: &Path,
+    text: &str,
+    captures: &[BoardCapture],
+    cals: &[LaserCalibration],
+) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir)?;
+    let mut text = text.to_string();
+    let _ = writeln!(
+        text,
+        "\nFigures: capture_NN.png, one per capture in the order given: laser-off frame, detected corners (green), stripe pixels of laser 0 (red), 1 (blue), 2 (green), 3 (magenta). {} plane(s) calibrated.",
+        cals.len()
+    );
+    std::fs::write(dir.join("laser-report.txt"), text)?;
+    for (k, c) in captures.iter().enumerate() {
+        laser_capture_figure(c).save(dir.join(format!("capture_{k:02}.png")))?;
     }
     Ok(())
 }

@@ -11,13 +11,9 @@ use std::process::ExitCode;
 
 use anyhow::{bail, Context as _};
 use clap::Subcommand;
-use tangent_core::real::Vec2;
-use tangent_host::calibrate::{corners, laser, refine, report, Board, View};
-use tangent_host::calibration_file::{
-    self, CalibrationToml, CameraToml, DistortionToml, PlaneToml,
-};
+use tangent_host::calibrate::{corners, laser, refine, report, Board};
+use tangent_host::calibration_file::{self, CalibrationToml, CameraToml, DistortionToml};
 use tangent_host::capture::Capture;
-use tangent_host::pgm::Pgm;
 
 /// Arguments of `tangent calibrate`.
 #[derive(clap::Args, Debug)]
@@ -67,7 +63,7 @@ enum Which {
         /// Calibration file to write (default: update the --camera file).
         #[arg(long)]
         out: Option<PathBuf>,
-        /// Directory for the text report.
+        /// Directory for the report (text, and one PNG per capture: corners and stripes).
         #[arg(long)]
         report: Option<PathBuf>,
     },
@@ -100,13 +96,6 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             report_dir.as_deref(),
         ),
     }
-}
-
-/// Reads a calibration file leniently: a camera-only file (no planes) is accepted.
-fn read_lenient(path: &Path) -> anyhow::Result<CalibrationToml> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    toml::from_str::<CalibrationToml>(&text).with_context(|| format!("parsing {}", path.display()))
 }
 
 fn camera(
@@ -162,15 +151,16 @@ fn camera(
     let cal = refine::calibrate_camera(&views, &board)?;
     print!("{}", report::camera_text(&cal, &skipped));
 
+    // An existing output keeps its id and planes (re-calibrating the camera of a unit).
     let existing = if out.exists() {
-        Some(read_lenient(out)?)
+        Some(calibration_file::read_camera(out)?)
     } else {
         None
     };
     let c = cal.camera;
     let d = c.distortion;
     let file = CalibrationToml {
-        id: id.or(existing.as_ref().map(|e| e.id)).unwrap_or(0),
+        id: id.or(existing.as_ref().map(|e| e.0)).unwrap_or(0),
         camera: CameraToml {
             width_px: c.width,
             height_px: c.height,
@@ -186,7 +176,7 @@ fn camera(
                 p2: d.p2,
             },
         },
-        planes: existing.map(|e| e.planes).unwrap_or_default(),
+        planes: existing.map(|e| e.2).unwrap_or_default(),
     };
     std::fs::write(out, toml::to_string(&file)?)
         .with_context(|| format!("writing {}", out.display()))?;
@@ -198,19 +188,6 @@ fn camera(
     Ok(ExitCode::SUCCESS)
 }
 
-/// A PGM frame as an 8-bit grey image (scaled by 255 / maxval) and as `f64` samples.
-fn pgm_to_gray(p: &Pgm) -> (image::GrayImage, Vec<f64>) {
-    let raw = p.to_u16();
-    let scale = 255.0 / p.maxval.max(1) as f64;
-    let bytes = raw
-        .iter()
-        .map(|&v| (v as f64 * scale).round().min(255.0) as u8)
-        .collect();
-    let img =
-        image::GrayImage::from_raw(p.width as u32, p.height as u32, bytes).unwrap_or_default();
-    (img, raw.iter().map(|&v| v as f64).collect())
-}
-
 fn laser_cmd(
     captures: &[PathBuf],
     camera_file: &Path,
@@ -220,101 +197,54 @@ fn laser_cmd(
     report_dir: Option<&Path>,
 ) -> anyhow::Result<ExitCode> {
     let board = Board::parse(board, square).map_err(anyhow::Error::msg)?;
-    let mut file = read_lenient(camera_file)?;
-    let c = &file.camera;
-    let camera = tangent_core::camera::Camera {
-        width: c.width_px,
-        height: c.height_px,
-        fx: c.fx_px,
-        fy: c.fy_px,
-        cx: c.cx_px,
-        cy: c.cy_px,
-        distortion: tangent_core::camera::Distortion {
-            k1: c.distortion.k1,
-            k2: c.distortion.k2,
-            k3: c.distortion.k3,
-            p1: c.distortion.p1,
-            p2: c.distortion.p2,
-        },
-    };
-    camera
-        .validate()
-        .map_err(|e| anyhow::anyhow!("camera in {}: {e}", camera_file.display()))?;
+    let (id, camera, _) = calibration_file::read_camera(camera_file)
+        .with_context(|| format!("camera file {}", camera_file.display()))?;
 
-    // Per laser index: (board view, stripe pixels) of every pose.
-    let mut per_plane: Vec<Vec<(View, Vec<Vec2>)>> = Vec::new();
+    let mut prepared = Vec::new();
+    let mut skipped = Vec::new();
     for dir in captures {
         let name = dir.display().to_string();
-        let cap = match Capture::read(dir) {
-            Ok(c) => c,
+        let got = Capture::read(dir)
+            .map_err(|e| e.to_string())
+            .and_then(|cap| laser::board_capture(&camera, &board, &cap, &name));
+        match got {
+            Ok(c) => {
+                for (k, px) in &c.stripes {
+                    eprintln!(
+                        "{name}: laser {k}: {} stripe pixels, {} corners",
+                        px.len(),
+                        c.view.corners.len()
+                    );
+                }
+                prepared.push(c);
+            }
             Err(e) => {
                 eprintln!("skipping {name}: {e}");
-                continue;
+                skipped.push((name, e));
             }
-        };
-        let (off_img, off) = pgm_to_gray(cap.off_frame());
-        if (off_img.width(), off_img.height()) != (camera.width, camera.height) {
-            eprintln!("skipping {name}: frame size differs from the camera's");
-            continue;
-        }
-        let view = match corners::detect(&off_img, &board, &name) {
-            Ok(v) => v,
-            Err(e) => {
-                eprintln!("skipping {name}: board: {e}");
-                continue;
-            }
-        };
-        for (lasers, frame) in cap.on_frames() {
-            if lasers.len() != 1 {
-                eprintln!(
-                    "{name}: skipping a frame lighting {} lasers (calibrate one laser per frame)",
-                    lasers.len()
-                );
-                continue;
-            }
-            let (_, on) = pgm_to_gray(frame);
-            let diff: Vec<f64> = on.iter().zip(&off).map(|(a, b)| a - b).collect();
-            let pixels = laser::stripe_pixels(&diff, frame.width, frame.height);
-            let k = lasers[0];
-            if per_plane.len() <= k {
-                per_plane.resize_with(k + 1, Vec::new);
-            }
-            eprintln!(
-                "{name}: laser {k}: {} stripe pixels, {} corners",
-                pixels.len(),
-                view.corners.len()
-            );
-            per_plane[k].push((view.clone(), pixels));
         }
     }
-    if per_plane.is_empty() {
+    if prepared.is_empty() {
         bail!("no usable capture");
     }
+    let cals = laser::calibrate_lasers(&camera, &board, &prepared)?;
     let mut text = String::new();
-    let mut planes = Vec::new();
-    for (k, poses) in per_plane.iter().enumerate() {
-        if poses.is_empty() {
-            bail!("laser {k}: no capture lights it alone; planes must be calibrated 0..n");
-        }
-        let cal = laser::calibrate_plane(&camera, &board, poses, None)
-            .with_context(|| format!("laser {k}"))?;
-        text.push_str(&report::laser_text(k, &cal));
-        let p = cal.plane;
-        planes.push(PlaneToml {
-            normal: [p.normal.x, p.normal.y, p.normal.z],
-            offset_m: p.offset,
-            source_m: [p.source.x, p.source.y, p.source.z],
-        });
+    for (name, why) in &skipped {
+        text.push_str(&format!("skipped {name}: {why}\n"));
+    }
+    for (k, cal) in cals.iter().enumerate() {
+        text.push_str(&report::laser_text(k, cal));
     }
     print!("{text}");
-    file.planes = planes;
-    let calibration = file.to_calibration()?;
+    let planes: Vec<_> = cals.iter().map(|c| c.plane).collect();
+    let calibration = tangent_core::calibration::Calibration::new(id, camera, &planes)
+        .map_err(|e| anyhow::anyhow!("calibration: {e:?}"))?;
     let out = out.unwrap_or(camera_file);
     calibration_file::write(out, &calibration)?;
     eprintln!("wrote {}", out.display());
     if let Some(dir) = report_dir {
-        std::fs::create_dir_all(dir)?;
-        std::fs::write(dir.join("laser-report.txt"), &text)?;
+        report::write_laser_report(dir, &text, &prepared, &cals)?;
+        eprintln!("report in {}", dir.display());
     }
     Ok(ExitCode::SUCCESS)
 }

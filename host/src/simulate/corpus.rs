@@ -13,7 +13,7 @@ use tangent_core::calibration::Calibration;
 use tangent_core::camera::Distortion;
 
 use super::render::{HandMotion, Lighting};
-use super::scene::{Cylinder, Object, Plane, Road, Sphere, Texture, Wave};
+use super::scene::{Board, Cylinder, Object, Plane, Road, Sphere, Texture, Wave};
 use super::{simulate, Exposure, SimError, SimParams, SimSpec};
 use crate::capture::Mode;
 
@@ -568,7 +568,89 @@ pub fn entries() -> Vec<CorpusEntry> {
         ])],
         |_| {},
     );
+    // --- laser calibration: the chessboard at six poses, two planes in separate frames ---------
+    for (k, pose) in BOARD_POSES.iter().enumerate() {
+        b.add(
+            &format!("board-pose-{:02}", k + 1),
+            Mode::Wall,
+            &format!(
+                "9x6 chessboard (25 mm) centred {:.2} m ahead, rotated ({:.0}°, {:.0}°, {:.0}°), \
+                 lab light, two planes in separate frames (laser calibration)",
+                pose[2], pose[3], pose[4], pose[5]
+            ),
+            two_plane_calibration(),
+            vec![calibration_board(pose), lab_wall()],
+            |p| {
+                p.separate_frames = true;
+                p.lighting = lab_light();
+            },
+        );
+    }
     b.entries
+}
+
+/// The corpus's board poses: centre `(x, y, z)` (metres, camera frame) and rotation
+/// `(rx, ry, rz)` (degrees, [`nalgebra::Rotation3::from_euler_angles`] order). Depths
+/// 0.8–1.25 m and tilts up to 30° about both in-plane axes (a plane is fixed by several
+/// non-parallel stripe lines; depth spread fixes its tilt); each centre is placed between
+/// the two reference planes' stripes (`y ≈ 0.125 − z/15`), so both cross the board.
+pub const BOARD_POSES: [[f64; 6]; 6] = [
+    [0.0, 0.072, 0.80, 0.0, 0.0, 0.0],
+    [-0.05, 0.065, 0.90, 25.0, 0.0, 5.0],
+    [0.05, 0.058, 1.00, -20.0, 25.0, 0.0],
+    [0.0, 0.052, 1.10, 10.0, -30.0, -8.0],
+    [-0.08, 0.042, 1.25, -10.0, 15.0, 10.0],
+    [0.08, 0.068, 0.85, 30.0, -15.0, 0.0],
+];
+
+/// The calibration chessboard of the corpus (9 × 6 inner corners, 25 mm squares, 15 mm
+/// border) at a pose of [`BOARD_POSES`].
+pub fn calibration_board(pose: &[f64; 6]) -> Object {
+    let [x, y, z, rx, ry, rz] = *pose;
+    let r =
+        nalgebra::Rotation3::from_euler_angles(rx.to_radians(), ry.to_radians(), rz.to_radians());
+    let (cols, rows, s) = (9usize, 6usize, 0.025);
+    let centre_b = nalgebra::Vector3::new(
+        (cols - 1) as f64 * s / 2.0,
+        (rows - 1) as f64 * s / 2.0,
+        0.0,
+    );
+    let origin = nalgebra::Vector3::new(x, y, z) - r * centre_b;
+    let (ax, ay) = (r * nalgebra::Vector3::x(), r * nalgebra::Vector3::y());
+    Object::Board(Board {
+        origin_m: [origin.x, origin.y, origin.z],
+        x_axis: [ax.x, ax.y, ax.z],
+        y_axis: [ay.x, ay.y, ay.z],
+        square_m: s,
+        inner_corners: [cols, rows],
+        border_m: 0.015,
+        albedo: 0.8,
+        dark_albedo: 0.05,
+    })
+}
+
+/// A plaster wall 1.8 m ahead, behind the calibration board (the stripe runs on past the
+/// board; the calibration must keep only the points on the board).
+pub fn lab_wall() -> Object {
+    Object::Plane(Plane {
+        point_m: [0.0, 0.0, 1.8],
+        normal: [0.0, 0.0, -1.0],
+        albedo: 0.5,
+        texture: Texture::Stone,
+        texture_contrast: 0.2,
+    })
+}
+
+/// Indoor light for calibration: 2 W/m² diffuse in band, so the board is well exposed in
+/// the laser-off frame while the 1 mW stripe (≈ 0.9 W/m² at 1 m) still stands out on the
+/// light squares.
+pub fn lab_light() -> Lighting {
+    Lighting {
+        diffuse_w_m2: 2.0,
+        sun_w_m2: 0.0,
+        sun_direction: [0.0, -1.0, 0.0],
+        background_w_m2: 0.3,
+    }
 }
 
 /// A random stem in the product's envelope (for Monte-Carlo and accuracy runs, not the

@@ -120,6 +120,8 @@ struct Sample {
 struct Corner {
     /// Object hit (−1 nothing, −2 no valid ray).
     object: i64,
+    /// Reflectance region of the hit ([`Scene::region`]: a board's square, else 0).
+    region: i64,
     s: [f64; MAX_PLANES],
     w: [f64; MAX_PLANES],
 }
@@ -139,6 +141,7 @@ impl RenderSetup<'_> {
     fn corner(&self, u: f64, v: f64, motion: Option<&HandMotion>, lasers: bool) -> Corner {
         let mut c = Corner {
             object: -2,
+            region: 0,
             s: [f64::INFINITY; MAX_PLANES],
             w: [0.0; MAX_PLANES],
         };
@@ -150,6 +153,7 @@ impl RenderSetup<'_> {
             None => c.object = -1,
             Some(h) => {
                 c.object = h.object as i64;
+                c.region = self.scene.region(h.object, h.point);
                 if lasers {
                     for (i, p) in self.calibration.planes.iter().enumerate() {
                         c.s[i] = p.signed_distance(h.point);
@@ -245,7 +249,9 @@ impl RenderSetup<'_> {
                             corners[j + 1][i],
                             corners[j + 1][i + 1],
                         ];
-                        let edge = cs.iter().any(|c| c.object != cs[0].object);
+                        let edge = cs
+                            .iter()
+                            .any(|c| c.object != cs[0].object || c.region != cs[0].region);
                         let stripe = (0..nplanes).any(|p| {
                             lit[p] && {
                                 let lo = cs.iter().map(|c| c.s[p]).fold(f64::INFINITY, f64::min);

@@ -137,7 +137,46 @@ pub struct Road {
     pub texture_contrast: f64,
 }
 
-/// A scene object (`kind = "cylinder" | "sphere" | "plane" | "road"` in TOML).
+/// A planar chessboard calibration target: a finite rectangle of `(cols + 1) × (rows + 1)`
+/// alternating dark and light squares with a light border (`docs/simulator.md`, "Scene").
+///
+/// Board frame: inner corner `(i, j)` is at `origin_m + s·i·x + s·j·y` (`s` = `square_m`,
+/// `x`, `y` the unit axes), the same convention as `calibrate::Board::point`, so a capture's
+/// truth gives the board pose directly. Square `(a, b) = (⌊X/s⌋, ⌊Y/s⌋)`,
+/// `a ∈ −1..=cols−1`, `b ∈ −1..=rows−1`, is dark when `a + b` is even (the corner square
+/// `(−1, −1)` is dark, as on OpenCV's pattern).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Board {
+    /// Position of inner corner `(0, 0)` (metres).
+    pub origin_m: [f64; 3],
+    /// Direction of the board's `x` axis, along the `cols` inner corners (normalised on use).
+    pub x_axis: [f64; 3],
+    /// Direction of the board's `y` axis (made perpendicular to `x_axis` on use).
+    pub y_axis: [f64; 3],
+    /// Side of one square (metres).
+    pub square_m: f64,
+    /// Inner corners `[cols, rows]` (`[9, 6]` is OpenCV's 10 × 7-square pattern).
+    pub inner_corners: [usize; 2],
+    /// Width of the light border around the squares (metres).
+    pub border_m: f64,
+    /// Albedo of the light squares and the border at 650 nm.
+    #[serde(default = "default_board_light")]
+    pub albedo: f64,
+    /// Albedo of the dark squares (printer black ≈ 0.05).
+    #[serde(default = "default_board_dark")]
+    pub dark_albedo: f64,
+}
+
+fn default_board_light() -> f64 {
+    0.8
+}
+
+fn default_board_dark() -> f64 {
+    0.05
+}
+
+/// A scene object (`kind = "cylinder" | "sphere" | "plane" | "road" | "board"` in TOML).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum Object {
@@ -149,6 +188,8 @@ pub enum Object {
     Plane(Plane),
     /// A road surface.
     Road(Road),
+    /// A chessboard calibration target.
+    Board(Board),
 }
 
 /// Why a scene is invalid.
@@ -215,6 +256,17 @@ enum Shape {
         min_wavelength: f64,
         max_slope: f64,
     },
+    Board {
+        o: Vec3,
+        x: Vec3,
+        y: Vec3,
+        n: Vec3,
+        square: f64,
+        cols: usize,
+        rows: usize,
+        border: f64,
+        dark: f64,
+    },
 }
 
 #[derive(Debug, Clone)]
@@ -250,6 +302,7 @@ impl Scene {
                 Object::Sphere(s) => (s.albedo, s.texture, s.texture_contrast),
                 Object::Plane(p) => (p.albedo, p.texture, p.texture_contrast),
                 Object::Road(r) => (r.albedo, r.texture, r.texture_contrast),
+                Object::Board(b) => (b.albedo, Texture::None, 0.0),
             };
             if !(0.0..=1.0).contains(&albedo) || !(0.0..=1.0).contains(&contrast) {
                 return Err(bad("albedo and texture_contrast must be in [0, 1]"));
@@ -349,6 +402,38 @@ impl Scene {
                         max_slope,
                     }
                 }
+                Object::Board(b) => {
+                    let x = unit(b.x_axis).ok_or_else(|| bad("zero x_axis"))?;
+                    let y = v3(b.y_axis) - x * x.dot(&v3(b.y_axis));
+                    let yn = y.norm();
+                    if !(yn > 1e-9) {
+                        return Err(bad("y_axis is parallel to x_axis"));
+                    }
+                    let [cols, rows] = b.inner_corners;
+                    if cols < 2 || rows < 2 {
+                        return Err(bad("a board needs at least 2 × 2 inner corners"));
+                    }
+                    if !(b.square_m.is_finite() && b.square_m > 0.0)
+                        || !(b.border_m.is_finite() && b.border_m >= 0.0)
+                    {
+                        return Err(bad("square_m must be positive and border_m ≥ 0"));
+                    }
+                    if !(0.0..=1.0).contains(&b.dark_albedo) {
+                        return Err(bad("dark_albedo must be in [0, 1]"));
+                    }
+                    let y = y / yn;
+                    Shape::Board {
+                        o: v3(b.origin_m),
+                        x,
+                        y,
+                        n: x.cross(&y),
+                        square: b.square_m,
+                        cols,
+                        rows,
+                        border: b.border_m,
+                        dark: b.dark_albedo,
+                    }
+                }
             };
             out.push(Prepared {
                 shape,
@@ -399,6 +484,13 @@ impl Scene {
         let Some(o) = self.objects.get(object) else {
             return 0.0;
         };
+        if let Some((a, b)) = o.shape.board_square(point) {
+            return if (a + b).rem_euclid(2) == 0 {
+                board_dark(&o.shape)
+            } else {
+                o.albedo
+            };
+        }
         if o.texture == Texture::None || o.contrast == 0.0 {
             return o.albedo;
         }
@@ -418,7 +510,48 @@ impl Scene {
     }
 }
 
+impl Scene {
+    /// Reflectance region of `point` on object `object`: the square index of a board (a
+    /// different value for every square, 0 on its border), 0 on every other object. The
+    /// renderer supersamples pixels whose corners see different regions, so the squares'
+    /// edges are anti-aliased like object edges (`docs/simulator.md`, "Rendering").
+    pub fn region(&self, object: usize, point: Vec3) -> i64 {
+        self.objects
+            .get(object)
+            .and_then(|o| o.shape.board_square(point))
+            .map_or(0, |(a, b)| 1 + (a + 1) + (b + 1) * 1_000_003)
+    }
+}
+
+fn board_dark(shape: &Shape) -> f64 {
+    match shape {
+        Shape::Board { dark, .. } => *dark,
+        _ => 0.0,
+    }
+}
+
 impl Shape {
+    /// Square `(a, b)` of a board containing `p` (on its plane), `None` on the border or
+    /// for other shapes.
+    fn board_square(&self, p: Vec3) -> Option<(i64, i64)> {
+        let Shape::Board {
+            o,
+            x,
+            y,
+            square,
+            cols,
+            rows,
+            ..
+        } = self
+        else {
+            return None;
+        };
+        let rel = p - o;
+        let (a, b) = ((rel.dot(x) / square).floor(), (rel.dot(y) / square).floor());
+        let inside = a >= -1.0 && a <= *cols as f64 - 1.0 && b >= -1.0 && b <= *rows as f64 - 1.0;
+        inside.then_some((a as i64, b as i64))
+    }
+
     fn intersect(&self, o: Vec3, d: Vec3, t_max: f64) -> Option<(f64, Vec3)> {
         let accept = |t: f64| t.is_finite() && t > T_MIN / d.norm().max(1e-300) && t < t_max;
         match self {
@@ -574,6 +707,35 @@ impl Shape {
                 }
                 None
             }
+            Shape::Board {
+                o: p0,
+                x,
+                y,
+                n,
+                square,
+                cols,
+                rows,
+                border,
+                ..
+            } => {
+                let den = n.dot(&d);
+                if den.abs() < 1e-15 {
+                    return None;
+                }
+                let t = n.dot(&(p0 - o)) / den;
+                if !accept(t) {
+                    return None;
+                }
+                // Inside the rectangle: squares −1..=cols (−1..=rows) plus the border.
+                let rel = o + d * t - p0;
+                let (bx, by) = (rel.dot(x), rel.dot(y));
+                let lo = -square - border;
+                let (hx, hy) = (
+                    *cols as f64 * square + border,
+                    *rows as f64 * square + border,
+                );
+                (bx >= lo && bx <= hx && by >= lo && by <= hy).then_some((t, *n))
+            }
         }
     }
 
@@ -601,6 +763,10 @@ impl Shape {
                 (rel.dot(u), rel.dot(w))
             }
             Shape::Road { .. } => (p.x, p.y),
+            Shape::Board { o, x, y, .. } => {
+                let rel = p - o;
+                (rel.dot(x), rel.dot(y))
+            }
         }
     }
 }

@@ -1115,7 +1115,10 @@ pub fn edge_bias_sigma(t: &ThreeTangent, circle: &circle::Circle, sigma_fit: Rea
 fn choose(tt: Option<(Real, Real)>, fit: Option<(Real, Real, bool)>) -> Option<(bool, bool)> {
     match (tt, fit) {
         (None, None) => None,
-        (Some(_), None) => Some((false, false)),
+        // The three-tangent alone has no check on the fade-out of its edges (docs/cylinder.md
+        // §5b: biased low by up to tens of percent, and a fragment of the curve looks like a
+        // small stem): without a fit to judge it there is no trustworthy answer.
+        (Some(_), None) => None,
         (None, Some((_, _, short))) => {
             if short {
                 None
@@ -1769,5 +1772,52 @@ mod tests {
             },
         );
         assert_eq!(r.err(), Some(SolveError::RadiusOutOfRange));
+    }
+
+    /// The fade-out bias term: a three-tangent solution whose edges stop short of the true
+    /// grazing rays by `g` radians (each side) gets `∂r/∂α·g` from an exact fitted circle
+    /// (σ_fit = 0), and the fit's σ adds in quadrature through `∂α_f/∂R = 1/(L cos α_f)`.
+    #[test]
+    fn edge_bias_sigma_measures_the_fade_gap() {
+        let (c, r) = (Vec2::new(0.05, 2.0), 0.15);
+        let mut pts = std::vec![Vec2::zeros(); 400];
+        lit_arc(c, r, 400, &mut pts);
+        let l = c.norm();
+        let alpha_true = (r / l).asin();
+        // Drop the outer points until the aperture has lost about 1 % of α on each side.
+        let keep: std::vec::Vec<Vec2> = pts
+            .iter()
+            .copied()
+            .filter(|q| {
+                let psi = (q.x * c.y - q.y * c.x).atan2(q.dot(&c));
+                psi.abs() <= 0.99 * alpha_true
+            })
+            .collect();
+        let t = three_tangent(&keep, &ThreeTangentParams::default()).unwrap();
+        let gap = alpha_true - t.alpha;
+        assert!(gap > 0.0);
+        let (dr_da, _) = t.partials();
+        let exact = circle::Circle::new(c, r);
+        let b = edge_bias_sigma(&t, &exact, 0.0);
+        assert!(
+            (b - dr_da * gap).abs() <= 1e-6 * b + 64.0 * EPS,
+            "{b} vs {}",
+            dr_da * gap
+        );
+        // The three-tangent radius really is short by about that much.
+        assert!(
+            ((r - t.radius) - b).abs() < 0.05 * b,
+            "short by {} vs {b}",
+            r - t.radius
+        );
+        let sf = 1e-3;
+        let with_fit = edge_bias_sigma(&t, &exact, sf);
+        let s_af = sf / (l * alpha_true.cos());
+        assert!((with_fit - dr_da * gap.hypot(s_af)).abs() <= 1e-6 * with_fit);
+        // Source inside the circle: no grazing geometry, no term.
+        assert_eq!(
+            edge_bias_sigma(&t, &circle::Circle::new(Vec2::new(0.0, 0.1), 0.2), 0.0),
+            0.0
+        );
     }
 }

@@ -1,0 +1,80 @@
+//! `tangent calib push|pull`: store the calibration on the device, or read it back, as the
+//! calibration TOML file of `docs/formats.md`.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::{bail, Context, Result};
+use tangent_core::protocol::WireCalibration;
+use tangent_host::calibration_file;
+use tangent_host::link::{Link, LinkConfig};
+
+use super::devices::resolve_port;
+
+/// Arguments of `tangent calib`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(clap::Subcommand, Debug)]
+enum Command {
+    /// Store a calibration file on the device (validated there, then active); read back
+    /// and compared.
+    Push {
+        /// Serial port (default: the connected Tangent).
+        #[arg(long)]
+        port: Option<String>,
+        /// Calibration TOML (from `tangent calibrate`).
+        file: PathBuf,
+    },
+    /// Read the device's calibration as TOML (to FILE, or standard output).
+    Pull {
+        /// Serial port (default: the connected Tangent).
+        #[arg(long)]
+        port: Option<String>,
+        /// Where to write it.
+        file: Option<PathBuf>,
+    },
+}
+
+/// Runs `tangent calib …`.
+pub fn run(args: Args) -> Result<ExitCode> {
+    match args.command {
+        Command::Push { port, file } => {
+            let cal = calibration_file::read(&file)
+                .with_context(|| format!("cannot use {}", file.display()))?;
+            let wire = WireCalibration::from(&cal);
+            let path = resolve_port(port)?;
+            let mut link = Link::open(&path, LinkConfig::default())?;
+            link.write_calibration(&wire)?;
+            match link.read_calibration()? {
+                Some(back) if back == wire => {}
+                Some(_) => bail!("the device stored a different calibration than was sent: push again"),
+                None => bail!("the device acknowledged the calibration but does not report one"),
+            }
+            eprintln!("calibration {} stored on the device at {path} and verified", cal.id);
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Pull { port, file } => {
+            let path = resolve_port(port)?;
+            let mut link = Link::open(&path, LinkConfig::default())?;
+            let Some(wire) = link.read_calibration()? else {
+                bail!("the device at {path} has no calibration: push one with `tangent calib push`");
+            };
+            let cal = wire
+                .to_calibration()
+                .map_err(|e| anyhow::anyhow!("the device's calibration is invalid: {e:?}"))?;
+            let text = calibration_file::to_string(&cal);
+            match file {
+                Some(f) => {
+                    std::fs::write(&f, text).with_context(|| format!("cannot write {}", f.display()))?;
+                    eprintln!("calibration {} written to {}", cal.id, f.display());
+                }
+                None => print!("{text}"),
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+    }
+}
