@@ -47,6 +47,15 @@ pub const TANGENT_USB_PID: u16 = 0x7A6E;
 /// the board's UART would need it.
 pub const BAUD: u32 = 115_200;
 
+/// Readings the device keeps for `History` (the firmware's `HISTORY_LEN`, documented in
+/// `docs/protocol.md`). Missing readings older than this are given up at once; younger
+/// ones are asked for again.
+pub const DEVICE_HISTORY: u32 = 64;
+
+/// Replays in a row that bring none of the missing readings before they are given up
+/// anyway (a device with a shorter history than [`DEVICE_HISTORY`]).
+const MAX_FRUITLESS_REPLAYS: u32 = 6;
+
 /// How long one `read` on the port may block: bounds the latency of deadlines.
 const POLL: Duration = Duration::from_millis(20);
 
@@ -329,6 +338,8 @@ struct SeqTracker {
     ready: VecDeque<Reading>,
     /// Highest device timestamp seen (reboot detection).
     newest_ms: u64,
+    /// The last replay left readings missing that the device should still have.
+    recheck: bool,
 }
 
 impl SeqTracker {
@@ -351,33 +362,43 @@ impl SeqTracker {
     }
 
     fn has_gap(&self) -> bool {
-        !self.pending.is_empty()
+        !self.pending.is_empty() || self.recheck
     }
 
-    /// After a history replay that ended at `device_last`: everything the device issued up to
-    /// it that we still miss is lost; returns the missing ranges.
-    fn give_up_until(&mut self, device_last: u32) -> Vec<(u32, u32)> {
+    /// After a history replay that ended at `device_last`: the readings we still miss
+    /// that are older than `keep_from` are no longer on the device and are given up
+    /// (returned as ranges); younger ones stay missing (their replay frame was lost on the
+    /// wire) for the next replay.
+    fn give_up_before(&mut self, keep_from: u32, device_last: u32) -> Vec<(u32, u32)> {
         let mut lost = Vec::new();
         loop {
             self.drain();
             let next_have = self.pending.keys().next().copied();
-            let target = match next_have {
+            let missing_to = match next_have {
                 Some(s) => s - 1,
                 None if device_last > self.last => device_last,
                 None => break,
             };
-            if target > self.last {
-                lost.push((self.last + 1, target));
+            let target = missing_to.min(keep_from.saturating_sub(1));
+            if target <= self.last {
+                break;
             }
+            lost.push((self.last + 1, target));
             self.last = target;
         }
         lost
+    }
+
+    /// Whether readings up to `device_last` are still missing.
+    fn missing_up_to(&self, device_last: u32) -> bool {
+        self.has_gap() || device_last > self.last
     }
 
     fn restart(&mut self) {
         self.last = 0;
         self.pending.clear();
         self.newest_ms = 0;
+        self.recheck = false;
     }
 }
 
@@ -398,6 +419,7 @@ pub struct Link {
     counters: LinkCounters,
     bytes_in: usize,
     peer_version: Option<u8>,
+    fruitless_replays: u32,
     on_event: Option<Box<dyn FnMut(&LinkEvent) + Send>>,
 }
 
@@ -439,6 +461,7 @@ impl Link {
             counters: LinkCounters::default(),
             bytes_in: 0,
             peer_version: None,
+            fruitless_replays: 0,
             on_event: None,
         };
         link.handshake()?;
@@ -714,6 +737,10 @@ impl Link {
                             if self.seq.accept(*r) {
                                 self.counters.duplicates += 1;
                             }
+                            if !matches!(request, Request::Measure) {
+                                // A History replay (or a stream): more follows.
+                                continue;
+                            }
                         }
                         return Ok(reply);
                     }
@@ -744,6 +771,7 @@ impl Link {
     /// that fell out of its history.
     fn recover(&mut self) -> Result<(), LinkError> {
         self.counters.history_requests += 1;
+        self.seq.recheck = false;
         self.last_check_at = Instant::now();
         let after_seq = self.seq.last;
         let reply = self.request_inner(Request::History { after_seq }, "History", true)?;
@@ -758,9 +786,25 @@ impl Link {
             self.device_rebooted();
             return self.recover();
         }
-        for (from, to) in self.seq.give_up_until(last_seq) {
+        // The device keeps its last DEVICE_HISTORY readings: older missing ones are gone.
+        // Younger missing ones had their replay frame damaged: ask again, and give them up
+        // only if replay after replay does not bring them (a device with a shorter history).
+        let mut keep_from = last_seq.saturating_sub(DEVICE_HISTORY - 1).max(1);
+        if self.seq.last == after_seq && self.seq.missing_up_to(last_seq) {
+            self.fruitless_replays += 1;
+            if self.fruitless_replays >= MAX_FRUITLESS_REPLAYS {
+                keep_from = last_seq.saturating_add(1);
+            }
+        } else {
+            self.fruitless_replays = 0;
+        }
+        for (from, to) in self.seq.give_up_before(keep_from, last_seq) {
             self.counters.lost += (to - from + 1) as u64;
+            self.fruitless_replays = 0;
             self.emit(LinkEvent::Unrecoverable { from, to });
+        }
+        if self.seq.missing_up_to(last_seq) {
+            self.seq.recheck = true;
         }
         Ok(())
     }
@@ -901,21 +945,26 @@ impl Link {
     ) -> Result<Vec<u8>, LinkError> {
         let total = info.width as usize * info.height as usize;
         let mut data = Vec::with_capacity(total);
+        // Chunk size adapts to the line: a chunk frame lost to noise halves it (a damaged
+        // byte costs a whole frame, so short frames get through a noisy line), a good one
+        // doubles it back up to FRAME_CHUNK_MAX.
+        let mut chunk_len = FRAME_CHUNK_MAX;
+        let mut failures = 0;
         while data.len() < total {
             let request = Request::ReadFrameChunk {
                 capture: info.capture,
                 frame,
                 offset: data.len() as u32,
-                max_len: FRAME_CHUNK_MAX as u16,
+                max_len: chunk_len as u16,
             };
-            match self.request_inner(request, "ReadFrameChunk", true)? {
-                Reply::FrameChunk {
+            match self.request_inner(request, "ReadFrameChunk", false) {
+                Ok(Reply::FrameChunk {
                     capture,
                     frame: f,
                     offset,
                     total: t,
                     data: chunk,
-                } if capture == info.capture
+                }) if capture == info.capture
                     && f == frame
                     && offset as usize == data.len()
                     && t as usize == total
@@ -924,14 +973,22 @@ impl Link {
                     let take = chunk.len().min(total - data.len());
                     data.extend_from_slice(&chunk[..take]);
                     progress(data.len());
+                    failures = 0;
+                    chunk_len = (chunk_len * 2).min(FRAME_CHUNK_MAX);
                 }
-                Reply::Error(error) => {
+                Ok(Reply::Error(error)) => {
                     return Err(LinkError::Device {
                         what: "ReadFrameChunk",
                         error,
                     })
                 }
-                other => return Err(unexpected("ReadFrameChunk", other)),
+                Ok(other) => return Err(unexpected("ReadFrameChunk", other)),
+                Err(LinkError::Timeout { .. }) if failures < 4 * self.cfg.attempts.max(1) => {
+                    failures += 1;
+                    self.counters.retries += 1;
+                    chunk_len = (chunk_len / 2).max(32);
+                }
+                Err(e) => return Err(e),
             }
         }
         Ok(data)
@@ -1047,8 +1104,12 @@ mod tests {
         assert!(t.accept(r(3)));
         let seqs: Vec<u32> = t.ready.iter().map(|r| r.seq).collect();
         assert_eq!(seqs, [1]);
-        // History ended at 6 without 2, 5, 6: they are lost; 3 and 4 come out in order.
-        assert_eq!(t.give_up_until(6), vec![(2, 2), (5, 6)]);
+        // History (keeping 3..) ended at 6 without 2, 5, 6: 2 is gone, 5 and 6 may come.
+        assert_eq!(t.give_up_before(3, 6), vec![(2, 2)]);
+        assert_eq!(t.last, 4);
+        assert!(t.missing_up_to(6));
+        // A device that kept nothing older than 7: 5 and 6 are gone too.
+        assert_eq!(t.give_up_before(7, 6), vec![(5, 6)]);
         let seqs: Vec<u32> = t.ready.iter().map(|r| r.seq).collect();
         assert_eq!(seqs, [1, 3, 4]);
         assert_eq!(t.last, 6);

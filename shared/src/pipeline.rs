@@ -931,13 +931,13 @@ mod tests {
     fn contrast_test_is_relative_to_the_noise() {
         let mut hist = vec![0u32; 256];
         let mut rng = crate::solvers::circle::tests::Rng::new(7);
-        let sigma = 3.0;
+        let sigma: f64 = 3.0;
         for _ in 0..200_000 {
             let x = (sigma * rng.gauss()).round().max(0.0) as usize;
             hist[x.min(255)] += 1;
         }
         let est = difference_noise(&hist);
-        assert!((est / sigma - 1.0).abs() < 0.05, "σ̂ = {est}");
+        assert!((est as f64 / sigma - 1.0).abs() < 0.05, "σ̂ = {est}");
         assert_eq!(difference_noise(&[0; 4]), 0.0);
 
         let cal = calibration(1);

@@ -12,9 +12,9 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use image::{Rgb, RgbImage};
-use tangent_core::curve::CurvePoint;
 use tangent_core::image::{Frame, Pixel};
-use tangent_core::pipeline::{self, PipelineConfig, Workspace, WorkspaceSizes};
+use tangent_core::pipeline::{self, PipelineConfig};
+use tangent_host::measure::HostWorkspace;
 use tangent_host::capture::Capture;
 use tangent_host::pgm::{Pgm, PgmSamples};
 
@@ -52,47 +52,19 @@ fn extract(capture: &Capture, on: &Pgm) -> Result<Vec<(usize, f64, f64)>, String
         let on = Frame::new(on, w, h, w)
             .and_then(|f| f.with_bit_depth(bits))
             .map_err(|e| e.to_string())?;
-        let sizes = WorkspaceSizes::new(w, h, bits, c.calibration.planes.len());
-        let mut diff = vec![P::default(); sizes.pixels];
-        let mut labels = vec![0u16; sizes.pixels];
-        let mut histogram = vec![0u32; sizes.histogram];
-        let mut label_table = vec![0u16; sizes.label_table];
-        let mut objects =
-            vec![tangent_core::image::segment::ObjectFeatures::empty(0); sizes.objects];
-        let blank = CurvePoint {
-            column: 0,
-            row: 0.0,
-            amplitude: 0.0,
-            curve: 0,
-            saturated: false,
-        };
-        let mut curve = vec![blank; sizes.points];
-        let mut points = vec![tangent_core::real::Vec3::zeros(); sizes.points];
-        let mut scratch_points = vec![tangent_core::real::Vec2::zeros(); sizes.points];
-        let mut scratch_values = vec![0.0; sizes.points];
-        let mut ws = Workspace {
-            diff: &mut diff,
-            labels: &mut labels,
-            histogram: &mut histogram,
-            label_table: &mut label_table,
-            objects: &mut objects,
-            curve: &mut curve,
-            points: &mut points,
-            scratch_points: &mut scratch_points,
-            scratch_values: &mut scratch_values,
-        };
+        let mut hw = HostWorkspace::<P>::new(w, h, bits, c.calibration.planes.len());
         let profile = pipeline::extract_profile(
             &off,
             &on,
             &c.calibration,
             &PipelineConfig::default(),
-            &mut ws,
+            &mut hw.workspace(),
         )
         .map_err(|e| e.to_string())?;
         let mut out = Vec::new();
         for plane in 0..profile.planes {
             let (s, e) = profile.plane_points[plane];
-            for p in ws.curve.get(s..e).unwrap_or(&[]) {
+            for p in hw.curve().get(s..e).unwrap_or(&[]) {
                 out.push((plane, f64::from(p.column), p.row));
             }
         }

@@ -16,6 +16,8 @@
 use core::fmt;
 
 use super::{Frame, FrameError, FrameMut, Pixel};
+// `Float` supplies ceil/exp/round in no_std builds; with `std` the inherent methods win.
+#[cfg_attr(feature = "std", allow(unused_imports))]
 use crate::real::{Float, Real};
 
 /// Largest kernel radius supported (taps = `2·radius + 1` ≤ 33; σ up to 5 px with the
