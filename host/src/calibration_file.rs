@@ -155,8 +155,9 @@ pub struct CalibrationToml {
     /// The camera.
     pub camera: CameraToml,
     /// The laser planes, in the order of the laser outputs. Required, at least one
-    /// (defaulted to empty here only so that its absence gives [`CalibrationFileError::MissingPlanes`]).
-    #[serde(default)]
+    /// (defaulted to empty here only so that its absence gives [`CalibrationFileError::MissingPlanes`];
+    /// a camera-only file, [`parse_camera`], has none and does not write the key).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub planes: Vec<PlaneToml>,
 }
 

@@ -188,12 +188,20 @@ impl FieldLog {
             .create(true)
             .open(path)
             .map_err(io(path))?;
-        match file.try_lock() {
-            Ok(()) => {}
-            Err(std::fs::TryLockError::WouldBlock) => {
-                return Err(FieldLogError::Locked(path.to_path_buf()))
+        // A lock can outlive its holder briefly (a process exiting, or a fork of this
+        // process that has not exec'd yet still shares the descriptor): wait up to 2 s.
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(2);
+        loop {
+            match file.try_lock() {
+                Ok(()) => break,
+                Err(std::fs::TryLockError::WouldBlock) if std::time::Instant::now() < deadline => {
+                    std::thread::sleep(std::time::Duration::from_millis(20))
+                }
+                Err(std::fs::TryLockError::WouldBlock) => {
+                    return Err(FieldLogError::Locked(path.to_path_buf()))
+                }
+                Err(std::fs::TryLockError::Error(e)) => return Err(io(path)(e)),
             }
-            Err(std::fs::TryLockError::Error(e)) => return Err(io(path)(e)),
         }
         let mut bytes = Vec::new();
         file.read_to_end(&mut bytes).map_err(io(path))?;

@@ -710,12 +710,14 @@ fn predicted_sigma(capture: &Capture) -> Option<f64> {
 ///
 /// 1. Whatever the true calibration measures, the calibrated one measures too, and within
 ///    3σ of the error model (the corpus rule of `tests/corpus.rs`).
-/// 2. The change of the diameter is what the plane errors predict (`docs/error-model.md`,
-///    §2 "Calibration"): a baseline error scales all distances by `Δe/e`; a tilt error moves
-///    a point at depth `z` by `Δz = −z²Δδ/(e cos²δ)`, locally a scale `zΔδ/(e cos²δ)`. So
-///    `|Δd| ≤ d (|Δe|/e + z|Δδ|/(e cos²δ))` to first order; the bound is doubled for the
-///    second-order terms and the roll (which tilts the profile across the image) and given
-///    a floor of 0.02 mm (the reading is rounded by its solvers' tolerances, not exact).
+/// 2. The change of the diameter is within the calibration term the error model budgets
+///    (`docs/error-model.md`, §2 "Calibration": σ_e = 0.2 mm, σ_δ = 0.2 mrad): a baseline
+///    error scales all distances by `Δe/e`; a tilt error moves a point at depth `z` by
+///    `Δz = −z²Δδ/(e cos²δ)`, locally a scale `zΔδ/(e cos²δ)`; so a calibration within the
+///    budget changes a diameter `d` by at most `d (σ_e/e + zσ_δ/(e cos²δ))` to first order.
+///    The calibrated planes are 6–30× better than that budget
+///    (`laser_planes_from_simulated_board_captures`), so this holds with a wide margin where
+///    the reading is stable; it fails if the planes were off by the budget or more.
 #[test]
 fn stem_corpus_measured_with_calibrated_planes() {
     let (_, calibrated, _) = calibrated_from_boards();
@@ -749,13 +751,9 @@ fn stem_corpus_measured_with_calibrated_planes() {
         compared += 1;
         let truth_d = rt.truth_diameter_m.expect("truth");
         let z = rt.distance_m.unwrap_or(3.0);
-        let p0 = capture.calibration.planes[0];
-        let (e, delta) = p0.baseline_tilt();
-        let (ec, deltac) = cal.planes[0].baseline_tilt();
-        let bound = (2.0
-            * dt
-            * ((ec - e).abs() / e + z * (deltac - delta).abs() / (e * delta.cos().powi(2))))
-        .max(2e-5);
+        let (e, delta) = capture.calibration.planes[0].baseline_tilt();
+        let noise = NoiseModel::reference();
+        let bound = dt * (noise.baseline / e + z * noise.tilt / (e * delta.cos().powi(2)));
         eprintln!(
             "{name}: truth {:.1} mm, true-cal error {:+.2} mm, calibrated error {:+.2} mm, change {:+.3} mm (bound {:.3})",
             truth_d * 1e3,
@@ -818,4 +816,115 @@ fn camera_only_file_round_trip() {
     let bad = text.replace("fx_px = 700.0", "fx_px = -700.0");
     assert_ne!(bad, text);
     assert!(calibration_file::parse_camera(&bad).is_err());
+}
+
+/// `(e, δ, ρ)` of every plane of a laser calibration.
+fn etr(cals: &[laser::LaserCalibration]) -> Vec<(f64, f64, f64)> {
+    cals.iter()
+        .map(|c| laser::baseline_tilt_roll(c.fit.normal, c.fit.offset).expect("valid plane"))
+        .collect()
+}
+
+/// Mean, standard deviation and range of one component over repeated calibrations.
+fn spread(values: &[f64]) -> (f64, f64, f64) {
+    let n = values.len() as f64;
+    let mean = values.iter().sum::<f64>() / n;
+    let sd = (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    let lo = values.iter().copied().fold(f64::MAX, f64::min);
+    let hi = values.iter().copied().fold(f64::MIN, f64::max);
+    (mean, sd, hi - lo)
+}
+
+fn print_and_check(label: &str, truth: &Calibration, runs: &[Vec<(f64, f64, f64)>]) {
+    let noise = NoiseModel::reference();
+    for (k, t) in truth.planes.iter().enumerate() {
+        let (te, td) = t.baseline_tilt();
+        let e: Vec<f64> = runs.iter().map(|r| r[k].0).collect();
+        let d: Vec<f64> = runs.iter().map(|r| r[k].1).collect();
+        let rho: Vec<f64> = runs.iter().map(|r| r[k].2).collect();
+        let (me, se, re) = spread(&e);
+        let (md, sd, rd) = spread(&d);
+        let (mr, sr, rr) = spread(&rho);
+        eprintln!(
+            "{label}, plane {k} ({} runs): e {:+.4} ± {:.4} mm (range {:.4}), δ {:+.4} ± {:.4} mrad (range {:.4}), ρ {:+.4} ± {:.4} mrad (range {:.4}) [mean − truth ± sd]",
+            runs.len(),
+            (me - te) * 1e3, se * 1e3, re * 1e3,
+            (md - td) * 1e3, sd * 1e3, rd * 1e3,
+            (mr - t.roll()) * 1e3, sr * 1e3, rr * 1e3
+        );
+        // Every single calibration of the study meets the error model's budget.
+        for ((e, d), r) in e.iter().zip(&d).zip(&rho) {
+            assert!((e - te).abs() <= noise.baseline, "{label} plane {k}: e {e}");
+            assert!((d - td).abs() <= noise.tilt, "{label} plane {k}: δ {d}");
+            assert!((r - t.roll()).abs() <= noise.tilt, "{label} plane {k}: ρ {r}");
+        }
+    }
+}
+
+/// Repeatability (thesis §6.3.4) over pose subsets: every choice of 4 of the 6 board poses
+/// is calibrated; each must meet the error model's budget (a user may take only 4 poses),
+/// and the spread is printed for `docs/calibration.md`.
+#[test]
+fn repeatability_over_pose_subsets() {
+    let (truth, prepared) = committed_board_captures();
+    let n = prepared.len();
+    let mut runs = Vec::new();
+    for mask in 0u32..(1 << n) {
+        if mask.count_ones() != 4 {
+            continue;
+        }
+        let subset: Vec<BoardCapture> = (0..n)
+            .filter(|i| mask & (1 << i) != 0)
+            .map(|i| prepared[i].clone())
+            .collect();
+        let cals = calibrate_lasers(&truth.camera, &board_9x6(), &subset).expect("calibrates");
+        runs.push(etr(&cals));
+    }
+    assert_eq!(runs.len(), 15);
+    print_and_check("4-of-6 pose subsets", &truth, &runs);
+}
+
+/// Repeatability over independent noise: the six board captures re-rendered with other
+/// seeds (new shot/read noise and speckle; same poses) and recalibrated. Each calibration
+/// must meet the budget, and the seed-to-seed standard deviation must agree with the
+/// jackknife standard error the calibration reports (within a factor 3: with 4 seeds a
+/// sample sd lies within [0.3, 1.8]× its true value at 95 %, and the 6-pose jackknife SE
+/// itself scatters by ~30 %). Ignored by default: it renders 24 frame triplets
+/// (≈ 1 min); `cargo test -p tangent-host --test calibration -- --ignored`.
+#[test]
+#[ignore]
+fn repeatability_over_noise_seeds() {
+    use tangent_host::simulate::simulate;
+    let entries: Vec<_> = corpus::entries()
+        .into_iter()
+        .filter(|e| e.name.starts_with("board-pose-"))
+        .collect();
+    let truth = entries[0].spec.calibration.clone();
+    let mut runs = Vec::new();
+    let mut jackknife = Vec::new();
+    for seed in 1..=4u64 {
+        let prepared: Vec<BoardCapture> = entries
+            .iter()
+            .map(|e| {
+                let mut spec = e.spec.clone();
+                spec.params.seed = 50_000 + 100 * seed + spec.params.seed;
+                let (cap, _) = simulate(&spec).expect("renders");
+                board_capture(&truth.camera, &board_9x6(), &cap, &e.name).expect("board")
+            })
+            .collect();
+        let cals = calibrate_lasers(&truth.camera, &board_9x6(), &prepared).expect("calibrates");
+        jackknife.push(
+            cals.iter()
+                .map(|c| c.repeatability.as_ref().expect("≥ 3 poses").std_error)
+                .collect::<Vec<_>>(),
+        );
+        runs.push(etr(&cals));
+    }
+    print_and_check("4 noise seeds", &truth, &runs);
+    for k in 0..truth.planes.len() {
+        let se = jackknife.iter().map(|j| j[k].0).sum::<f64>() / jackknife.len() as f64;
+        let sd = spread(&runs.iter().map(|r| r[k].0).collect::<Vec<_>>()).1;
+        eprintln!("plane {k}: seed sd of e {:.4} mm, mean jackknife SE {:.4} mm", sd * 1e3, se * 1e3);
+        assert!(sd <= 3.0 * se && se <= 3.0 * sd.max(1e-7), "plane {k}: sd {sd} vs SE {se}");
+    }
 }

@@ -232,3 +232,221 @@ fn a_missing_port_says_so() {
     assert!(matches!(err, LinkError::Open { .. }), "{err:?}");
     assert!(err.to_string().contains("tangent devices"));
 }
+
+// ---------------------------------------------------------------------------------------
+// End to end: the real `tangent` binary against the emulated firmware under QEMU, through
+// a pty (`firmware/qemu/run.sh --serial pty`), optionally through a faulty relay.
+// ---------------------------------------------------------------------------------------
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+
+use fake_device::Relay;
+use tangent_host::capture::Capture;
+use tangent_host::fieldlog::{FieldLog, Record};
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// The emulated firmware on a pty; killed on drop.
+struct Emulated {
+    child: Child,
+    pty: PathBuf,
+}
+
+impl Drop for Emulated {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Boots the emulated firmware on the frames of `capture` (without a calibration); `None`,
+/// with the reason printed, when the ELF is not built or QEMU is missing. CI builds the ELF
+/// (`cargo firmware-qemu`) before the host tests.
+fn boot_emulated(capture: &Path) -> Option<Emulated> {
+    let elf = repo().join("firmware/target/thumbv7em-none-eabihf/release/tangent-qemu");
+    if !elf.is_file() {
+        eprintln!("SKIPPED: {} is not built (run `cargo firmware-qemu`)", elf.display());
+        return None;
+    }
+    if Command::new("qemu-system-arm").arg("--version").output().is_err() {
+        eprintln!("SKIPPED: qemu-system-arm is not installed");
+        return None;
+    }
+    let mut child = Command::new(repo().join("firmware/qemu/run.sh"))
+        .args(["--serial", "pty", "--"])
+        .arg(capture.join("off.pgm"))
+        .arg(capture.join("on.pgm"))
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("run firmware/qemu/run.sh");
+    // QEMU announces "char device redirected to /dev/pts/N (label serial0)" on one of its
+    // streams; watch both.
+    let (tx, rx) = std::sync::mpsc::channel();
+    for stream in [
+        Box::new(child.stdout.take().unwrap()) as Box<dyn std::io::Read + Send>,
+        Box::new(child.stderr.take().unwrap()),
+    ] {
+        let tx = tx.clone();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stream).lines().map_while(Result::ok) {
+                let _ = tx.send(line);
+            }
+        });
+    }
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while Instant::now() < deadline {
+        if let Ok(line) = rx.recv_timeout(Duration::from_millis(200)) {
+            if let Some(rest) = line.split("redirected to ").nth(1) {
+                let pty = PathBuf::from(rest.split_whitespace().next().unwrap());
+                // Give the firmware a moment to boot (its banner is not needed).
+                std::thread::sleep(Duration::from_millis(300));
+                return Some(Emulated { child, pty });
+            }
+        }
+    }
+    panic!("QEMU did not announce its pty");
+}
+
+fn tangent(args: &[&str]) -> std::process::Output {
+    let out = Command::new(env!("CARGO_BIN_EXE_tangent"))
+        .args(args)
+        .stdin(Stdio::null())
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "tangent {args:?} failed:\n{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+fn logged(log: &Path) -> Vec<tangent_host::fieldlog::TreeRecord> {
+    FieldLog::read(log)
+        .unwrap()
+        .into_iter()
+        .filter_map(|r| match r {
+            Record::Tree(t) => Some(t),
+            Record::Plot(_) => None,
+        })
+        .collect()
+}
+
+const SOURCE: &str = "tests/captures/cyl-d300-z150-shade";
+
+/// Calibration round trip, measurements, a stream and a recorded capture equal to its
+/// source, all through the `tangent` binary.
+#[test]
+fn emulated_device_end_to_end() {
+    let source = repo().join(SOURCE);
+    let Some(dev) = boot_emulated(&source) else { return };
+    let port = dev.pty.to_str().unwrap().to_string();
+    let dir = tempfile::tempdir().unwrap();
+    let src = Capture::read(&source).unwrap();
+
+    // Calibration: push the capture's, pull it back, identical.
+    let cal_in = dir.path().join("cal.toml");
+    tangent_host::calibration_file::write(&cal_in, &src.calibration).unwrap();
+    tangent(&["calib", "push", "--port", &port, cal_in.to_str().unwrap()]);
+    let cal_out = dir.path().join("pulled.toml");
+    tangent(&["calib", "pull", "--port", &port, cal_out.to_str().unwrap()]);
+    assert_eq!(tangent_host::calibration_file::read(&cal_out).unwrap(), src.calibration);
+
+    // Three measurements (as trigger presses), then a stream of five.
+    let log = dir.path().join("field.log");
+    let l = log.to_str().unwrap();
+    tangent(&["listen", "--port", &port, "--log", l, "--plot-id", "E2E", "--species", "PIAB", "--measure", "3"]);
+    tangent(&["listen", "--port", &port, "--log", l, "--stream", "--count", "5"]);
+    let trees = logged(&log);
+    assert_eq!(trees.iter().map(|t| t.seq).collect::<Vec<_>>(), (1..=8).collect::<Vec<_>>());
+    // Truth: a 300 mm stem. The reading must lie within 3 of its own predicted standard
+    // uncertainties (the error model's claim; the f32 device adds < 1e-4 relative).
+    let truth_mm = 300.0;
+    for t in &trees {
+        assert!(
+            (t.diameter_mm - truth_mm).abs() < 3.0 * t.uncertainty_mm,
+            "{} mm ± {} vs {truth_mm}",
+            t.diameter_mm,
+            t.uncertainty_mm
+        );
+        assert_eq!(t.calib_id, src.calibration.id);
+        assert_eq!(t.device_id, "emulated");
+    }
+    // Tree ids: one per press (1, 2, 3), the stream is one held trigger (tree 4).
+    assert_eq!(trees.iter().map(|t| t.tree_id).collect::<Vec<_>>(), [1, 2, 3, 4, 4, 4, 4, 4]);
+
+    // Record a capture: the frames equal the source's, the calibration is the device's.
+    let rec = dir.path().join("rec");
+    tangent(&["record", "--port", &port, rec.to_str().unwrap()]);
+    let got = Capture::read(&rec).unwrap();
+    assert_eq!(got.calibration, src.calibration);
+    assert!(got.off_frame() == src.off_frame(), "off frame differs from the source");
+    let (lit_got, on_got) = got.on_frames().next().unwrap();
+    let (lit_src, on_src) = src.on_frames().next().unwrap();
+    assert_eq!(lit_got, lit_src);
+    assert!(on_got == on_src, "on frame differs from the source");
+}
+
+/// Bytes dropped and corrupted between host and emulated device, and the cable pulled
+/// twice while the forester keeps measuring: the log holds every reading the device made,
+/// once, in order (a request corrupted on the way makes no reading; that is not a loss).
+#[test]
+fn emulated_device_through_a_faulty_cut_link() {
+    let source = repo().join(SOURCE);
+    let Some(dev) = boot_emulated(&source) else { return };
+    let src = Capture::read(&source).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let cal = dir.path().join("cal.toml");
+    tangent_host::calibration_file::write(&cal, &src.calibration).unwrap();
+    tangent(&["calib", "push", "--port", dev.pty.to_str().unwrap(), cal.to_str().unwrap()]);
+
+    let relay = Relay::start(&dev.pty);
+    relay.faults(Faults {
+        drop_out: 3,
+        corrupt_out: 3,
+        drop_in: 3,
+        corrupt_in: 3,
+    });
+    let log = dir.path().join("field.log");
+    let n = 30;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_tangent"))
+        .args(["listen", "--port", relay.path().to_str().unwrap(), "--log"])
+        .arg(&log)
+        .args(["--measure", &n.to_string(), "--plot-id", "F"])
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    for _ in 0..2 {
+        std::thread::sleep(Duration::from_millis(1500));
+        relay.cut(Duration::from_millis(500));
+    }
+    let deadline = Instant::now() + Duration::from_secs(180);
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(Instant::now() < deadline, "listen did not finish");
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    let mut err = String::new();
+    std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
+    eprintln!("{err}");
+    assert!(status.success(), "{err}");
+    drop(relay);
+    // What the device made, asked directly (no relay).
+    let mut direct = Link::open(dev.pty.to_str().unwrap(), LinkConfig::default()).unwrap();
+    let made = direct.device_info().unwrap().last_seq;
+    let seqs: Vec<u32> = logged(&log).iter().map(|t| t.seq).collect();
+    assert_eq!(seqs, (1..=made).collect::<Vec<_>>(), "{err}");
+    assert!(made >= n / 2, "only {made} of {n} measurements made: {err}");
+    assert!(err.contains("link lost"), "the cuts happened: {err}");
+}

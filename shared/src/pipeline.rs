@@ -452,15 +452,20 @@ pub fn extract_profile<P: Pixel>(
     // 1. Subtraction (thesis §5.3.1).
     let mut diff = FrameMut::new(&mut ws.diff[..pixels], width, height, width)?
         .with_bit_depth(on.bit_depth())?;
-    let stats = subtract::subtract(on, off, &mut diff)?;
+    // One pass writes the difference, its statistics and its histogram (`ws.histogram`,
+    // exactly `threshold::histogram` of the difference).
+    let stats = subtract::subtract_with_histogram(on, off, &mut diff, ws.histogram).map_err(|e| match e {
+        ThresholdError::Frame(e) => PipelineError::Frame(e),
+        e => PipelineError::Threshold(e),
+    })?;
     let diff = diff.as_frame();
     let full_scale = on.max_value();
     // The noise of the difference image, from its histogram (needed for both tests below).
-    threshold::histogram(&diff, ws.histogram)?;
     let hist_len = threshold::histogram_len(&diff).min(ws.histogram.len());
     let noise = difference_noise(&ws.histogram[..hist_len]);
     let dark_floor = (config.min_contrast as Real).max(config.contrast_snr * noise);
-    if !((stats.max_difference as Real) >= dark_floor) {
+    // `dark_floor` is finite: `difference_noise` of a histogram always is.
+    if (stats.max_difference as Real) < dark_floor {
         return Err(PipelineError::NoLaserLight { max_difference: stats.max_difference });
     }
     // The off frame's mean at full scale means most of it is clipped: nothing can be seen.

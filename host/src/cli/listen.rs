@@ -118,10 +118,15 @@ pub fn run(args: Args) -> Result<ExitCode> {
     };
 
     let path = resolve_port(args.port.clone())?;
-    let cfg = LinkConfig {
+    let mut cfg = LinkConfig {
         reconnect_timeout: args.reconnect_timeout.map(Duration::from_secs_f64),
         ..LinkConfig::default()
     };
+    if args.stream {
+        // A streaming device reads requests between measurements (the emulated board
+        // about one byte per measurement): give replies more time.
+        cfg.reply_timeout = Duration::from_secs(5);
+    }
     let mut link = Link::open(&path, cfg)?;
     link.on_event(|e| match e {
         LinkEvent::Lost(why) => eprintln!("link lost ({why}); waiting for the device…"),

@@ -86,12 +86,21 @@ pub struct FakeDevice {
     _dir: tempfile::TempDir,
 }
 
-struct Pty {
+pub struct Pty {
     master: File,
 }
 
-fn open_pty(link: &Path) -> Pty {
+pub fn open_pty(link: &Path) -> Pty {
     let pty = nix::pty::openpty(None, None).expect("openpty");
+    // openpty(3) does not set close-on-exec: without it a child process (the `tangent`
+    // binary under test) would inherit the master, and closing ours would not hang up.
+    for fd in [pty.master, pty.slave] {
+        nix::fcntl::fcntl(
+            fd,
+            nix::fcntl::FcntlArg::F_SETFD(nix::fcntl::FdFlag::FD_CLOEXEC),
+        )
+        .expect("close-on-exec");
+    }
     let mut t = nix::sys::termios::tcgetattr(pty.slave).expect("tcgetattr");
     nix::sys::termios::cfmakeraw(&mut t);
     nix::sys::termios::tcsetattr(pty.slave, nix::sys::termios::SetArg::TCSANOW, &t)
@@ -575,6 +584,143 @@ impl Device {
                 tag,
                 &Response::SelfTest(protocol::SelfTestReport { failed: 0, ran: 0xF }),
             ),
+        }
+    }
+}
+
+/// A man in the middle between the host and a real serial peer (the emulated firmware's
+/// pty): the host opens [`Relay::path`]; bytes are copied both ways with [`Faults`], and
+/// [`Relay::cut`] unplugs the host side for a while, as [`FakeDevice::cut`] does.
+pub struct Relay {
+    path: PathBuf,
+    control: Arc<Mutex<Control>>,
+    thread: Option<JoinHandle<()>>,
+    _dir: tempfile::TempDir,
+}
+
+impl Relay {
+    /// Relays to the tty at `peer`.
+    pub fn start(peer: &Path) -> Relay {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("ttyRELAY");
+        let control = Arc::new(Mutex::new(Control::default()));
+        let fd = nix::fcntl::open(
+            peer,
+            nix::fcntl::OFlag::O_RDWR
+                | nix::fcntl::OFlag::O_NOCTTY
+                | nix::fcntl::OFlag::O_NONBLOCK
+                | nix::fcntl::OFlag::O_CLOEXEC,
+            nix::sys::stat::Mode::empty(),
+        )
+        .expect("open the peer tty");
+        let mut t = nix::sys::termios::tcgetattr(fd).expect("tcgetattr");
+        nix::sys::termios::cfmakeraw(&mut t);
+        nix::sys::termios::tcsetattr(fd, nix::sys::termios::SetArg::TCSANOW, &t).expect("raw");
+        // SAFETY: a fresh descriptor owned by nothing else.
+        let mut peer_file = unsafe { File::from_raw_fd(fd) };
+        let mut pty = open_pty(&path);
+        let c = control.clone();
+        let p = path.clone();
+        let thread = std::thread::spawn(move || {
+            let mut rng = 0x9E37_79B9u32;
+            let mut hit = |per_mille: u32| {
+                rng ^= rng << 13;
+                rng ^= rng >> 17;
+                rng ^= rng << 5;
+                per_mille > 0 && rng % 1000 < per_mille
+            };
+            let mut buf = [0u8; 1024];
+            loop {
+                let (stop, cut_until, f) = {
+                    let mut c = c.lock().unwrap();
+                    (c.stop, c.cut_until.take(), c.faults)
+                };
+                if stop {
+                    return;
+                }
+                if let Some(until) = cut_until {
+                    drop(pty);
+                    let _ = std::fs::remove_file(&p);
+                    while Instant::now() < until {
+                        // The device keeps talking into the void.
+                        let _ = peer_file.read(&mut buf);
+                        std::thread::sleep(Duration::from_millis(1));
+                    }
+                    pty = open_pty(&p);
+                }
+                let mut idle = true;
+                // Host → device.
+                if let Ok(n) = pty.master.read(&mut buf) {
+                    idle = n == 0;
+                    let mut out = Vec::with_capacity(n);
+                    for &b in &buf[..n] {
+                        if hit(f.drop_in) {
+                            continue;
+                        }
+                        out.push(if hit(f.corrupt_in) { b ^ 0x5A } else { b });
+                    }
+                    write_all_nb(&mut peer_file, &out);
+                }
+                // Device → host.
+                if let Ok(n) = peer_file.read(&mut buf) {
+                    idle &= n == 0;
+                    let mut out = Vec::with_capacity(n);
+                    for &b in &buf[..n] {
+                        if hit(f.drop_out) {
+                            continue;
+                        }
+                        out.push(if hit(f.corrupt_out) { b ^ 0x5A } else { b });
+                    }
+                    write_all_nb(&mut pty.master, &out);
+                }
+                if idle {
+                    std::thread::sleep(Duration::from_millis(1));
+                }
+            }
+        });
+        Relay {
+            path,
+            control,
+            thread: Some(thread),
+            _dir: dir,
+        }
+    }
+
+    /// The path the host opens.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Sets the faults.
+    pub fn faults(&self, f: Faults) {
+        self.control.lock().unwrap().faults = f;
+    }
+
+    /// Unplugs the host side for `d`.
+    pub fn cut(&self, d: Duration) {
+        self.control.lock().unwrap().cut_until = Some(Instant::now() + d);
+    }
+}
+
+impl Drop for Relay {
+    fn drop(&mut self) {
+        self.control.lock().unwrap().stop = true;
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+/// Writes everything to a non-blocking descriptor (gives up after 500 ms or on a hang-up:
+/// the bytes are lost as on a wire).
+fn write_all_nb(f: &mut File, bytes: &[u8]) {
+    let mut rest = bytes;
+    let deadline = Instant::now() + Duration::from_millis(500);
+    while !rest.is_empty() && Instant::now() < deadline {
+        match f.write(rest) {
+            Ok(n) => rest = &rest[n..],
+            Err(e) if e.kind() == ErrorKind::WouldBlock => std::thread::sleep(Duration::from_millis(1)),
+            Err(_) => return,
         }
     }
 }

@@ -22,6 +22,7 @@
 
 use core::fmt;
 
+use super::subtract::{any_byte_greater, pack4};
 use super::{Frame, FrameError, FrameMut, Pixel};
 use crate::real::Real;
 
@@ -370,69 +371,88 @@ pub fn segment<P: Pixel>(
             break; // unreachable: 1 <= y < height
         };
         let row = image.row(y);
-        // Equal-length re-slices (n = width for every well-formed frame): with `x < n` the
-        // compiler drops the bounds checks, and a background pixel costs a load, a compare, a
-        // store. Neighbour labels are only read for foreground pixels.
+        // Equal-length re-slices (n = width for every well-formed frame). Neighbour labels are
+        // only read for foreground pixels.
         let n = cur.len().min(row.len()).min(prev.len());
         let (cur, row, prev) = (&mut cur[..n], &row[..n], &prev[..n]);
-        let mut left = 0u16;
+        // Background is most of a laser image: clear the row at memset speed, then visit only
+        // the 4-pixel words that hold a foreground pixel (8-bit pixels: one word test for 4
+        // pixels; a background pixel's label is 0 whatever its neighbours are).
+        cur.fill(0);
+        let word_skip = P::STORAGE_BITS == 8 && threshold < 255;
+        if P::STORAGE_BITS == 8 && threshold >= 255 {
+            continue; // no 8-bit value exceeds 255
+        }
         let mut any = false;
-        for x in 0..n {
-            let v: u32 = row[x].into();
+        // One pixel: its label given the label `left` of its left neighbour; returns it.
+        let mut pixel = |x: usize, left: u16| -> Result<u16, SegmentError> {
+            let v: u32 = row.get(x).map_or(0, |&p| p.into());
             if v <= threshold {
-                cur[x] = 0;
-                left = 0;
-                continue;
+                return Ok(0);
             }
-            let up = prev[x];
-            let up_left = if x > 0 { prev[x - 1] } else { 0 };
-            let up_right = if x + 1 < n { prev[x + 1] } else { 0 };
+            let up = prev.get(x).copied().unwrap_or(0);
+            let up_left = if x > 0 { prev.get(x - 1).copied().unwrap_or(0) } else { 0 };
+            let up_right = prev.get(x + 1).copied().unwrap_or(0);
             any = true;
-            let l = {
-                match connectivity {
-                    // Decision tree of Wu, Otoo & Suzuki (2005): the upper neighbour is adjacent
-                    // to all the others, so when it is set no equivalence can be new.
-                    Connectivity::Eight => {
-                        if up != 0 {
-                            up
-                        } else if up_left != 0 {
-                            if up_right != 0 {
-                                union(lab.table, up_left, up_right)
-                            } else {
-                                up_left
-                            }
-                        } else if up_right != 0 {
-                            if left != 0 {
-                                union(lab.table, up_right, left)
-                            } else {
-                                up_right
-                            }
-                        } else if left != 0 {
-                            left
+            let l = match connectivity {
+                // Decision tree of Wu, Otoo & Suzuki (2005): the upper neighbour is adjacent
+                // to all the others, so when it is set no equivalence can be new.
+                Connectivity::Eight => {
+                    if up != 0 {
+                        up
+                    } else if up_left != 0 {
+                        if up_right != 0 {
+                            union(lab.table, up_left, up_right)
                         } else {
-                            lab.new_label()?
-                        }
-                    }
-                    // Upper-left is adjacent to both upper and left in this connectivity.
-                    Connectivity::ThesisSix => {
-                        if up_left != 0 {
                             up_left
-                        } else if up != 0 {
-                            if left != 0 {
-                                union(lab.table, up, left)
-                            } else {
-                                up
-                            }
-                        } else if left != 0 {
-                            left
-                        } else {
-                            lab.new_label()?
                         }
+                    } else if up_right != 0 {
+                        if left != 0 {
+                            union(lab.table, up_right, left)
+                        } else {
+                            up_right
+                        }
+                    } else if left != 0 {
+                        left
+                    } else {
+                        lab.new_label()?
+                    }
+                }
+                // Upper-left is adjacent to both upper and left in this connectivity.
+                Connectivity::ThesisSix => {
+                    if up_left != 0 {
+                        up_left
+                    } else if up != 0 {
+                        if left != 0 {
+                            union(lab.table, up, left)
+                        } else {
+                            up
+                        }
+                    } else if left != 0 {
+                        left
+                    } else {
+                        lab.new_label()?
                     }
                 }
             };
-            cur[x] = l;
-            left = l;
+            if let Some(c) = cur.get_mut(x) {
+                *c = l;
+            }
+            Ok(l)
+        };
+        let words = if word_skip { n / 4 } else { 0 };
+        let mut left = 0u16;
+        for (k, w) in row.chunks_exact(4).take(words).enumerate() {
+            if any_byte_greater(pack4(w), threshold) == 0 {
+                left = 0;
+                continue;
+            }
+            for x in 4 * k..4 * k + 4 {
+                left = pixel(x, left)?;
+            }
+        }
+        for x in 4 * words..n {
+            left = pixel(x, left)?;
         }
         if any {
             first_row = first_row.min(y);
@@ -472,14 +492,20 @@ pub fn segment<P: Pixel>(
         for y in first_row..=last_row {
             let row = image.row(y);
             let yy = y as u16; // y < 2^16 checked above
-            for (x, (c, &p)) in labels.row_mut(y).iter_mut().zip(row).enumerate() {
-                if *c == 0 {
+            // Four labels at a time: most words of a foreground row are background.
+            for (k, (c4, p4)) in labels.row_mut(y).chunks_mut(4).zip(row.chunks(4)).enumerate() {
+                if c4.iter().fold(0, |acc, &c| acc | c) == 0 {
                     continue;
                 }
-                let compact = table.get(*c as usize).copied().unwrap_or(0);
-                *c = compact;
-                if let Some(f) = features.get_mut((compact as usize).wrapping_sub(1)) {
-                    f.add(x as u16, yy, p.into());
+                for (i, (c, &p)) in c4.iter_mut().zip(p4).enumerate() {
+                    if *c == 0 {
+                        continue;
+                    }
+                    let compact = table.get(*c as usize).copied().unwrap_or(0);
+                    *c = compact;
+                    if let Some(f) = features.get_mut((compact as usize).wrapping_sub(1)) {
+                        f.add((4 * k + i) as u16, yy, p.into());
+                    }
                 }
             }
         }

@@ -107,9 +107,6 @@ const HIGH: u32 = 0x8080_8080;
 const ONES: u32 = 0x0101_0101;
 /// Even byte lanes (bytes 0 and 2) of a word, as two 16-bit lanes.
 const EVEN: u32 = 0x00FF_00FF;
-/// Words of 4 pixels summed into 16-bit lanes before they are flushed: each word adds at
-/// most 255 to a lane, and 256 · 255 < 2^16.
-const SUM_FLUSH: usize = 256;
 
 /// Per-lane `max(a − b, 0)` of four bytes packed in `u32`s (no lane borrows from another).
 ///
@@ -134,7 +131,7 @@ fn saturating_sub_bytes(a: u32, b: u32) -> u32 {
 /// next lane: at most 127 + 127); for `m < 128` a lane with bit 7 set is greater anyway, for
 /// `m ≥ 128` it must also have bit 7 set.
 #[inline(always)]
-fn any_byte_greater(x: u32, m: u32) -> u32 {
+pub(crate) fn any_byte_greater(x: u32, m: u32) -> u32 {
     let t = (x & LOW7) + (127 - (m & 127)) * ONES;
     if m < 128 {
         (t | x) & HIGH
@@ -143,16 +140,35 @@ fn any_byte_greater(x: u32, m: u32) -> u32 {
     }
 }
 
+/// The maximum of `m` and the byte lanes of `x`, with its [`any_byte_greater`] constant
+/// `(127 − (max mod 128))·0x01010101` (rare: a laser-off pixel above the running maximum; at
+/// 255 the constant is 0 and the test never fires, as nothing is greater).
+#[inline(never)]
+fn raise_max(m: u32, x: u32) -> (u32, u32) {
+    let m = m.max(x & 0xFF).max((x >> 8) & 0xFF);
+    let m = m.max((x >> 16) & 0xFF).max(x >> 24);
+    (m, (127 - (m & 127)) * ONES)
+}
+
+/// Counts the four byte lanes of `d` in `bins` (words with a difference ≥ 4: rare).
+#[inline(never)]
+fn count_lanes(bins: &mut [u32; 256], d: u32) {
+    for i in 0..4 {
+        bins[((d >> (8 * i)) & 0xFF) as usize] += 1;
+    }
+}
+
 /// Packs 4 pixels of at most 8 bits (little-endian, pixel 0 in the low byte). For `u8` the
 /// compiler turns the four byte loads into one word load.
 #[inline(always)]
-fn pack4<P: Pixel>(p: &[P]) -> u32 {
-    let mut w = 0u32;
-    for (i, &v) in p.iter().take(4).enumerate() {
-        let v: u32 = v.into();
-        w |= (v & 0xFF) << (8 * i);
+pub(crate) fn pack4<P: Pixel>(p: &[P]) -> u32 {
+    match *p {
+        [p0, p1, p2, p3, ..] => {
+            let (p0, p1, p2, p3): (u32, u32, u32, u32) = (p0.into(), p1.into(), p2.into(), p3.into());
+            (p0 & 0xFF) | (p1 & 0xFF) << 8 | (p2 & 0xFF) << 16 | (p3 & 0xFF) << 24
+        }
+        _ => 0,
     }
-    w
 }
 
 /// [`subtract`] and the histogram of the difference
@@ -212,9 +228,14 @@ pub fn subtract_with_histogram<P: Pixel>(
     };
     let mut off_sum = 0u64;
     if P::STORAGE_BITS == 8 && saturation == 255 && out_max == 255 {
+        // Fixed-size views: the byte-valued indices below need no bounds check.
+        let Some(bins) = bins.first_chunk_mut::<256>() else {
+            return Err(ThresholdError::HistogramTooSmall { needed: 256, actual: levels });
+        };
         // Counts of the words whose four differences are all < 4, by their 2-bit values.
         let mut quads = [0u32; 256];
-        let mut off_max = 0u32;
+        // Running laser-off maximum and its `any_byte_greater` constant.
+        let (mut off_max, mut off_add) = (0u32, 127 * ONES);
         let mut on_saturated = 0u32;
         for y in 0..height {
             let (a_row, b_row, o_row) = (on.row(y), off.row(y), out.row_mut(y));
@@ -224,49 +245,44 @@ pub fn subtract_with_histogram<P: Pixel>(
             let (a_words, a_tail) = a_row.split_at(split);
             let (b_words, b_tail) = b_row.split_at(split);
             let (o_words, o_tail) = o_row.split_at_mut(split);
-            for ((a_blk, b_blk), o_blk) in a_words
-                .chunks(4 * SUM_FLUSH)
-                .zip(b_words.chunks(4 * SUM_FLUSH))
-                .zip(o_words.chunks_mut(4 * SUM_FLUSH))
-            {
-                // Laser-off sum in 16-bit lanes: bytes 0 and 2 in `even`, 1 and 3 in `odd`.
-                let (mut even, mut odd) = (0u32, 0u32);
-                for ((a4, b4), o4) in a_blk
-                    .chunks_exact(4)
-                    .zip(b_blk.chunks_exact(4))
-                    .zip(o_blk.chunks_exact_mut(4))
-                {
-                    let a = pack4(a4);
-                    let b = pack4(b4);
-                    let d = saturating_sub_bytes(a, b);
-                    for (i, o) in o4.iter_mut().enumerate() {
-                        *o = P::saturate_from((d >> (8 * i)) & 0xFF);
-                    }
-                    even += b & EVEN;
-                    odd += (b >> 8) & EVEN;
-                    if any_byte_greater(b, off_max) != 0 {
-                        off_max = off_max.max(b & 0xFF).max((b >> 8) & 0xFF);
-                        off_max = off_max.max((b >> 16) & 0xFF).max(b >> 24);
-                    }
-                    // Lanes equal to 255 (= saturation): exactly the lanes flagged here.
-                    let sat = ((a & LOW7) + ONES) & a & HIGH;
-                    if sat != 0 {
-                        on_saturated += ((sat >> 7).wrapping_mul(ONES)) >> 24;
-                    }
-                    if d & 0xFCFC_FCFC == 0 {
-                        let code = (d | d >> 6 | d >> 12 | d >> 18) & 0xFF;
-                        if let Some(q) = quads.get_mut(code as usize) {
-                            *q += 1;
-                        }
-                    } else {
-                        for i in 0..4 {
-                            if let Some(c) = bins.get_mut(((d >> (8 * i)) & 0xFF) as usize) {
-                                *c += 1;
-                            }
-                        }
+            // The frames' statistics in a loop of their own: fused into the difference loop
+            // below they push its live values past the M7's registers (spills cost more than
+            // reading the words again).
+            for (a_blk, b_blk) in a_words.chunks(4 * 128).zip(b_words.chunks(4 * 128)) {
+                // Laser-off sum in 16-bit lanes, bytes 0 + 1 and 2 + 3 of each word (≤ 510
+                // per word, 128 words per block); saturated laser-on lanes (== 255: exactly
+                // the lanes flagged) counted in byte lanes.
+                let (mut sum_lanes, mut sat_lanes) = (0u32, 0u32);
+                for (a4, b4) in a_blk.chunks_exact(4).zip(b_blk.chunks_exact(4)) {
+                    let (a, b) = (pack4(a4), pack4(b4));
+                    sum_lanes += (b & EVEN) + ((b >> 8) & EVEN);
+                    sat_lanes += ((((a & LOW7) + ONES) & a) >> 7) & ONES;
+                    let t = (b & LOW7) + off_add;
+                    let greater = if off_max < 128 { (t | b) & HIGH } else { t & b & HIGH };
+                    if greater != 0 {
+                        (off_max, off_add) = raise_max(off_max, b);
                     }
                 }
-                off_sum += ((even & 0xFFFF) + (even >> 16) + (odd & 0xFFFF) + (odd >> 16)) as u64;
+                off_sum += ((sum_lanes & 0xFFFF) + (sum_lanes >> 16)) as u64;
+                on_saturated += (sat_lanes & 0xFF)
+                    + ((sat_lanes >> 8) & 0xFF)
+                    + ((sat_lanes >> 16) & 0xFF)
+                    + (sat_lanes >> 24);
+            }
+            for ((a4, b4), o4) in a_words
+                .chunks_exact(4)
+                .zip(b_words.chunks_exact(4))
+                .zip(o_words.chunks_exact_mut(4))
+            {
+                let d = saturating_sub_bytes(pack4(a4), pack4(b4));
+                for (i, o) in o4.iter_mut().enumerate() {
+                    *o = P::saturate_from((d >> (8 * i)) & 0xFF);
+                }
+                if d & 0xFCFC_FCFC == 0 {
+                    quads[((d | d >> 6 | d >> 12 | d >> 18) & 0xFF) as usize] += 1;
+                } else {
+                    count_lanes(bins, d);
+                }
             }
             for ((o, &a), &b) in o_tail.iter_mut().zip(a_tail).zip(b_tail) {
                 let (a, b): (u32, u32) = (a.into(), b.into());
@@ -275,17 +291,13 @@ pub fn subtract_with_histogram<P: Pixel>(
                 off_max = off_max.max(b);
                 on_saturated += (a >= saturation) as u32;
                 off_sum += b as u64;
-                if let Some(c) = bins.get_mut((d as usize).min(top)) {
-                    *c += 1;
-                }
+                bins[(d & 0xFF) as usize] += 1;
             }
         }
         for (code, &count) in quads.iter().enumerate() {
             if count != 0 {
                 for i in 0..4 {
-                    if let Some(c) = bins.get_mut((code >> (2 * i)) & 3) {
-                        *c += count;
-                    }
+                    bins[(code >> (2 * i)) & 3] += count;
                 }
             }
         }
@@ -322,6 +334,7 @@ pub fn subtract_with_histogram<P: Pixel>(
 
 #[cfg(test)]
 mod tests {
+    extern crate std;
     use super::*;
 
     #[test]
@@ -363,6 +376,102 @@ mod tests {
         assert_eq!(s.on_saturated, 2);
         assert_eq!(s.max_difference, 1000);
         assert_eq!(s.off_max, 1000);
+    }
+
+    /// Pseudo-random frames (LCG) whose values mix the cases the word path treats apart:
+    /// differences below 4 (the 2-bit table), above, negative (clamped), saturated laser-on
+    /// pixels, laser-off values above and below 128 (both halves of `any_byte_greater`).
+    fn random_frame(seed: &mut u32, len: usize, on: bool) -> std::vec::Vec<u8> {
+        (0..len)
+            .map(|_| {
+                *seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                let r = *seed >> 8;
+                match (r % 8, on) {
+                    (0, true) => 255,
+                    (1, _) => (r >> 8) as u8,
+                    (2, _) => 120 + (r >> 8) as u8 % 20,
+                    _ => 40 + (r >> 8) as u8 % 4,
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn fused_histogram_equals_subtract_then_histogram() {
+        use crate::image::threshold::histogram;
+        let mut seed = 99u32;
+        // Widths around the 4-pixel word and the 1024-pixel flush block, padded strides, and
+        // bit depths 8 (word path) and 7 (per-pixel path, with out-of-range data).
+        for &(w, h, stride, bits) in &[
+            (752usize, 7usize, 752usize, 8u8),
+            (1029, 3, 1031, 8),
+            (6, 5, 9, 8),
+            (3, 4, 3, 8),
+            (37, 6, 40, 7),
+        ] {
+            let len = (h - 1) * stride + w;
+            let on = random_frame(&mut seed, len, true);
+            let off = random_frame(&mut seed, len, false);
+            let fon = Frame::new(&on, w, h, stride).unwrap().with_bit_depth(bits).unwrap();
+            let foff = Frame::new(&off, w, h, stride).unwrap().with_bit_depth(bits).unwrap();
+            let mut out_a = std::vec![0u8; w * h];
+            let mut out_b = std::vec![7u8; w * h];
+            let mut bins_a = std::vec![0u32; 256];
+            let mut bins_b = std::vec![5u32; 300];
+            let mut fa = FrameMut::new(&mut out_a, w, h, w).unwrap().with_bit_depth(bits).unwrap();
+            let sa = subtract(&fon, &foff, &mut fa).unwrap();
+            let total = histogram(&fa.as_frame(), &mut bins_a).unwrap();
+            let mut fb = FrameMut::new(&mut out_b, w, h, w).unwrap().with_bit_depth(bits).unwrap();
+            let sb = subtract_with_histogram(&fon, &foff, &mut fb, &mut bins_b).unwrap();
+            assert_eq!(out_a, out_b, "{w}x{h}");
+            assert_eq!(sa, sb, "{w}x{h}");
+            assert_eq!(&bins_a[..], &bins_b[..256], "{w}x{h}");
+            assert!(bins_b[256..].iter().all(|&c| c == 0));
+            assert_eq!(bins_b.iter().sum::<u32>(), total);
+        }
+        // u16 frames take the per-pixel path.
+        let on: [u16; 4] = [1023, 7, 500, 3];
+        let off: [u16; 4] = [3, 9, 100, 3];
+        let fon = Frame::new(&on, 2, 2, 2).unwrap().with_bit_depth(10).unwrap();
+        let foff = Frame::new(&off, 2, 2, 2).unwrap().with_bit_depth(10).unwrap();
+        let mut out = [0u16; 4];
+        let mut fo = FrameMut::new(&mut out, 2, 2, 2).unwrap().with_bit_depth(10).unwrap();
+        let mut bins = [0u32; 1024];
+        assert_eq!(
+            subtract_with_histogram(&fon, &foff, &mut fo, &mut bins[..1000]).unwrap_err(),
+            ThresholdError::HistogramTooSmall { needed: 1024, actual: 1000 }
+        );
+        let s = subtract_with_histogram(&fon, &foff, &mut fo, &mut bins).unwrap();
+        assert_eq!(out, [1020, 0, 400, 0]);
+        assert_eq!((s.max_difference, s.on_saturated, s.off_max), (1020, 1, 100));
+        assert_eq!((bins[0], bins[400], bins[1020]), (2, 1, 1));
+    }
+
+    #[test]
+    fn word_helpers_match_per_lane_arithmetic() {
+        // Exhaustive over one lane pair in every position, with the other lanes fixed.
+        for a in 0..=255u32 {
+            for b in 0..=255u32 {
+                for lane in 0..4 {
+                    let fill_a = 0x9C5A_37E1 & !(0xFF << (8 * lane));
+                    let fill_b = 0x21B4_7F9C & !(0xFF << (8 * lane));
+                    let wa = fill_a | a << (8 * lane);
+                    let wb = fill_b | b << (8 * lane);
+                    let d = saturating_sub_bytes(wa, wb);
+                    for k in 0..4 {
+                        let (x, y) = ((wa >> (8 * k)) & 0xFF, (wb >> (8 * k)) & 0xFF);
+                        assert_eq!((d >> (8 * k)) & 0xFF, x.saturating_sub(y));
+                    }
+                }
+                if b < 255 {
+                    let w = a * ONES;
+                    assert_eq!(any_byte_greater(w, b) != 0, a > b, "{a} > {b}");
+                    let w = a << 16 | 0x0300_0003;
+                    let expect = a > b || 3 > b;
+                    assert_eq!(any_byte_greater(w, b) != 0, expect, "{a} {b}");
+                }
+            }
+        }
     }
 
     #[test]
