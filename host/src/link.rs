@@ -207,6 +207,8 @@ pub struct DeviceIdentity {
 }
 
 /// A device message, owned ([`Response`] borrows from the receive buffer).
+// Replies live briefly on the stack; boxing the calibration would only add an allocation.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq)]
 pub enum Reply {
     /// [`Response::Info`].
@@ -402,6 +404,9 @@ impl SeqTracker {
     }
 }
 
+/// Receiver of [`LinkEvent`]s.
+type EventSink = Box<dyn FnMut(&LinkEvent) + Send>;
+
 /// A link to one Tangent on one serial port.
 pub struct Link {
     path: String,
@@ -420,10 +425,11 @@ pub struct Link {
     bytes_in: usize,
     peer_version: Option<u8>,
     fruitless_replays: u32,
-    on_event: Option<Box<dyn FnMut(&LinkEvent) + Send>>,
+    on_event: Option<EventSink>,
 }
 
 /// What one frame turned out to be.
+#[allow(clippy::large_enum_variant)]
 enum Incoming {
     Message(u16, Reply),
     Rejected,
@@ -656,7 +662,10 @@ impl Link {
             let mut buf = [0u8; 1024];
             let timeout = (deadline - now).min(POLL);
             let r = match self.port.as_mut() {
-                Some(p) => p.set_timeout(timeout).map_err(std::io::Error::from).and_then(|()| p.read(&mut buf)),
+                Some(p) => p
+                    .set_timeout(timeout)
+                    .map_err(std::io::Error::from)
+                    .and_then(|()| p.read(&mut buf)),
                 None => Err(std::io::Error::new(ErrorKind::NotConnected, "port closed")),
             };
             match r {
@@ -670,7 +679,8 @@ impl Link {
                         self.rx.extend_from_slice(&buf[z..n]);
                     }
                 }
-                Err(e) if e.kind() == ErrorKind::TimedOut || e.kind() == ErrorKind::Interrupted => {}
+                Err(e) if e.kind() == ErrorKind::TimedOut || e.kind() == ErrorKind::Interrupted => {
+                }
                 Err(e) => self.reconnect(&e.to_string())?,
             }
         }
@@ -700,9 +710,8 @@ impl Link {
     fn side_message(&mut self, tag: u16, reply: Reply) {
         match reply {
             Reply::Reading(r) => {
-                if self.seq.accept(r) {
-                    self.counters.duplicates += 1;
-                }
+                let duplicate = self.seq.accept(r);
+                self.counters.duplicates += duplicate as u64;
             }
             Reply::Info(i) if tag == UNSOLICITED => {
                 // The boot banner.
@@ -723,7 +732,11 @@ impl Link {
         what: &'static str,
         idempotent: bool,
     ) -> Result<Reply, LinkError> {
-        let attempts = if idempotent { self.cfg.attempts.max(1) } else { 1 };
+        let attempts = if idempotent {
+            self.cfg.attempts.max(1)
+        } else {
+            1
+        };
         for attempt in 0..attempts {
             if attempt > 0 {
                 self.counters.retries += 1;
@@ -752,7 +765,9 @@ impl Link {
                     }
                     Incoming::Message(t, reply) => self.side_message(t, reply),
                     Incoming::Rejected => {
-                        if let (Some(v), true) = (self.peer_version, self.identity.fw_version.is_empty()) {
+                        if let (Some(v), true) =
+                            (self.peer_version, self.identity.fw_version.is_empty())
+                        {
                             return Err(self.version_error(v));
                         }
                     }
@@ -828,7 +843,8 @@ impl Link {
             if now >= deadline {
                 return Ok(None);
             }
-            let wake = deadline.min(self.last_check_at.max(self.last_frame_at) + self.cfg.idle_check);
+            let wake =
+                deadline.min(self.last_check_at.max(self.last_frame_at) + self.cfg.idle_check);
             if let Some(Incoming::Message(tag, reply)) = self.pump(wake.max(now))? {
                 self.side_message(tag, reply);
             }

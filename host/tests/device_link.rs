@@ -33,7 +33,12 @@ fn collect(link: &mut Link, n: u32, timeout: Duration) -> Vec<u32> {
     let mut seqs = Vec::new();
     while (seqs.len() as u32) < n && Instant::now() < end {
         if let Some(r) = link.next_reading(Duration::from_millis(100)).unwrap() {
-            assert_eq!(r.diameter_m, diameter_of(r.seq), "content of reading {}", r.seq);
+            assert_eq!(
+                r.diameter_m,
+                diameter_of(r.seq),
+                "content of reading {}",
+                r.seq
+            );
             seqs.push(r.seq);
         }
     }
@@ -55,7 +60,10 @@ fn clean_link_delivers_every_reading_once() {
     dev.press(40, Duration::from_millis(5));
     assert_eq!(collect(&mut link, 40, Duration::from_secs(20)), one_to(40));
     let c = link.counters();
-    assert_eq!((c.malformed, c.duplicates, c.lost, c.reconnects), (0, 0, 0, 0));
+    assert_eq!(
+        (c.malformed, c.duplicates, c.lost, c.reconnects),
+        (0, 0, 0, 0)
+    );
 }
 
 #[test]
@@ -79,7 +87,10 @@ fn dropped_and_corrupted_bytes_lose_and_duplicate_nothing() {
     assert_eq!(seqs, one_to(n));
     let c = link.counters();
     assert!(c.malformed > 5, "faults were injected: {c:?}");
-    assert!(c.history_requests > 1, "gaps were recovered from the history: {c:?}");
+    assert!(
+        c.history_requests > 1,
+        "gaps were recovered from the history: {c:?}"
+    );
     assert_eq!(c.lost, 0);
     eprintln!("faulty link: {c:?}");
 }
@@ -103,7 +114,11 @@ fn cut_and_restored_link_recovers_readings_made_meanwhile() {
         dev.cut(Duration::from_millis(400));
         std::thread::sleep(Duration::from_millis(100));
     }
-    seqs.extend(collect(&mut link, 50 - seqs.len() as u32, Duration::from_secs(30)));
+    seqs.extend(collect(
+        &mut link,
+        50 - seqs.len() as u32,
+        Duration::from_secs(30),
+    ));
     assert_eq!(seqs, one_to(50));
     let c = link.counters();
     assert!(c.reconnects >= 2, "{c:?}");
@@ -192,7 +207,8 @@ fn frame_dump_and_calibration_over_a_faulty_link() {
     let info = link.capture_frames().unwrap();
     for sel in [FrameSel::Off, FrameSel::On] {
         let got = link.read_frame(&info, sel, |_| {}).unwrap();
-        let want = fake_device::fake_frame(info.capture, sel, info.width as usize, info.height as usize);
+        let want =
+            fake_device::fake_frame(info.capture, sel, info.width as usize, info.height as usize);
         assert!(got == want, "{sel:?} frame differs");
     }
     let cal = tangent_core::protocol::WireCalibration::from(
@@ -206,19 +222,33 @@ fn frame_dump_and_calibration_over_a_faulty_link() {
 #[test]
 fn another_protocol_version_is_named() {
     let dev = FakeDevice::start(Persona::OtherVersion(2));
-    let err = Link::open(dev.path().to_str().unwrap(), cfg()).err().expect("must fail");
+    let err = Link::open(dev.path().to_str().unwrap(), cfg())
+        .err()
+        .expect("must fail");
     assert!(
-        matches!(err, LinkError::VersionMismatch { device: 2, host: 1, .. }),
+        matches!(
+            err,
+            LinkError::VersionMismatch {
+                device: 2,
+                host: 1,
+                ..
+            }
+        ),
         "{err:?}"
     );
     let text = err.to_string();
-    assert!(text.contains("version 2") && text.contains("version 1"), "{text}");
+    assert!(
+        text.contains("version 2") && text.contains("version 1"),
+        "{text}"
+    );
 }
 
 #[test]
 fn a_port_that_is_not_a_tangent_is_refused() {
     let dev = FakeDevice::start(Persona::Noise);
-    let err = Link::open(dev.path().to_str().unwrap(), cfg()).err().expect("must fail");
+    let err = Link::open(dev.path().to_str().unwrap(), cfg())
+        .err()
+        .expect("must fail");
     match &err {
         LinkError::NotATangent { bytes, .. } => assert!(*bytes > 0, "{err:?}"),
         other => panic!("{other:?}"),
@@ -228,7 +258,9 @@ fn a_port_that_is_not_a_tangent_is_refused() {
 
 #[test]
 fn a_missing_port_says_so() {
-    let err = Link::open("/dev/does-not-exist-tangent", cfg()).err().unwrap();
+    let err = Link::open("/dev/does-not-exist-tangent", cfg())
+        .err()
+        .unwrap();
     assert!(matches!(err, LinkError::Open { .. }), "{err:?}");
     assert!(err.to_string().contains("tangent devices"));
 }
@@ -269,10 +301,17 @@ impl Drop for Emulated {
 fn boot_emulated(capture: &Path) -> Option<Emulated> {
     let elf = repo().join("firmware/target/thumbv7em-none-eabihf/release/tangent-qemu");
     if !elf.is_file() {
-        eprintln!("SKIPPED: {} is not built (run `cargo firmware-qemu`)", elf.display());
+        eprintln!(
+            "SKIPPED: {} is not built (run `cargo firmware-qemu`)",
+            elf.display()
+        );
         return None;
     }
-    if Command::new("qemu-system-arm").arg("--version").output().is_err() {
+    if Command::new("qemu-system-arm")
+        .arg("--version")
+        .output()
+        .is_err()
+    {
         eprintln!("SKIPPED: qemu-system-arm is not installed");
         return None;
     }
@@ -310,6 +349,8 @@ fn boot_emulated(capture: &Path) -> Option<Emulated> {
             }
         }
     }
+    let _ = child.kill();
+    let _ = child.wait();
     panic!("QEMU did not announce its pty");
 }
 
@@ -346,7 +387,9 @@ const SOURCE: &str = "tests/captures/cyl-d300-z150-shade";
 #[test]
 fn emulated_device_end_to_end() {
     let source = repo().join(SOURCE);
-    let Some(dev) = boot_emulated(&source) else { return };
+    let Some(dev) = boot_emulated(&source) else {
+        return;
+    };
     let port = dev.pty.to_str().unwrap().to_string();
     let dir = tempfile::tempdir().unwrap();
     let src = Capture::read(&source).unwrap();
@@ -357,15 +400,35 @@ fn emulated_device_end_to_end() {
     tangent(&["calib", "push", "--port", &port, cal_in.to_str().unwrap()]);
     let cal_out = dir.path().join("pulled.toml");
     tangent(&["calib", "pull", "--port", &port, cal_out.to_str().unwrap()]);
-    assert_eq!(tangent_host::calibration_file::read(&cal_out).unwrap(), src.calibration);
+    assert_eq!(
+        tangent_host::calibration_file::read(&cal_out).unwrap(),
+        src.calibration
+    );
 
     // Three measurements (as trigger presses), then a stream of five.
     let log = dir.path().join("field.log");
     let l = log.to_str().unwrap();
-    tangent(&["listen", "--port", &port, "--log", l, "--plot-id", "E2E", "--species", "PIAB", "--measure", "3"]);
-    tangent(&["listen", "--port", &port, "--log", l, "--stream", "--count", "5"]);
+    tangent(&[
+        "listen",
+        "--port",
+        &port,
+        "--log",
+        l,
+        "--plot-id",
+        "E2E",
+        "--species",
+        "PIAB",
+        "--measure",
+        "3",
+    ]);
+    tangent(&[
+        "listen", "--port", &port, "--log", l, "--stream", "--count", "5",
+    ]);
     let trees = logged(&log);
-    assert_eq!(trees.iter().map(|t| t.seq).collect::<Vec<_>>(), (1..=8).collect::<Vec<_>>());
+    assert_eq!(
+        trees.iter().map(|t| t.seq).collect::<Vec<_>>(),
+        (1..=8).collect::<Vec<_>>()
+    );
     // Truth: a 300 mm stem. The reading must lie within 3 of its own predicted standard
     // uncertainties (the error model's claim; the f32 device adds < 1e-4 relative).
     let truth_mm = 300.0;
@@ -380,14 +443,20 @@ fn emulated_device_end_to_end() {
         assert_eq!(t.device_id, "emulated");
     }
     // Tree ids: one per press (1, 2, 3), the stream is one held trigger (tree 4).
-    assert_eq!(trees.iter().map(|t| t.tree_id).collect::<Vec<_>>(), [1, 2, 3, 4, 4, 4, 4, 4]);
+    assert_eq!(
+        trees.iter().map(|t| t.tree_id).collect::<Vec<_>>(),
+        [1, 2, 3, 4, 4, 4, 4, 4]
+    );
 
     // Record a capture: the frames equal the source's, the calibration is the device's.
     let rec = dir.path().join("rec");
     tangent(&["record", "--port", &port, rec.to_str().unwrap()]);
     let got = Capture::read(&rec).unwrap();
     assert_eq!(got.calibration, src.calibration);
-    assert!(got.off_frame() == src.off_frame(), "off frame differs from the source");
+    assert!(
+        got.off_frame() == src.off_frame(),
+        "off frame differs from the source"
+    );
     let (lit_got, on_got) = got.on_frames().next().unwrap();
     let (lit_src, on_src) = src.on_frames().next().unwrap();
     assert_eq!(lit_got, lit_src);
@@ -400,12 +469,20 @@ fn emulated_device_end_to_end() {
 #[test]
 fn emulated_device_through_a_faulty_cut_link() {
     let source = repo().join(SOURCE);
-    let Some(dev) = boot_emulated(&source) else { return };
+    let Some(dev) = boot_emulated(&source) else {
+        return;
+    };
     let src = Capture::read(&source).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let cal = dir.path().join("cal.toml");
     tangent_host::calibration_file::write(&cal, &src.calibration).unwrap();
-    tangent(&["calib", "push", "--port", dev.pty.to_str().unwrap(), cal.to_str().unwrap()]);
+    tangent(&[
+        "calib",
+        "push",
+        "--port",
+        dev.pty.to_str().unwrap(),
+        cal.to_str().unwrap(),
+    ]);
 
     let relay = Relay::start(&dev.pty);
     relay.faults(Faults {

@@ -82,7 +82,10 @@ fn a_tree_needs_a_plot_and_a_log_is_locked() {
         log.append(tree("P", 1, "X", 1.0, 0, 1)),
         Err(FieldLogError::NoPlot)
     ));
-    assert!(matches!(FieldLog::open(&path), Err(FieldLogError::Locked(_))));
+    assert!(matches!(
+        FieldLog::open(&path),
+        Err(FieldLogError::Locked(_))
+    ));
     std::fs::write(dir.path().join("other.txt"), "hello\n").unwrap();
     assert!(matches!(
         FieldLog::open(&dir.path().join("other.txt")),
@@ -141,7 +144,10 @@ fn json_export_nests_trees_in_plots() {
     assert_eq!(t["species"], "PISY");
     assert_eq!(t["diameter_mm"], 201.96);
     assert_eq!(t["flags"], 6);
-    assert_eq!(t["flag_names"], serde_json::json!(["POOR_FIT", "TILT_IGNORED"]));
+    assert_eq!(
+        t["flag_names"],
+        serde_json::json!(["POOR_FIT", "TILT_IGNORED"])
+    );
     assert_eq!(plots[1]["trees"].as_array().unwrap().len(), 1);
 }
 
@@ -266,10 +272,16 @@ fn killed_listener_loses_and_duplicates_nothing() {
         .collect();
     let logged = tree_seqs(&log);
     // Every printed reading is in the log (write-ahead), in order, no duplicates.
-    assert!(logged.starts_with(&printed_seqs), "printed {printed_seqs:?}, logged {logged:?}");
+    assert!(
+        logged.starts_with(&printed_seqs),
+        "printed {printed_seqs:?}, logged {logged:?}"
+    );
     assert_eq!(logged, (1..=logged.len() as u32).collect::<Vec<_>>());
     let k = logged.len() as u32;
-    assert!(k < n, "killed after every reading ({k}); the test needs it mid-stream");
+    assert!(
+        k < n,
+        "killed after every reading ({k}); the test needs it mid-stream"
+    );
 
     // Restart: it must fetch k+1..=n (some made while nobody listened) from the history.
     dev.wait_presses(Duration::from_secs(30));
@@ -282,7 +294,11 @@ fn killed_listener_loses_and_duplicates_nothing() {
         .stdin(Stdio::null())
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert_eq!(tree_seqs(&log), (1..=n).collect::<Vec<_>>());
     // Tree ids continue in the plot; the species stays what the first run was given only
     // for the first run (the second gave none).
@@ -312,17 +328,32 @@ fn log_export_command_writes_the_format() {
             log.append(r).unwrap();
         }
     }
-    for (fmt, kind) in [("csv", ExportFormat::Csv), ("tsv", ExportFormat::Tsv), ("json", ExportFormat::Json)] {
+    for (fmt, kind) in [
+        ("csv", ExportFormat::Csv),
+        ("tsv", ExportFormat::Tsv),
+        ("json", ExportFormat::Json),
+    ] {
         let out = tangent()
             .args(["log", "export", "--format", fmt, "--log"])
             .arg(&path)
             .output()
             .unwrap();
         assert!(out.status.success());
-        assert_eq!(String::from_utf8(out.stdout).unwrap(), fieldlog::export(&sample(), kind));
+        assert_eq!(
+            String::from_utf8(out.stdout).unwrap(),
+            fieldlog::export(&sample(), kind)
+        );
     }
     let out = tangent()
-        .args(["log", "export", "--format", "csv", "--plot-id", "P-017", "--log"])
+        .args([
+            "log",
+            "export",
+            "--format",
+            "csv",
+            "--plot-id",
+            "P-017",
+            "--log",
+        ])
         .arg(&path)
         .output()
         .unwrap();

@@ -51,17 +51,24 @@ pub fn run(args: Args) -> Result<ExitCode> {
             link.write_calibration(&wire)?;
             match link.read_calibration()? {
                 Some(back) if back == wire => {}
-                Some(_) => bail!("the device stored a different calibration than was sent: push again"),
+                Some(_) => {
+                    bail!("the device stored a different calibration than was sent: push again")
+                }
                 None => bail!("the device acknowledged the calibration but does not report one"),
             }
-            eprintln!("calibration {} stored on the device at {path} and verified", cal.id);
+            eprintln!(
+                "calibration {} stored on the device at {path} and verified",
+                cal.id
+            );
             Ok(ExitCode::SUCCESS)
         }
         Command::Pull { port, file } => {
             let path = resolve_port(port)?;
             let mut link = Link::open(&path, LinkConfig::default())?;
             let Some(wire) = link.read_calibration()? else {
-                bail!("the device at {path} has no calibration: push one with `tangent calib push`");
+                bail!(
+                    "the device at {path} has no calibration: push one with `tangent calib push`"
+                );
             };
             let cal = wire
                 .to_calibration()
@@ -69,7 +76,8 @@ pub fn run(args: Args) -> Result<ExitCode> {
             let text = calibration_file::to_string(&cal);
             match file {
                 Some(f) => {
-                    std::fs::write(&f, text).with_context(|| format!("cannot write {}", f.display()))?;
+                    std::fs::write(&f, text)
+                        .with_context(|| format!("cannot write {}", f.display()))?;
                     eprintln!("calibration {} written to {}", cal.id, f.display());
                 }
                 None => print!("{text}"),

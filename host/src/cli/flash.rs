@@ -29,9 +29,8 @@ fn find_repo(start: &Path) -> Option<PathBuf> {
 }
 
 fn on_path(program: &str) -> bool {
-    std::env::var_os("PATH").is_some_and(|paths| {
-        std::env::split_paths(&paths).any(|d| d.join(program).is_file())
-    })
+    std::env::var_os("PATH")
+        .is_some_and(|paths| std::env::split_paths(&paths).any(|d| d.join(program).is_file()))
 }
 
 /// Builds, then flashes.
@@ -41,7 +40,10 @@ pub fn run(args: Args) -> Result<ExitCode> {
         None => {
             let cwd = std::env::current_dir()?;
             find_repo(&cwd).with_context(|| {
-                format!("no firmware/Cargo.toml in {} or above: run from the repository or give --repo", cwd.display())
+                format!(
+                    "no firmware/Cargo.toml in {} or above: run from the repository or give --repo",
+                    cwd.display()
+                )
             })?
         }
     };

@@ -100,7 +100,10 @@ pub fn run(args: Args) -> Result<ExitCode> {
         );
     }
     if log.skipped() > 0 {
-        eprintln!("warning: {} damaged line(s) in the middle of the log were skipped", log.skipped());
+        eprintln!(
+            "warning: {} damaged line(s) in the middle of the log were skipped",
+            log.skipped()
+        );
     }
     let plot_id = match (&args.plot_id, log.current_plot()) {
         (Some(id), Some(cur)) if *id == cur.plot_id => id.clone(),
@@ -149,13 +152,17 @@ pub fn run(args: Args) -> Result<ExitCode> {
         "listening to {} on {path} (firmware {}, calibration {}), plot {plot_id}, log {}",
         device_id,
         id.fw_version,
-        id.calib_id.map(|c| c.to_string()).unwrap_or_else(|| "NONE — push one with `tangent calib push`".into()),
+        id.calib_id
+            .map(|c| c.to_string())
+            .unwrap_or_else(|| "NONE — push one with `tangent calib push`".into()),
         args.log.display()
     );
 
-    let mut next_tree = args
-        .tree_id
-        .unwrap_or_else(|| log.last_tree_in(&plot_id).map(|t| t.tree_id + 1).unwrap_or(1));
+    let mut next_tree = args.tree_id.unwrap_or_else(|| {
+        log.last_tree_in(&plot_id)
+            .map(|t| t.tree_id + 1)
+            .unwrap_or(1)
+    });
     let mut species = args.species.clone();
     let typed = if std::io::stdin().is_terminal() {
         eprintln!("type a tree id and/or species code (`17`, `PIAB`, `17 PIAB`, `- 50`) + Enter to set the next tree");
@@ -191,7 +198,10 @@ pub fn run(args: Args) -> Result<ExitCode> {
                         Typed::Species(s) => species = s,
                     }
                 }
-                eprintln!("next: tree {next_tree}, species {}", if species.is_empty() { "-" } else { &species });
+                eprintln!(
+                    "next: tree {next_tree}, species {}",
+                    if species.is_empty() { "-" } else { &species }
+                );
             }
         }
         if to_measure > 0 {
@@ -247,7 +257,13 @@ pub fn run(args: Args) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-fn tree_record(r: &Reading, plot_id: &str, tree_id: u32, species: &str, device_id: &str) -> TreeRecord {
+fn tree_record(
+    r: &Reading,
+    plot_id: &str,
+    tree_id: u32,
+    species: &str,
+    device_id: &str,
+) -> TreeRecord {
     TreeRecord {
         plot_id: plot_id.to_string(),
         tree_id,
@@ -268,7 +284,11 @@ fn describe(t: &TreeRecord, r: &Reading) -> String {
     let mut s = format!(
         "tree {:>4} {:<6} {:7.1} mm ± {:.1}  tilt {:4.1}°",
         t.tree_id,
-        if t.species.is_empty() { "-" } else { &t.species },
+        if t.species.is_empty() {
+            "-"
+        } else {
+            &t.species
+        },
         t.diameter_mm,
         t.uncertainty_mm,
         t.tilt_deg
@@ -296,14 +316,22 @@ fn session_png(path: &std::path::Path, plot_id: &str, trees: &[TreeRecord]) -> R
     let root = BitMapBackend::new(path, (900, 500)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| err(&e))?;
     let x_max = trees.iter().map(|t| t.tree_id).max().unwrap_or(1) + 1;
-    let x_min = trees.iter().map(|t| t.tree_id).min().unwrap_or(1).saturating_sub(1);
+    let x_min = trees
+        .iter()
+        .map(|t| t.tree_id)
+        .min()
+        .unwrap_or(1)
+        .saturating_sub(1);
     let y_max = trees
         .iter()
         .map(|t| t.diameter_mm + 2.0 * t.uncertainty_mm)
         .fold(10.0, f64::max)
         * 1.1;
     let mut chart = ChartBuilder::on(&root)
-        .caption(format!("plot {plot_id}: diameters (± 2σ)"), ("sans-serif", 22))
+        .caption(
+            format!("plot {plot_id}: diameters (± 2σ)"),
+            ("sans-serif", 22),
+        )
         .margin(12)
         .x_label_area_size(36)
         .y_label_area_size(56)

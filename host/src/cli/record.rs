@@ -73,7 +73,9 @@ pub fn run(args: Args) -> Result<ExitCode> {
         bar.set_message(format!("pair {}/{}", i + 1, args.count));
         let frame_len = info.width as u64 * info.height as u64;
         let off = link.read_frame(&info, FrameSel::Off, |n| bar.set_position(n as u64))?;
-        let on = link.read_frame(&info, FrameSel::On, |n| bar.set_position(frame_len + n as u64))?;
+        let on = link.read_frame(&info, FrameSel::On, |n| {
+            bar.set_position(frame_len + n as u64)
+        })?;
         bar.finish_and_clear();
         let capture = build_capture(&info, off, on, &calibration, board, mode, &args.description)?;
         capture
@@ -118,7 +120,10 @@ pub fn build_capture(
         .filter(|i| info.laser_mask & (1 << i) != 0 && *i < cal.planes.len())
         .collect();
     if lasers_on.is_empty() {
-        bail!("the laser-on frame lit no calibrated laser (mask {:#04b})", info.laser_mask);
+        bail!(
+            "the laser-on frame lit no calibrated laser (mask {:#04b})",
+            info.laser_mask
+        );
     }
     let sensor = match board {
         Board::H743 => "MT9V034",
@@ -164,8 +169,10 @@ pub fn build_capture(
     Ok(Capture {
         meta,
         calibration: cal,
-        frames: vec![Pgm::from_u8(w, h, maxval, off)?, Pgm::from_u8(w, h, maxval, on)?],
+        frames: vec![
+            Pgm::from_u8(w, h, maxval, off)?,
+            Pgm::from_u8(w, h, maxval, on)?,
+        ],
         truth_curve: None,
     })
 }
-

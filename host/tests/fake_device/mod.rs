@@ -186,7 +186,10 @@ impl FakeDevice {
     pub fn wait_presses(&self, timeout: Duration) {
         let end = Instant::now() + timeout;
         while self.presses_left() > 0 {
-            assert!(Instant::now() < end, "the fake device did not finish its presses");
+            assert!(
+                Instant::now() < end,
+                "the fake device did not finish its presses"
+            );
             std::thread::sleep(Duration::from_millis(5));
         }
     }
@@ -310,9 +313,9 @@ impl Device {
             }
             if self.persona == Persona::Noise && noise_at.elapsed() > Duration::from_millis(50) {
                 noise_at = Instant::now();
-                let _ = pty
-                    .master
-                    .write_all(b"$GPGGA,092750.000,5321.6802,N,00630.3372,W,1,8,1.03,61.7,M,55.2,M,,*76\r\n");
+                let _ = pty.master.write_all(
+                    b"$GPGGA,092750.000,5321.6802,N,00630.3372,W,1,8,1.03,61.7,M,55.2,M,,*76\r\n",
+                );
             }
             let mut buf = [0u8; 256];
             match pty.master.read(&mut buf) {
@@ -563,7 +566,9 @@ impl Device {
                 offset,
                 max_len,
             } => {
-                let Some((off, on)) = &self.frames else { return };
+                let Some((off, on)) = &self.frames else {
+                    return;
+                };
                 let data = if frame == FrameSel::Off { off } else { on };
                 let start = (offset as usize).min(data.len());
                 let end = (start + (max_len as usize).min(FRAME_CHUNK_MAX)).min(data.len());
@@ -582,7 +587,10 @@ impl Device {
             Request::SelfTest => self.send_msg(
                 pty,
                 tag,
-                &Response::SelfTest(protocol::SelfTestReport { failed: 0, ran: 0xF }),
+                &Response::SelfTest(protocol::SelfTestReport {
+                    failed: 0,
+                    ran: 0xF,
+                }),
             ),
         }
     }
@@ -719,7 +727,9 @@ fn write_all_nb(f: &mut File, bytes: &[u8]) {
     while !rest.is_empty() && Instant::now() < deadline {
         match f.write(rest) {
             Ok(n) => rest = &rest[n..],
-            Err(e) if e.kind() == ErrorKind::WouldBlock => std::thread::sleep(Duration::from_millis(1)),
+            Err(e) if e.kind() == ErrorKind::WouldBlock => {
+                std::thread::sleep(Duration::from_millis(1))
+            }
             Err(_) => return,
         }
     }

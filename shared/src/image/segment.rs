@@ -22,7 +22,7 @@
 
 use core::fmt;
 
-use super::subtract::{any_byte_greater, pack4};
+use super::subtract::{pack4, ByteGreater};
 use super::{Frame, FrameError, FrameMut, Pixel};
 use crate::real::Real;
 
@@ -298,6 +298,36 @@ impl Labeller<'_> {
     }
 }
 
+/// Index of the first 4-pixel word `k` in `from..words` of an 8-bit `row` holding a pixel
+/// above the level of `greater`, or `words` if none: the background scan of [`segment`],
+/// two words per iteration with the level's branch out of the loop.
+#[inline(never)]
+fn next_foreground_word<P: Pixel>(
+    row: &[P],
+    from: usize,
+    words: usize,
+    greater: ByteGreater,
+) -> usize {
+    let end = words.min(row.len() / 4);
+    let Some(words_row) = row.get(4 * from.min(end)..4 * end) else {
+        return words;
+    };
+    let mut k = from.min(end);
+    let mut pairs = words_row.chunks_exact(8);
+    for pair in &mut pairs {
+        let (w0, w1) = (pack4(pair), pack4(pair.get(4..).unwrap_or(&[])));
+        if greater.test(w0) | greater.test(w1) != 0 {
+            return if greater.test(w0) != 0 { k } else { k + 1 };
+        }
+        k += 2;
+    }
+    let rest = pairs.remainder();
+    if rest.len() >= 4 && greater.test(pack4(rest)) != 0 {
+        return k;
+    }
+    words
+}
+
 /// Segments `image` into connected objects of pixels with `value > threshold`, writes compact
 /// labels (`0` = background, objects `1..=n`) into `labels` and the objects' features into
 /// `features[..n]`.
@@ -380,6 +410,7 @@ pub fn segment<P: Pixel>(
         // pixels; a background pixel's label is 0 whatever its neighbours are).
         cur.fill(0);
         let word_skip = P::STORAGE_BITS == 8 && threshold < 255;
+        let greater = ByteGreater::new(threshold.min(255));
         if P::STORAGE_BITS == 8 && threshold >= 255 {
             continue; // no 8-bit value exceeds 255
         }
@@ -442,14 +473,22 @@ pub fn segment<P: Pixel>(
         };
         let words = if word_skip { n / 4 } else { 0 };
         let mut left = 0u16;
-        for (k, w) in row.chunks_exact(4).take(words).enumerate() {
-            if any_byte_greater(pack4(w), threshold) == 0 {
-                left = 0;
-                continue;
+        let mut k = 0;
+        loop {
+            let next = next_foreground_word(row, k, words, greater);
+            if next >= words {
+                break;
             }
-            for x in 4 * k..4 * k + 4 {
+            if next > k {
+                left = 0; // the pixel left of word `next` is background
+            }
+            for x in 4 * next..4 * next + 4 {
                 left = pixel(x, left)?;
             }
+            k = next + 1;
+        }
+        if words > 0 && k < words {
+            left = 0;
         }
         for x in 4 * words..n {
             left = pixel(x, left)?;

@@ -130,17 +130,41 @@ fn saturating_sub_bytes(a: u32, b: u32) -> u32 {
 /// lane plus `127 − (m mod 128)` reach bit 7 iff `x_lo > m mod 128` (never carrying into the
 /// next lane: at most 127 + 127); for `m < 128` a lane with bit 7 set is greater anyway, for
 /// `m ≥ 128` it must also have bit 7 set.
-#[inline(always)]
-pub(crate) fn any_byte_greater(x: u32, m: u32) -> u32 {
-    let t = (x & LOW7) + (127 - (m & 127)) * ONES;
-    if m < 128 {
-        (t | x) & HIGH
-    } else {
-        t & x & HIGH
+#[cfg(test)]
+fn any_byte_greater(x: u32, m: u32) -> u32 {
+    ByteGreater::new(m).test(x)
+}
+
+/// The word test of [`any_byte_greater`] for a fixed `m ≤ 254`, its constant precomputed
+/// (for loops that test every word of a frame against one level).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct ByteGreater {
+    add: u32,
+    high: bool,
+}
+
+impl ByteGreater {
+    /// The test against level `m` (`m ≤ 254`; at 255 it would never fire, which is also right).
+    #[inline(always)]
+    pub(crate) fn new(m: u32) -> Self {
+        ByteGreater {
+            add: (127 - (m & 127)) * ONES,
+            high: m >= 128,
+        }
+    }
+    /// Non-zero iff some byte lane of `x` is greater than the level.
+    #[inline(always)]
+    pub(crate) fn test(self, x: u32) -> u32 {
+        let t = (x & LOW7) + self.add;
+        if self.high {
+            t & x & HIGH
+        } else {
+            (t | x) & HIGH
+        }
     }
 }
 
-/// The maximum of `m` and the byte lanes of `x`, with its [`any_byte_greater`] constant
+/// The maximum of `m` and the byte lanes of `x`, with its [`ByteGreater`] constant
 /// `(127 − (max mod 128))·0x01010101` (rare: a laser-off pixel above the running maximum; at
 /// 255 the constant is 0 and the test never fires, as nothing is greater).
 #[inline(never)]
@@ -234,7 +258,7 @@ pub fn subtract_with_histogram<P: Pixel>(
         };
         // Counts of the words whose four differences are all < 4, by their 2-bit values.
         let mut quads = [0u32; 256];
-        // Running laser-off maximum and its `any_byte_greater` constant.
+        // Running laser-off maximum and its `ByteGreater` constant.
         let (mut off_max, mut off_add) = (0u32, 127 * ONES);
         let mut on_saturated = 0u32;
         for y in 0..height {
