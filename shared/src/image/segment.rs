@@ -422,7 +422,11 @@ pub fn segment<P: Pixel>(
                 return Ok(0);
             }
             let up = prev.get(x).copied().unwrap_or(0);
-            let up_left = if x > 0 { prev.get(x - 1).copied().unwrap_or(0) } else { 0 };
+            let up_left = if x > 0 {
+                prev.get(x - 1).copied().unwrap_or(0)
+            } else {
+                0
+            };
             let up_right = prev.get(x + 1).copied().unwrap_or(0);
             any = true;
             let l = match connectivity {
@@ -531,8 +535,13 @@ pub fn segment<P: Pixel>(
         for y in first_row..=last_row {
             let row = image.row(y);
             let yy = y as u16; // y < 2^16 checked above
-            // Four labels at a time: most words of a foreground row are background.
-            for (k, (c4, p4)) in labels.row_mut(y).chunks_mut(4).zip(row.chunks(4)).enumerate() {
+                               // Four labels at a time: most words of a foreground row are background.
+            for (k, (c4, p4)) in labels
+                .row_mut(y)
+                .chunks_mut(4)
+                .zip(row.chunks(4))
+                .enumerate()
+            {
                 if c4.iter().fold(0, |acc, &c| acc | c) == 0 {
                     continue;
                 }

@@ -188,7 +188,8 @@ fn count_lanes(bins: &mut [u32; 256], d: u32) {
 pub(crate) fn pack4<P: Pixel>(p: &[P]) -> u32 {
     match *p {
         [p0, p1, p2, p3, ..] => {
-            let (p0, p1, p2, p3): (u32, u32, u32, u32) = (p0.into(), p1.into(), p2.into(), p3.into());
+            let (p0, p1, p2, p3): (u32, u32, u32, u32) =
+                (p0.into(), p1.into(), p2.into(), p3.into());
             (p0 & 0xFF) | (p1 & 0xFF) << 8 | (p2 & 0xFF) << 16 | (p3 & 0xFF) << 24
         }
         _ => 0,
@@ -254,7 +255,10 @@ pub fn subtract_with_histogram<P: Pixel>(
     if P::STORAGE_BITS == 8 && saturation == 255 && out_max == 255 {
         // Fixed-size views: the byte-valued indices below need no bounds check.
         let Some(bins) = bins.first_chunk_mut::<256>() else {
-            return Err(ThresholdError::HistogramTooSmall { needed: 256, actual: levels });
+            return Err(ThresholdError::HistogramTooSmall {
+                needed: 256,
+                actual: levels,
+            });
         };
         // Counts of the words whose four differences are all < 4, by their 2-bit values.
         let mut quads = [0u32; 256];
@@ -282,7 +286,11 @@ pub fn subtract_with_histogram<P: Pixel>(
                     sum_lanes += (b & EVEN) + ((b >> 8) & EVEN);
                     sat_lanes += ((((a & LOW7) + ONES) & a) >> 7) & ONES;
                     let t = (b & LOW7) + off_add;
-                    let greater = if off_max < 128 { (t | b) & HIGH } else { t & b & HIGH };
+                    let greater = if off_max < 128 {
+                        (t | b) & HIGH
+                    } else {
+                        t & b & HIGH
+                    };
                     if greater != 0 {
                         (off_max, off_add) = raise_max(off_max, b);
                     }
@@ -436,16 +444,28 @@ mod tests {
             let len = (h - 1) * stride + w;
             let on = random_frame(&mut seed, len, true);
             let off = random_frame(&mut seed, len, false);
-            let fon = Frame::new(&on, w, h, stride).unwrap().with_bit_depth(bits).unwrap();
-            let foff = Frame::new(&off, w, h, stride).unwrap().with_bit_depth(bits).unwrap();
+            let fon = Frame::new(&on, w, h, stride)
+                .unwrap()
+                .with_bit_depth(bits)
+                .unwrap();
+            let foff = Frame::new(&off, w, h, stride)
+                .unwrap()
+                .with_bit_depth(bits)
+                .unwrap();
             let mut out_a = std::vec![0u8; w * h];
             let mut out_b = std::vec![7u8; w * h];
             let mut bins_a = std::vec![0u32; 256];
             let mut bins_b = std::vec![5u32; 300];
-            let mut fa = FrameMut::new(&mut out_a, w, h, w).unwrap().with_bit_depth(bits).unwrap();
+            let mut fa = FrameMut::new(&mut out_a, w, h, w)
+                .unwrap()
+                .with_bit_depth(bits)
+                .unwrap();
             let sa = subtract(&fon, &foff, &mut fa).unwrap();
             let total = histogram(&fa.as_frame(), &mut bins_a).unwrap();
-            let mut fb = FrameMut::new(&mut out_b, w, h, w).unwrap().with_bit_depth(bits).unwrap();
+            let mut fb = FrameMut::new(&mut out_b, w, h, w)
+                .unwrap()
+                .with_bit_depth(bits)
+                .unwrap();
             let sb = subtract_with_histogram(&fon, &foff, &mut fb, &mut bins_b).unwrap();
             assert_eq!(out_a, out_b, "{w}x{h}");
             assert_eq!(sa, sb, "{w}x{h}");
@@ -456,18 +476,33 @@ mod tests {
         // u16 frames take the per-pixel path.
         let on: [u16; 4] = [1023, 7, 500, 3];
         let off: [u16; 4] = [3, 9, 100, 3];
-        let fon = Frame::new(&on, 2, 2, 2).unwrap().with_bit_depth(10).unwrap();
-        let foff = Frame::new(&off, 2, 2, 2).unwrap().with_bit_depth(10).unwrap();
+        let fon = Frame::new(&on, 2, 2, 2)
+            .unwrap()
+            .with_bit_depth(10)
+            .unwrap();
+        let foff = Frame::new(&off, 2, 2, 2)
+            .unwrap()
+            .with_bit_depth(10)
+            .unwrap();
         let mut out = [0u16; 4];
-        let mut fo = FrameMut::new(&mut out, 2, 2, 2).unwrap().with_bit_depth(10).unwrap();
+        let mut fo = FrameMut::new(&mut out, 2, 2, 2)
+            .unwrap()
+            .with_bit_depth(10)
+            .unwrap();
         let mut bins = [0u32; 1024];
         assert_eq!(
             subtract_with_histogram(&fon, &foff, &mut fo, &mut bins[..1000]).unwrap_err(),
-            ThresholdError::HistogramTooSmall { needed: 1024, actual: 1000 }
+            ThresholdError::HistogramTooSmall {
+                needed: 1024,
+                actual: 1000
+            }
         );
         let s = subtract_with_histogram(&fon, &foff, &mut fo, &mut bins).unwrap();
         assert_eq!(out, [1020, 0, 400, 0]);
-        assert_eq!((s.max_difference, s.on_saturated, s.off_max), (1020, 1, 100));
+        assert_eq!(
+            (s.max_difference, s.on_saturated, s.off_max),
+            (1020, 1, 100)
+        );
         assert_eq!((bins[0], bins[400], bins[1020]), (2, 1, 1));
     }
 
