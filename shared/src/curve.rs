@@ -500,6 +500,55 @@ mod tests {
     }
 
     #[test]
+    fn window_over_the_labels_gives_the_same_points() {
+        let (d, l) = scene(&[(3, row_a, AMP), (5, row_b, 0.6 * AMP)]);
+        let (diff, labels) = frames(&d, &l);
+        let blank = CurvePoint {
+            column: 0,
+            row: 0.0,
+            amplitude: 0.0,
+            curve: 0,
+            saturated: false,
+        };
+        let params = ExtractParams::default();
+        let mut full = [blank; 128];
+        let n = extract(&diff, &labels, &[5, 3], &params, &mut full).unwrap();
+        // The labels' bounding box, found independently by scanning the label frame.
+        let (mut y0, mut y1) = (H, 0);
+        for (i, &lab) in l.iter().enumerate() {
+            if lab == 3 || lab == 5 {
+                y0 = y0.min(i / W);
+                y1 = y1.max(i / W + 1);
+            }
+        }
+        assert!(
+            y0 > 0 && y1 < H,
+            "the box must be a real restriction: {y0}..{y1}"
+        );
+        let mut win = [blank; 128];
+        let m = extract_window(&diff, &labels, &[5, 3], 0..W, y0..y1, &params, &mut win).unwrap();
+        assert_eq!(&win[..m], &full[..n]);
+        // Columns outside the window give no point; the others are unchanged. A window
+        // reaching past the frame is clamped to it.
+        let m = extract_window(
+            &diff,
+            &labels,
+            &[5, 3],
+            10..W + 5,
+            y0..H + 9,
+            &params,
+            &mut win,
+        )
+        .unwrap();
+        assert_eq!(&win[..m], &full[20..n]);
+        // A window that misses every label finds no curve.
+        assert_eq!(
+            extract_window(&diff, &labels, &[5, 3], 0..W, 0..y0, &params, &mut win),
+            Err(CurveError::NoCurve)
+        );
+    }
+
+    #[test]
     fn flags_saturated_columns_and_still_locates_them() {
         fn row_c(x: usize) -> f64 {
             20.0 + 0.137 * x as f64
