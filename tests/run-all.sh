@@ -61,8 +61,8 @@ run_cargo_tests firmware-logic bash -c 'cd firmware && cargo test --target x86_6
 
 # Host and core (including the corpus, the simulator, calibration on real images and the
 # emulated device under QEMU), then the core again in single precision, as on the device.
-run_cargo_tests host-and-core cargo test --workspace --release
-run_cargo_tests core-f32 cargo test -p tangent-core --features f32 --release
+run_cargo_tests host-and-core cargo test --workspace --release --no-fail-fast
+run_cargo_tests core-f32 cargo test -p tangent-core --features f32 --release --no-fail-fast
 
 # --- summary -----------------------------------------------------------------------
 echo

@@ -23,7 +23,7 @@ use crate::simulate::scene::Object;
 type Vec3d = nalgebra::Vector3<f64>;
 
 /// Every flag with its name as printed and exported (stable: the field log stores them).
-pub const FLAG_NAMES: [(Flags, &str); 13] = [
+pub const FLAG_NAMES: [(Flags, &str); 14] = [
     (Flags::ARC_TOO_SHORT, "arc_too_short"),
     (Flags::POOR_FIT, "poor_fit"),
     (Flags::TILT_IGNORED, "tilt_ignored"),
@@ -37,6 +37,7 @@ pub const FLAG_NAMES: [(Flags, &str); 13] = [
     (Flags::STRIPE_SATURATED, "stripe_saturated"),
     (Flags::AMBIENT_BRIGHT, "ambient_bright"),
     (Flags::OTHER_OBJECTS, "other_objects"),
+    (Flags::ELLIPTIC, "elliptic"),
 ];
 
 /// The names of the flags set in `flags`.
@@ -142,7 +143,7 @@ impl Reading {
                         theta_deg: (t.theta as f64).to_degrees(),
                         phi_deg: (t.phi as f64).to_degrees(),
                     }),
-                    axes_m: None,
+                    axes_m: s.axes.map(|(a, b)| (a as f64, b as f64)),
                     three_tangent_diameter_m: s.three_tangent_diameter.map(|d| d as f64),
                     fit_diameter_m: s.fit_diameter.map(|d| d as f64),
                     distance_m: Some(s.distance as f64),

@@ -669,7 +669,10 @@ fn laser_planes_from_simulated_board_captures() {
         assert!((roll - t.roll()).abs() <= noise.tilt, "plane {k}: ρ {roll}");
         assert!((e - te).abs() <= 4.03 * rep.std_error.0, "plane {k}: e SE");
         assert!((d - td).abs() <= 4.03 * rep.std_error.1, "plane {k}: δ SE");
-        assert!((roll - t.roll()).abs() <= 4.03 * rep.std_error.2, "plane {k}: ρ SE");
+        assert!(
+            (roll - t.roll()).abs() <= 4.03 * rep.std_error.2,
+            "plane {k}: ρ SE"
+        );
         // Every pose contributes points on the board (both stripes cross it by design).
         assert!(cal.per_pose.iter().all(|p| p.len() >= 50), "plane {k}");
     }
@@ -698,10 +701,13 @@ fn predicted_sigma(capture: &Capture) -> Option<f64> {
         &mut scratch,
     )
     .ok()?;
-    [p.three_tangent.map(|m| m.total), p.circle_fit.map(|m| m.total)]
-        .into_iter()
-        .flatten()
-        .reduce(f64::min)
+    [
+        p.three_tangent.map(|m| m.total),
+        p.circle_fit.map(|m| m.total),
+    ]
+    .into_iter()
+    .flatten()
+    .reduce(f64::min)
 }
 
 /// End-to-end validation: every stem capture of the corpus taken with the reference camera
@@ -733,8 +739,7 @@ fn stem_corpus_measured_with_calibrated_planes() {
     for dir in entries {
         let name = dir.file_name().unwrap().to_string_lossy().into_owned();
         let capture = Capture::read(&dir).expect("reads");
-        if capture.meta.mode != Mode::Cylinder || capture.calibration.camera != calibrated.camera
-        {
+        if capture.meta.mode != Mode::Cylinder || capture.calibration.camera != calibrated.camera {
             continue;
         }
         let mut cal = calibrated.clone();
@@ -763,14 +768,21 @@ fn stem_corpus_measured_with_calibrated_planes() {
             bound * 1e3
         );
         if (dc - dt).abs() > bound {
-            failures.push(format!("{name}: change {:+.3} mm > {:.3}", (dc - dt) * 1e3, bound * 1e3));
+            failures.push(format!(
+                "{name}: change {:+.3} mm > {:.3}",
+                (dc - dt) * 1e3,
+                bound * 1e3
+            ));
         }
         // The corpus rule with the calibrated planes, for readings the true planes give
         // within the rule (the others are judged by tests/corpus.rs).
         if let Some(sigma) = predicted_sigma(&capture) {
             let sigma = sigma.max(rc.uncertainty_m.unwrap_or(0.0));
             if (dt - truth_d).abs() <= 3.0 * sigma && (dc - truth_d).abs() > 3.0 * sigma {
-                failures.push(format!("{name}: calibrated error beyond 3σ = {:.2} mm", 3e3 * sigma));
+                failures.push(format!(
+                    "{name}: calibrated error beyond 3σ = {:.2} mm",
+                    3e3 * sigma
+                ));
             }
         }
     }
@@ -856,7 +868,10 @@ fn print_and_check(label: &str, truth: &Calibration, runs: &[Vec<(f64, f64, f64)
         for ((e, d), r) in e.iter().zip(&d).zip(&rho) {
             assert!((e - te).abs() <= noise.baseline, "{label} plane {k}: e {e}");
             assert!((d - td).abs() <= noise.tilt, "{label} plane {k}: δ {d}");
-            assert!((r - t.roll()).abs() <= noise.tilt, "{label} plane {k}: ρ {r}");
+            assert!(
+                (r - t.roll()).abs() <= noise.tilt,
+                "{label} plane {k}: ρ {r}"
+            );
         }
     }
 }
@@ -890,7 +905,7 @@ fn repeatability_over_pose_subsets() {
 /// jackknife standard error the calibration reports (within a factor 3: with 4 seeds a
 /// sample sd lies within [0.3, 1.8]× its true value at 95 %, and the 6-pose jackknife SE
 /// itself scatters by ~30 %). Ignored by default: it renders 24 frame triplets
-/// (≈ 1 min); `cargo test -p tangent-host --test calibration -- --ignored`.
+/// (≈ 20 s on 2 cores); `cargo test -p tangent-host --test calibration -- --ignored`.
 #[test]
 #[ignore]
 fn repeatability_over_noise_seeds() {
@@ -924,7 +939,14 @@ fn repeatability_over_noise_seeds() {
     for k in 0..truth.planes.len() {
         let se = jackknife.iter().map(|j| j[k].0).sum::<f64>() / jackknife.len() as f64;
         let sd = spread(&runs.iter().map(|r| r[k].0).collect::<Vec<_>>()).1;
-        eprintln!("plane {k}: seed sd of e {:.4} mm, mean jackknife SE {:.4} mm", sd * 1e3, se * 1e3);
-        assert!(sd <= 3.0 * se && se <= 3.0 * sd.max(1e-7), "plane {k}: sd {sd} vs SE {se}");
+        eprintln!(
+            "plane {k}: seed sd of e {:.4} mm, mean jackknife SE {:.4} mm",
+            sd * 1e3,
+            se * 1e3
+        );
+        assert!(
+            sd <= 3.0 * se && se <= 3.0 * sd.max(1e-7),
+            "plane {k}: sd {sd} vs SE {se}"
+        );
     }
 }

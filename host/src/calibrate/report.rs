@@ -363,8 +363,18 @@ pub fn laser_capture_figure(capture: &BoardCapture) -> RgbImage {
     for c in &capture.view.corners {
         let p = c.pixel;
         let g = Rgb([0, 230, 0]);
-        line(&mut out, p - Vec2::new(4.0, 0.0), p + Vec2::new(4.0, 0.0), g);
-        line(&mut out, p - Vec2::new(0.0, 4.0), p + Vec2::new(0.0, 4.0), g);
+        line(
+            &mut out,
+            p - Vec2::new(4.0, 0.0),
+            p + Vec2::new(4.0, 0.0),
+            g,
+        );
+        line(
+            &mut out,
+            p - Vec2::new(0.0, 4.0),
+            p + Vec2::new(0.0, 4.0),
+            g,
+        );
     }
     for (k, pixels) in &capture.stripes {
         let colour = LASER_COLOURS[k % LASER_COLOURS.len()];

@@ -595,6 +595,265 @@ pub fn fit_robust(
     finish(points, &norm, next, it.max(last_it), &weight)
 }
 
+// ---------------------------------------------------------------------------------------
+// Ellipse fit (non-round sections)
+// ---------------------------------------------------------------------------------------
+
+/// Result of [`fit_ellipse`]: an ellipse fitted to the points a circle fit accepted, and the
+/// comparison of the two fits (`docs/cylinder.md`, "Elliptic stems").
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EllipseFit {
+    /// Centre of the ellipse.
+    pub centre: Vec2,
+    /// Semi-axes `(major, minor)`.
+    pub semi_axes: (Real, Real),
+    /// Direction of the major axis (radians from the first coordinate axis, in `(−π/2, π/2]`).
+    pub angle: Real,
+    /// 1σ of the mean diameter `a + b` (semi-axes sum, i.e. the mean of the two diameters),
+    /// from the fit: the larger of the Gauss–Newton and the residual-sandwich estimates.
+    pub sigma_mean_diameter: Real,
+    /// Sum of squared radial residuals of the ellipse.
+    pub ssr: Real,
+    /// Sum of squared residuals of the starting circle over the same points.
+    pub ssr_circle: Real,
+    /// Points used (circle residual within the cutoff).
+    pub points: usize,
+    /// LM iterations.
+    pub iterations: u32,
+}
+
+impl EllipseFit {
+    /// Mean diameter `a + b` of the two semi-axes (what cross-calipering reports).
+    pub fn mean_diameter(&self) -> Real {
+        self.semi_axes.0 + self.semi_axes.1
+    }
+    /// Relative non-roundness `(a − b)/(a + b)`.
+    pub fn eccentricity(&self) -> Real {
+        let s = self.semi_axes.0 + self.semi_axes.1;
+        if s > 0.0 {
+            (self.semi_axes.0 - self.semi_axes.1) / s
+        } else {
+            0.0
+        }
+    }
+    /// F statistic of the circle against the ellipse (2 extra parameters):
+    /// `((SSR_c − SSR_e)/2) / (SSR_e/(n − 5))`. Large when the circle leaves a systematic
+    /// pattern the ellipse explains.
+    pub fn f_statistic(&self) -> Real {
+        if self.points <= 5 || !(self.ssr > 0.0) {
+            return Real::INFINITY;
+        }
+        0.5 * (self.ssr_circle - self.ssr) / (self.ssr / (self.points - 5) as Real)
+    }
+}
+
+/// Relative cost decrease below which [`fit_ellipse`] stops (1e-9, or 100·ε in `f32`).
+const COST_SETTLED: Real = if 100.0 * Real::EPSILON > 1e-9 {
+    100.0 * Real::EPSILON
+} else {
+    1e-9
+};
+
+type M5 = nalgebra::SMatrix<Real, 5, 5>;
+type V5 = nalgebra::SVector<Real, 5>;
+
+/// Polar equation of an ellipse about its centre: `1/r² = A + B cos 2θ + C sin 2θ`
+/// (`docs/cylinder.md`, "Elliptic stems"). Residual `|d| − r(θ)` and its gradient in
+/// `(c_x, c_y, A, B, C)`; `None` where `g = 1/r² ≤ 0` or at the centre.
+fn ellipse_residual(q: Vec2, p: &V5) -> Option<(Real, V5)> {
+    let d = q - Vec2::new(p[0], p[1]);
+    let l2 = d.norm_squared();
+    if !(l2 > 0.0) {
+        return None;
+    }
+    let l = l2.sqrt();
+    let (cth, sth) = (d.x / l, d.y / l);
+    let (c2, s2) = (cth * cth - sth * sth, 2.0 * sth * cth);
+    let g = p[2] + p[3] * c2 + p[4] * s2;
+    if !(g > 0.0) {
+        return None;
+    }
+    let r = 1.0 / g.sqrt();
+    let h = 0.5 * r * r * r; // −∂r/∂g
+    // ∂r/∂θ = −½ g^(−3/2) ∂g/∂θ, ∂g/∂θ = −2B sin 2θ + 2C cos 2θ.
+    let dr_dth = -h * (-2.0 * p[3] * s2 + 2.0 * p[4] * c2);
+    // θ = atan2(d_y, d_x): ∂θ/∂c_x = d_y/|d|², ∂θ/∂c_y = −d_x/|d|².
+    let j = V5::new(
+        -cth - dr_dth * d.y / l2,
+        -sth + dr_dth * d.x / l2,
+        h,
+        h * c2,
+        h * s2,
+    );
+    Some((l - r, j))
+}
+
+fn ellipse_accumulate(
+    points: &[Vec2],
+    keep: impl Fn(Vec2) -> bool,
+    norm: &Normalisation,
+    p: &V5,
+) -> Option<(M5, V5, M5, Real, usize)> {
+    let mut jtj = M5::zeros();
+    let mut jtd = V5::zeros();
+    let mut meat = M5::zeros();
+    let mut cost = 0.0;
+    let mut n = 0;
+    for q in points {
+        if !keep(*q) {
+            continue;
+        }
+        let (d, j) = ellipse_residual(norm.apply(*q), p)?;
+        let jj = j * j.transpose();
+        jtj += jj;
+        meat += jj * (d * d);
+        jtd += j * d;
+        cost += d * d;
+        n += 1;
+    }
+    Some((jtj, jtd, meat, cost, n))
+}
+
+/// Geometric ellipse fit (radial residuals about the centre) to the points whose orthogonal
+/// distance from `circle` is at most `cutoff` (the circle fit's inliers), started from that
+/// circle (`docs/cylinder.md`, "Elliptic stems").
+///
+/// The ellipse is `1/r(θ)² = A + B cos 2θ + C sin 2θ` about its centre `c` — exact for any
+/// ellipse, smooth through the circle (`B = C = 0`), so a Levenberg–Marquardt fit of
+/// `(c, A, B, C)` starts at the circle fit. Semi-axes `1/√(A ∓ √(B² + C²))`. The radial
+/// residual differs from the orthogonal one by the cosine of the angle between radius and
+/// normal (≥ 0.98 for axis ratios up to 1.5), which is second order for the comparison.
+///
+/// Errors: fewer than 8 points kept, non-finite data, a singular normal matrix or a
+/// parameter vector leaving the ellipses (`A ≤ √(B² + C²)`), no convergence.
+pub fn fit_ellipse(
+    points: &[Vec2],
+    circle: &Circle,
+    cutoff: Real,
+    params: &LmParams,
+) -> Result<EllipseFit, SolveError> {
+    params.validate()?;
+    if !(cutoff > 0.0 && circle.radius > 0.0 && circle.radius.is_finite()) {
+        return Err(SolveError::InvalidParameter);
+    }
+    let keep = |q: Vec2| circle.distance(q).abs() <= cutoff;
+    let norm = Normalisation::of(points, 8)?;
+    let c0 = norm.apply(circle.centre);
+    let r0 = circle.radius / norm.scale;
+    let mut p = V5::new(c0.x, c0.y, 1.0 / (r0 * r0), 0.0, 0.0);
+    let (mut jtj, mut jtd, mut meat, mut cost, n) =
+        ellipse_accumulate(points, keep, &norm, &p).ok_or(SolveError::Degenerate)?;
+    if n < 8 {
+        return Err(SolveError::TooFewPoints);
+    }
+    let ssr_circle = cost * norm.scale * norm.scale;
+    let mut lambda = params.initial_lambda;
+    let mut iterations = 0;
+    let mut converged = false;
+    for it in 1..=params.max_iterations {
+        iterations = it;
+        let mut a = jtj;
+        for k in 0..5 {
+            a[(k, k)] += lambda * (jtj[(k, k)] + Real::EPSILON);
+        }
+        let step = match a.cholesky() {
+            Some(ch) => ch.solve(&(-jtd)),
+            None => {
+                lambda = (lambda * 10.0).max(Real::EPSILON);
+                if lambda > 1e16 {
+                    return Err(SolveError::Degenerate);
+                }
+                continue;
+            }
+        };
+        let cand = p + step;
+        let next = if cand[2] > (cand[3] * cand[3] + cand[4] * cand[4]).sqrt() {
+            ellipse_accumulate(points, keep, &norm, &cand)
+        } else {
+            None
+        };
+        let accepted = match next {
+            Some((jtj2, jtd2, meat2, cost2, n2)) if n2 == n && cost2.is_finite() => {
+                let rounding = 8.0 * Real::EPSILON * cost;
+                if cost2 < cost || (cost2 <= cost + rounding && jtd2.norm() < jtd.norm()) {
+                    // Also stop when the cost has settled: the F statistic and the axes'
+                    // σ need it to far better than their own noise, not to the last ulp of
+                    // a valley that is flat along the unseen back's extrapolation.
+                    let settled = cost - cost2 <= COST_SETTLED * cost;
+                    let small = settled || step.norm() <= params.tolerance * (1.0 + p.norm());
+                    p = cand;
+                    jtj = jtj2;
+                    jtd = jtd2;
+                    meat = meat2;
+                    cost = cost2;
+                    lambda = (lambda * 0.1).max(1e-12);
+                    if small {
+                        converged = true;
+                    }
+                    true
+                } else {
+                    false
+                }
+            }
+            _ => false,
+        };
+        if converged {
+            break;
+        }
+        if !accepted {
+            lambda = (lambda * 10.0).max(Real::EPSILON);
+            if lambda > 1e16 {
+                converged = true;
+                break;
+            }
+        }
+    }
+    if !converged {
+        return Err(SolveError::NotConverged);
+    }
+    let (aa, m) = (p[2], (p[3] * p[3] + p[4] * p[4]).sqrt());
+    if !(aa > m) {
+        return Err(SolveError::Degenerate);
+    }
+    let major = 1.0 / (aa - m).sqrt();
+    let minor = 1.0 / (aa + m).sqrt();
+    // Gradient of a + b in (A, B, C): ∂a/∂A = −a³/2, ∂a/∂m = a³/2, ∂b/∂A = ∂b/∂m = −b³/2,
+    // ∂m/∂(B, C) = (B, C)/m (the m-derivative of a + b vanishes at m = 0).
+    let (a3, b3) = (major * major * major, minor * minor * minor);
+    let dm = 0.5 * (a3 - b3);
+    let (mb, mc) = if m > 0.0 {
+        (p[3] / m, p[4] / m)
+    } else {
+        (0.0, 0.0)
+    };
+    let grad = V5::new(0.0, 0.0, -0.5 * (a3 + b3), dm * mb, dm * mc);
+    let inv = jtj.try_inverse().ok_or(SolveError::Degenerate)?;
+    let dof = (n - 5).max(1) as Real;
+    let gn = (grad.transpose() * inv * grad)[(0, 0)] * cost / dof;
+    let sandwich = (grad.transpose() * (inv * meat * inv) * grad)[(0, 0)] * n as Real / dof;
+    let sigma = gn.max(sandwich).max(0.0).sqrt() * norm.scale;
+    // Major axis direction: 1/r² is smallest there, i.e. cos 2(θ − φ) = −(B, C)/m.
+    let angle = if m > 0.0 {
+        0.5 * (-p[4]).atan2(-p[3])
+    } else {
+        0.0
+    };
+    let centre = norm.mean + Vec2::new(p[0], p[1]) * norm.scale;
+    if !(sigma.is_finite() && centre.x.is_finite() && centre.y.is_finite()) {
+        return Err(SolveError::Degenerate);
+    }
+    Ok(EllipseFit {
+        centre,
+        semi_axes: (major * norm.scale, minor * norm.scale),
+        angle,
+        sigma_mean_diameter: sigma,
+        ssr: cost * norm.scale * norm.scale,
+        ssr_circle,
+        points: n,
+        iterations,
+    })
+}
+
 #[cfg(test)]
 // The casts to f64 are no-ops in f64 builds but needed with `--features f32`.
 #[allow(clippy::unnecessary_cast)]

@@ -735,6 +735,11 @@ impl Flags {
     /// Image: another object of comparable size was seen beside the aimed one (a second
     /// trunk, a branch); the one nearest the central column was measured (set by `pipeline`).
     pub const OTHER_OBJECTS: Flags = Flags(1 << 13);
+    /// The section is not round: a circle fit leaves a systematic residual pattern that an
+    /// ellipse explains ([`circle::fit_ellipse`], `docs/cylinder.md`, "Elliptic stems"). The
+    /// diameter is the mean of the fitted axes (as cross-calipering), its σ covers the unseen
+    /// back, and [`CylinderSolution::axes`] gives the two diameters.
+    pub const ELLIPTIC: Flags = Flags(1 << 14);
 
     /// Whether every flag of `other` is set.
     pub fn contains(self, other: Flags) -> bool {
@@ -823,7 +828,25 @@ pub struct CylinderParams {
     pub noise: NoiseModel,
     /// Focal length along the image rows' normal (`fy`, pixels), for the noise model.
     pub focal_px: Real,
+    /// Non-roundness test: smallest F statistic of circle against ellipse
+    /// ([`circle::EllipseFit::f_statistic`]) for [`Flags::ELLIPTIC`].
+    pub elliptic_min_f: Real,
+    /// Non-roundness test: smallest relative axis difference `(a − b)/(a + b)` for
+    /// [`Flags::ELLIPTIC`] (smaller ones are within what a round stem's bark and the stripe
+    /// extraction's coherent bending produce; `docs/cylinder.md`, "Elliptic stems").
+    pub elliptic_min_eccentricity: Real,
 }
+
+/// Default [`CylinderParams::elliptic_min_f`]: far above the 1e-6 tail of `F(2, n − 5)`
+/// (≈ 14 for n ≥ 100) because the residuals are not independent (coherent bending, bark): the
+/// statistic only screens, the eccentricity decides (`docs/cylinder.md`, "Elliptic stems").
+pub const ELLIPTIC_MIN_F: Real = 30.0;
+
+/// Iteration budget of the ellipse fit in the non-roundness test.
+const ELLIPSE_MAX_ITERATIONS: u32 = 1000;
+
+/// Default [`CylinderParams::elliptic_min_eccentricity`]: 4 % (axis ratio 1.08).
+pub const ELLIPTIC_MIN_ECCENTRICITY: Real = 0.04;
 
 impl Default for CylinderParams {
     /// The reference caliper: radii 1–60 cm, range 0.3–3.5 m, min arc 40°, max tilt 35°,
@@ -841,6 +864,8 @@ impl Default for CylinderParams {
             lm: LmParams::default(),
             noise: NoiseModel::reference(),
             focal_px: 1000.0,
+            elliptic_min_f: ELLIPTIC_MIN_F,
+            elliptic_min_eccentricity: ELLIPTIC_MIN_ECCENTRICITY,
         }
     }
 }
@@ -883,6 +908,8 @@ pub struct CylinderSolution {
     pub distance: Real,
     /// Centre of the section in plane 0 (camera frame, metres).
     pub centre: Vec3,
+    /// Major and minor diameters (metres) of an elliptic section ([`Flags::ELLIPTIC`]).
+    pub axes: Option<(Real, Real)>,
 }
 
 /// Angle subtended at `centre` by the points (the arc's extent, radians).
@@ -924,6 +951,7 @@ fn noise_vector(plane: &LaserPlane, q: Vec2, params: &CylinderParams) -> Vec2 {
 struct PlaneResult {
     tt: Option<(ThreeTangent, Real)>,
     fit: Option<(circle::CircleFit, Real, Real)>, // fit, σ_r, arc angle
+    ellipse: Option<circle::EllipseFit>,
     flags: Flags,
     n: usize,
 }
@@ -962,6 +990,7 @@ fn solve_plane(
         }
     };
     // Robust fit, scale floor = predicted point noise at the arc's nearest point.
+    let mut ellipse = None;
     let fit = match circle::fit_hyper(pts) {
         Ok(init) => {
             let mut rp = params.robust;
@@ -995,6 +1024,7 @@ fn solve_plane(
                     if arc < params.min_arc_angle {
                         flags.insert(Flags::ARC_TOO_SHORT);
                     }
+                    ellipse = non_round(pts, &f, cutoff, params);
                     Some((f, s, arc))
                 }
                 Err(_) => None,
@@ -1018,9 +1048,48 @@ fn solve_plane(
     Ok(PlaneResult {
         tt,
         fit,
+        ellipse,
         flags,
         n: pts.len(),
     })
+}
+
+/// The ellipse fitted to the circle fit's inliers when the section is detectably not round
+/// (`docs/cylinder.md`, "Elliptic stems"): F statistic above `elliptic_min_f` and relative
+/// axis difference above `elliptic_min_eccentricity`. `None` for a round section or when the
+/// ellipse fit fails (then the circle stands).
+fn non_round(
+    pts: &[Vec2],
+    fit: &circle::CircleFit,
+    cutoff: Real,
+    params: &CylinderParams,
+) -> Option<circle::EllipseFit> {
+    // The ellipse's valley is long and flat (size against shape along the line of sight):
+    // LM needs a few hundred steps from the circle (measured: ≤ 220 on the corpus).
+    let lm = LmParams {
+        max_iterations: params.robust.lm.max_iterations.max(ELLIPSE_MAX_ITERATIONS),
+        ..params.robust.lm
+    };
+    let e = circle::fit_ellipse(pts, &fit.circle, cutoff, &lm).ok()?;
+    (e.f_statistic() > params.elliptic_min_f
+        && e.eccentricity() > params.elliptic_min_eccentricity)
+        .then_some(e)
+}
+
+/// Diameter and 1σ of an elliptic section (`docs/cylinder.md`, "Elliptic stems"): the mean
+/// of the fitted axes `a + b`; σ² = fit σ² + (a − b)² (the unseen back may differ from the
+/// front's continuation by as much as the front's own non-roundness) + calibration.
+/// [`SolveError::NotRound`] when the fit does not resolve the axes (its σ on `a + b`
+/// exceeds their difference `2(a − b)`: nothing distinguishes the ellipse's size from its
+/// shape).
+fn elliptic_diameter(e: &circle::EllipseFit, cal_rel: Real) -> Result<(Real, Real), SolveError> {
+    let (a, b) = e.semi_axes;
+    let d = a + b;
+    if !(e.sigma_mean_diameter < 2.0 * (a - b)) {
+        return Err(SolveError::NotRound);
+    }
+    let s = (e.sigma_mean_diameter.powi(2) + (a - b).powi(2) + (cal_rel * d).powi(2)).sqrt();
+    Ok((d, s))
 }
 
 /// Share of the fit's residual RMS (in pixels of stripe position) that bends the curve
@@ -1178,14 +1247,14 @@ pub fn solve(
         match solve_tilted(input, params, &mut scratch, &one) {
             Ok(s) => s,
             Err(_) => {
-                let mut s = finish_plane(&one, plane0)?;
+                let mut s = finish_plane(&one, plane0, params)?;
                 s.flags.insert(Flags::TILT_FIT_FAILED);
                 s.flags.insert(Flags::TILT_IGNORED);
                 s
             }
         }
     } else {
-        let mut s = finish_plane(&one, plane0)?;
+        let mut s = finish_plane(&one, plane0, params)?;
         s.flags.insert(Flags::TILT_IGNORED);
         s
     };
@@ -1199,7 +1268,39 @@ pub fn solve(
     Ok(sol)
 }
 
-fn finish_plane(one: &PlaneResult, plane: &LaserPlane) -> Result<CylinderSolution, SolveError> {
+fn finish_plane(
+    one: &PlaneResult,
+    plane: &LaserPlane,
+    params: &CylinderParams,
+) -> Result<CylinderSolution, SolveError> {
+    if let (Some(e), Some((f, _, _))) = (one.ellipse, one.fit) {
+        let cal_rel = error_model::calibration_relative_sigma(
+            plane,
+            plane.from_plane_coords(e.centre),
+            &params.noise,
+            params.focal_px,
+        );
+        let (d, s) = elliptic_diameter(&e, cal_rel)?;
+        let mut flags = one.flags;
+        flags.insert(Flags::ELLIPTIC);
+        let c = f.circle.centre;
+        return Ok(CylinderSolution {
+            diameter: d,
+            method: Method::CircleFit,
+            uncertainty: s,
+            tilt: None,
+            flags,
+            fit_rms: f.rms_residual,
+            n_points: one.n,
+            three_tangent_diameter: one.tt.map(|(t, _)| 2.0 * t.radius),
+            three_tangent_uncertainty: one.tt.map(|(_, s)| 2.0 * s),
+            fit_diameter: Some(2.0 * f.circle.radius),
+            fit_uncertainty: one.fit.map(|(_, s, _)| 2.0 * s),
+            distance: c.norm() - f.circle.radius,
+            centre: plane.from_plane_coords(e.centre),
+            axes: Some((2.0 * e.semi_axes.0, 2.0 * e.semi_axes.1)),
+        });
+    }
     let short = one.flags.contains(Flags::ARC_TOO_SHORT);
     let tt = one.tt.map(|(t, s)| (t.radius, s));
     let fit = one.fit.map(|(f, s, _)| (f.circle.radius, s, short));
@@ -1251,6 +1352,7 @@ fn finish_plane(one: &PlaneResult, plane: &LaserPlane) -> Result<CylinderSolutio
         fit_uncertainty: one.fit.map(|(_, s, _)| 2.0 * s),
         distance,
         centre: plane.from_plane_coords(centre),
+        axes: None,
     })
 }
 
@@ -1329,6 +1431,30 @@ fn solve_tilted(
         _ => (cyl.radius, fit_sigma, Method::CylinderFit),
     };
     let c0 = plane0.to_plane_coords(centre);
+    // Non-roundness in the plane perpendicular to the fitted axis (where a round stem's
+    // section is a circle whatever the tilt), on plane 0's curve.
+    if let Some(e) =
+        projected_non_round(input.curves[0], plane0.source, cyl.axis, params, scratch, point_sigma)
+    {
+        let (d, s) = elliptic_diameter(&e, cal_rel)?;
+        flags.insert(Flags::ELLIPTIC);
+        return Ok(CylinderSolution {
+            diameter: d,
+            method: Method::CylinderFit,
+            uncertainty: s,
+            tilt: Some(tilt),
+            flags,
+            fit_rms: fit.rms_residual,
+            n_points: fit.points,
+            three_tangent_diameter: tt.map(|(r, _)| 2.0 * r),
+            three_tangent_uncertainty: tt.map(|(_, s)| 2.0 * s),
+            fit_diameter: Some(2.0 * cyl.radius),
+            fit_uncertainty: Some(2.0 * fit_sigma),
+            distance: c0.norm() - cyl.radius,
+            centre,
+            axes: Some((2.0 * e.semi_axes.0, 2.0 * e.semi_axes.1)),
+        });
+    }
     Ok(CylinderSolution {
         diameter: 2.0 * radius,
         method,
@@ -1343,7 +1469,38 @@ fn solve_tilted(
         fit_uncertainty: Some(2.0 * fit_sigma),
         distance: c0.norm() - cyl.radius,
         centre,
+        axes: None,
     })
+}
+
+/// [`non_round`] on `curve` projected along `axis` onto the plane perpendicular to it (origin
+/// at `source`, as [`generalised_three_tangent`]), with a robust circle fit whose scale
+/// floor is `point_sigma`.
+fn projected_non_round(
+    curve: &[Vec3],
+    source: Vec3,
+    axis: Vec3,
+    params: &CylinderParams,
+    scratch: &mut Scratch<'_>,
+    point_sigma: Real,
+) -> Option<circle::EllipseFit> {
+    let an = axis.norm();
+    if !(an > 0.0 && an.is_finite()) {
+        return None;
+    }
+    let (e1, e2) = basis(axis / an);
+    let out = scratch.points.get_mut(..curve.len())?;
+    for (o, x) in out.iter_mut().zip(curve) {
+        let w = x - source;
+        *o = Vec2::new(w.dot(&e1), w.dot(&e2));
+    }
+    let pts: &[Vec2] = out;
+    let init = circle::fit_hyper(pts).ok()?;
+    let mut rp = params.robust;
+    rp.min_scale = rp.min_scale.max(point_sigma);
+    let f = circle::fit_robust(pts, init, &rp, scratch.values).ok()?;
+    let cutoff = rp.tuning * f.rms_residual.max(rp.min_scale);
+    non_round(pts, &f, cutoff, params)
 }
 
 /// Model σ of one point (metres, along the viewing direction) at in-plane distance

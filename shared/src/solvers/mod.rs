@@ -42,6 +42,9 @@ pub enum SolveError {
     InvalidParameter,
     /// The input has no or too many laser planes for the requested solution.
     PlaneCount,
+    /// The section is detectably not round and one view cannot resolve its axes: measure
+    /// across two directions (`docs/cylinder.md`, "Elliptic stems").
+    NotRound,
 }
 
 impl fmt::Display for SolveError {
@@ -56,6 +59,7 @@ impl fmt::Display for SolveError {
             SolveError::RadiusOutOfRange => "radius outside the plausible range",
             SolveError::InvalidParameter => "solver parameter out of range",
             SolveError::PlaneCount => "wrong number of laser planes for this solution",
+            SolveError::NotRound => "section not round: measure across two directions",
         };
         f.write_str(s)
     }
