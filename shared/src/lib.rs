@@ -22,6 +22,9 @@
 #![no_std]
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
+// `x as Real` is a no-op in the default f64 build but a real conversion with `f32`: the casts
+// stay so that one source serves both precisions.
+#![allow(clippy::unnecessary_cast)]
 
 #[cfg(feature = "std")]
 extern crate std;

@@ -50,7 +50,7 @@ pub const FRAME_CHUNK_MAX: usize = 512;
 ///
 /// The largest message is a [`Response::FrameChunk`]: [`FRAME_CHUNK_MAX`] bytes plus a
 /// header of at most 1 (tag varint ≤ 3) + 1 (variant) + 5 (capture varint) + 1 (frame)
-/// + 5 (offset) + 5 (total) + 2 (length varint) = 22 bytes; with the version and CRC that
+/// plus 5 (offset) + 5 (total) + 2 (length varint) = 22 bytes; with the version and CRC that
 /// is 537 bytes. A [`WireCalibration`] is at most 5 + 8 + 9·8 + 1 + 4·7·8 = 310 bytes.
 /// 640 leaves room for growth within this version.
 pub const MAX_RAW_LEN: usize = 640;
@@ -89,6 +89,9 @@ pub struct FromDevice<'a> {
 pub const UNSOLICITED: u16 = 0;
 
 /// What the host asks the device.
+// The calibration variant is large, but messages live briefly on the stack and `no_std` has
+// no `Box`: the size difference is accepted.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum Request {
     /// Device identity and health → [`Response::Info`].
@@ -145,6 +148,7 @@ pub enum FrameSel {
 }
 
 /// What the device sends.
+#[allow(clippy::large_enum_variant)] // as for `Request`
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum Response<'a> {
     /// Device identity and health.
@@ -626,10 +630,7 @@ pub fn encode_raw<'s, T: Serialize>(
         .get_mut(crc_at..crc_at + 2)
         .ok_or(ProtocolError::BufferTooSmall)?
         .copy_from_slice(&crc.to_le_bytes());
-    scratch
-        .get(..crc_at + 2)
-        .map(|raw| &*raw)
-        .ok_or(ProtocolError::BufferTooSmall)
+    scratch.get(..crc_at + 2).ok_or(ProtocolError::BufferTooSmall)
 }
 
 /// COBS-encodes `raw` into `out` and appends the delimiter; returns the frame length.

@@ -413,8 +413,10 @@ impl Scene {
                     if cols < 2 || rows < 2 {
                         return Err(bad("a board needs at least 2 × 2 inner corners"));
                     }
-                    if !(b.square_m.is_finite() && b.square_m > 0.0)
-                        || !(b.border_m.is_finite() && b.border_m >= 0.0)
+                    if !(b.square_m.is_finite()
+                        && b.square_m > 0.0
+                        && b.border_m.is_finite()
+                        && b.border_m >= 0.0)
                     {
                         return Err(bad("square_m must be positive and border_m ≥ 0"));
                     }

@@ -1071,8 +1071,7 @@ fn non_round(
         ..params.robust.lm
     };
     let e = circle::fit_ellipse(pts, &fit.circle, cutoff, &lm).ok()?;
-    (e.f_statistic() > params.elliptic_min_f
-        && e.eccentricity() > params.elliptic_min_eccentricity)
+    (e.f_statistic() > params.elliptic_min_f && e.eccentricity() > params.elliptic_min_eccentricity)
         .then_some(e)
 }
 
@@ -1433,9 +1432,14 @@ fn solve_tilted(
     let c0 = plane0.to_plane_coords(centre);
     // Non-roundness in the plane perpendicular to the fitted axis (where a round stem's
     // section is a circle whatever the tilt), on plane 0's curve.
-    if let Some(e) =
-        projected_non_round(input.curves[0], plane0.source, cyl.axis, params, scratch, point_sigma)
-    {
+    if let Some(e) = projected_non_round(
+        input.curves[0],
+        plane0.source,
+        cyl.axis,
+        params,
+        scratch,
+        point_sigma,
+    ) {
         let (d, s) = elliptic_diameter(&e, cal_rel)?;
         flags.insert(Flags::ELLIPTIC);
         return Ok(CylinderSolution {
@@ -1812,6 +1816,11 @@ mod tests {
                 "{sol:?}"
             );
             assert!(sol.flags.contains(Flags::TILT_IGNORED));
+            // Round: never flagged elliptic (docs/cylinder.md, "Elliptic stems").
+            assert!(
+                !sol.flags.contains(Flags::ELLIPTIC) && sol.axes.is_none(),
+                "{sol:?}"
+            );
             assert!(sol.tilt.is_none());
             assert!(sol.three_tangent_diameter.is_some() && sol.fit_diameter.is_some());
             assert_eq!(sol.n_points, curve.len());
