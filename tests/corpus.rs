@@ -25,9 +25,14 @@ fn corpus() -> PathBuf {
 }
 
 fn read(name: &str) -> Reading {
-    measure_capture(&corpus().join(name), None, &PipelineConfig::default(), &CylinderParams::default())
-        .unwrap_or_else(|e| panic!("{name}: {e}"))
-        .reading
+    measure_capture(
+        &corpus().join(name),
+        None,
+        &PipelineConfig::default(),
+        &CylinderParams::default(),
+    )
+    .unwrap_or_else(|e| panic!("{name}: {e}"))
+    .reading
 }
 
 /// The error model's 1σ for the aimed stem of `name` (transversal approximation: in-plane
@@ -35,8 +40,13 @@ fn read(name: &str) -> Reading {
 fn predicted_sigma(name: &str) -> f64 {
     let capture = Capture::read(&corpus().join(name)).expect("capture reads");
     let truth = capture.meta.truth.as_ref().expect("ground truth");
-    let Some(Object::Cylinder(c)) = truth.objects.first() else { panic!("{name}: first object is not a stem") };
-    let r = c.radius_m.or(c.semi_axes_m.map(|[a, b]| (a + b) / 2.0)).expect("radius");
+    let Some(Object::Cylinder(c)) = truth.objects.first() else {
+        panic!("{name}: first object is not a stem")
+    };
+    let r = c
+        .radius_m
+        .or(c.semi_axes_m.map(|[a, b]| (a + b) / 2.0))
+        .expect("radius");
     let plane = capture.calibration.planes[0];
     let centre = nalgebra::Vector3::from(c.axis_point_m);
     let distance = (plane.to_plane_coords(centre) - Vec2::zeros()).norm() - r;
@@ -44,15 +54,21 @@ fn predicted_sigma(name: &str) -> f64 {
     let p = predict_diameter_sigma(
         &plane,
         &capture.calibration.camera,
-        &StemGeometry { distance, diameter: 2.0 * r },
+        &StemGeometry {
+            distance,
+            diameter: 2.0 * r,
+        },
         &NoiseModel::reference(),
         &mut scratch,
     )
     .expect("prediction");
-    [p.three_tangent.map(|m| m.total), p.circle_fit.map(|m| m.total)]
-        .into_iter()
-        .flatten()
-        .fold(f64::INFINITY, f64::min)
+    [
+        p.three_tangent.map(|m| m.total),
+        p.circle_fit.map(|m| m.total),
+    ]
+    .into_iter()
+    .flatten()
+    .fold(f64::INFINITY, f64::min)
 }
 
 /// Captures a user expects to be measured (stem in view, range 0.5–3 m, light a 1 mW laser
@@ -99,7 +115,10 @@ fn stems_that_must_be_measured_are_measured_within_the_error_model() {
         let r = read(name);
         let truth = r.truth_diameter_m.expect("truth");
         match r.diameter_m {
-            None => failures.push(format!("{name}: no reading: {}", r.error.unwrap_or_default())),
+            None => failures.push(format!(
+                "{name}: no reading: {}",
+                r.error.unwrap_or_default()
+            )),
             Some(d) => {
                 // 3σ of the prediction, or of the reading's own stated σ if larger (a tilted
                 // stem's σ includes the axis fit, which the transversal model does not know).
@@ -116,16 +135,29 @@ fn stems_that_must_be_measured_are_measured_within_the_error_model() {
             }
         }
     }
-    assert!(failures.is_empty(), "{} of {} failed:\n{}", failures.len(), MUST_MEASURE.len(), failures.join("\n"));
+    assert!(
+        failures.is_empty(),
+        "{} of {} failed:\n{}",
+        failures.len(),
+        MUST_MEASURE.len(),
+        failures.join("\n")
+    );
 }
 
 #[test]
 fn unmeasurable_captures_give_their_specific_error() {
     for (name, needle) in MUST_REFUSE {
         let r = read(name);
-        assert!(r.diameter_m.is_none(), "{name}: expected an error, got {}", r.summary());
+        assert!(
+            r.diameter_m.is_none(),
+            "{name}: expected an error, got {}",
+            r.summary()
+        );
         let e = r.error.unwrap_or_default();
-        assert!(e.contains(needle), "{name}: expected an error containing {needle:?}, got {e:?}");
+        assert!(
+            e.contains(needle),
+            "{name}: expected an error containing {needle:?}, got {e:?}"
+        );
     }
 }
 
@@ -139,8 +171,15 @@ const ONE_PLANE_LEAN: &str = "cyl-d300-z150-tilt20-right-1p";
 fn a_one_plane_device_flags_that_it_ignores_tilt() {
     let r = read(ONE_PLANE_LEAN);
     assert!(r.flags.contains(&"tilt_ignored"), "{}", r.summary());
-    let (d, t) = (r.diameter_m.expect("a reading"), r.truth_diameter_m.expect("truth"));
-    assert!(d > t / 20f64.to_radians().cos() - 3.0 * r.uncertainty_m.unwrap_or(0.0), "{}", r.summary());
+    let (d, t) = (
+        r.diameter_m.expect("a reading"),
+        r.truth_diameter_m.expect("truth"),
+    );
+    assert!(
+        d > t / 20f64.to_radians().cos() - 3.0 * r.uncertainty_m.unwrap_or(0.0),
+        "{}",
+        r.summary()
+    );
 }
 
 /// Every stem capture, whatever it shows: a reading is never a made-up number. If a diameter
@@ -150,7 +189,10 @@ fn a_one_plane_device_flags_that_it_ignores_tilt() {
 #[test]
 fn no_reading_is_a_made_up_number() {
     let mut failures = Vec::new();
-    let mut entries: Vec<_> = std::fs::read_dir(corpus()).expect("corpus").filter_map(|e| e.ok()).collect();
+    let mut entries: Vec<_> = std::fs::read_dir(corpus())
+        .expect("corpus")
+        .filter_map(|e| e.ok())
+        .collect();
     entries.sort_by_key(|e| e.file_name());
     for e in entries {
         let name = e.file_name().to_string_lossy().into_owned();
@@ -165,5 +207,9 @@ fn no_reading_is_a_made_up_number() {
             }
         }
     }
-    assert!(failures.is_empty(), "readings outside 3× their stated σ:\n{}", failures.join("\n"));
+    assert!(
+        failures.is_empty(),
+        "readings outside 3× their stated σ:\n{}",
+        failures.join("\n")
+    );
 }

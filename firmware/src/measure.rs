@@ -117,6 +117,7 @@ pub type Objects = [ObjectFeatures; OBJECTS];
 
 /// An all-zero [`Objects`] buffer (all-zero so that a static of it lands in `.bss`, not in
 /// `.data` with a 57 KB image in flash; the pipeline initialises every entry it uses).
+#[allow(clippy::large_const_arrays)] // only used to initialise statics (zeroed, in .bss)
 pub const NO_OBJECTS: Objects = [ZERO_OBJECT; OBJECTS];
 
 const ZERO_OBJECT: ObjectFeatures = ObjectFeatures {
@@ -225,7 +226,7 @@ impl Measurer for PipelineMeasurer<'_> {
             diameter_m: s.diameter as f32,
             uncertainty_m: s.uncertainty as f32,
             distance_m: s.distance as f32,
-            tilt_rad: s.tilt.map(|t| t.total as f32).unwrap_or(0.0),
+            tilt_rad: s.tilt.map(|t| t.total).unwrap_or(0.0),
             flags: s.flags.0,
         })
     }

@@ -18,7 +18,10 @@ fn bench(c: &mut Criterion) {
         let spec = random_stem(seed, tilt);
         let (capture, _) = simulate(&spec).expect("simulated capture");
         let cal = capture.calibration.clone();
-        let (off, on) = (capture.off_frame(), capture.on_frames().next().expect("an on frame").1);
+        let (off, on) = (
+            capture.off_frame(),
+            capture.on_frames().next().expect("an on frame").1,
+        );
         let (PgmSamples::U8(off_px), PgmSamples::U8(on_px)) = (&off.samples, &on.samples) else {
             panic!("the benchmark expects 8-bit frames");
         };
@@ -29,10 +32,29 @@ fn bench(c: &mut Criterion) {
         let config = PipelineConfig::default();
         let params = CylinderParams::default();
         c.bench_function(&format!("extract_profile_752x480_{name}"), |b| {
-            b.iter(|| black_box(extract_profile(&off_f, &on_f, &cal, &config, &mut hw.workspace())).is_ok())
+            b.iter(|| {
+                black_box(extract_profile(
+                    &off_f,
+                    &on_f,
+                    &cal,
+                    &config,
+                    &mut hw.workspace(),
+                ))
+                .is_ok()
+            })
         });
         c.bench_function(&format!("measure_stem_752x480_{name}"), |b| {
-            b.iter(|| black_box(measure_stem(&off_f, &on_f, &cal, &config, &params, &mut hw.workspace())).is_ok())
+            b.iter(|| {
+                black_box(measure_stem(
+                    &off_f,
+                    &on_f,
+                    &cal,
+                    &config,
+                    &params,
+                    &mut hw.workspace(),
+                ))
+                .is_ok()
+            })
         });
     }
 }

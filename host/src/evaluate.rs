@@ -38,7 +38,8 @@ pub fn run(first_seed: u64, count: u64, tilt_max_deg: f64) -> anyhow::Result<Vec
         .map(|seed| {
             let spec = random_stem(seed, tilt_max_deg);
             let (capture, _) = simulate(&spec)?;
-            let outcome = measure_loaded(&capture, &format!("seed {seed}"), None, &config, &params)?;
+            let outcome =
+                measure_loaded(&capture, &format!("seed {seed}"), None, &config, &params)?;
             let (distance_m, tilt_deg) = stem_geometry(&spec.objects);
             Ok(Sample {
                 seed,
@@ -59,8 +60,14 @@ fn stem_geometry(objects: &[Object]) -> (f64, f64) {
             let p = nalgebra::Vector3::from(c.axis_point_m);
             let u = nalgebra::Vector3::from(c.axis_direction).normalize();
             let axis_distance = (p - u * p.dot(&u)).norm();
-            let r = c.radius_m.or(c.semi_axes_m.map(|[a, b]| (a + b) / 2.0)).unwrap_or(0.0);
-            return (axis_distance - r, u.y.abs().clamp(0.0, 1.0).acos().to_degrees());
+            let r = c
+                .radius_m
+                .or(c.semi_axes_m.map(|[a, b]| (a + b) / 2.0))
+                .unwrap_or(0.0);
+            return (
+                axis_distance - r,
+                u.y.abs().clamp(0.0, 1.0).acos().to_degrees(),
+            );
         }
     }
     (f64::NAN, f64::NAN)
@@ -96,7 +103,10 @@ pub struct Stats {
 
 /// Statistics of `samples`.
 pub fn stats(samples: &[&Sample]) -> Stats {
-    let mut s = Stats { n: samples.len(), ..Default::default() };
+    let mut s = Stats {
+        n: samples.len(),
+        ..Default::default()
+    };
     let mut rel = Vec::new();
     let (mut sum_abs, mut sum, mut within, mut within2) = (0.0, 0.0, 0usize, 0usize);
     let (mut tt, mut fit) = (0.0, 0.0);
@@ -130,11 +140,19 @@ pub fn stats(samples: &[&Sample]) -> Stats {
     s.mae_three_tangent = tt / s.n_three_tangent.max(1) as f64;
     s.mae_fit = fit / s.n_fit.max(1) as f64;
     rel.sort_by(f64::total_cmp);
-    s.p95_relative = rel.get(((rel.len() as f64 * 0.95).ceil() as usize).saturating_sub(1)).copied().unwrap_or(f64::NAN);
+    s.p95_relative = rel
+        .get(((rel.len() as f64 * 0.95).ceil() as usize).saturating_sub(1))
+        .copied()
+        .unwrap_or(f64::NAN);
     s
 }
 
-const DIAMETER_BINS_MM: [(f64, f64); 4] = [(50.0, 100.0), (100.0, 200.0), (200.0, 400.0), (400.0, 1000.01)];
+const DIAMETER_BINS_MM: [(f64, f64); 4] = [
+    (50.0, 100.0),
+    (100.0, 200.0),
+    (200.0, 400.0),
+    (400.0, 1000.01),
+];
 const DISTANCE_BINS_M: [(f64, f64); 3] = [(0.5, 1.0), (1.0, 2.0), (2.0, 3.01)];
 
 fn row(label: &str, s: &Stats) -> String {
@@ -163,18 +181,27 @@ pub fn section(title: &str, samples: &[Sample]) -> String {
     let all: Vec<&Sample> = samples.iter().collect();
     out += &row("**all**", &stats(&all));
     for (lo, hi) in DIAMETER_BINS_MM {
-        let b: Vec<&Sample> = samples.iter().filter(|s| (lo..hi).contains(&(s.truth_m * 1e3))).collect();
+        let b: Vec<&Sample> = samples
+            .iter()
+            .filter(|s| (lo..hi).contains(&(s.truth_m * 1e3)))
+            .collect();
         if !b.is_empty() {
             out += &row(&format!("d {lo:.0}–{:.0} mm", hi.floor()), &stats(&b));
         }
     }
     for (lo, hi) in DISTANCE_BINS_M {
-        let b: Vec<&Sample> = samples.iter().filter(|s| (lo..hi).contains(&s.distance_m)).collect();
+        let b: Vec<&Sample> = samples
+            .iter()
+            .filter(|s| (lo..hi).contains(&s.distance_m))
+            .collect();
         if !b.is_empty() {
             out += &row(&format!("z {lo:.1}–{:.1} m", hi.floor()), &stats(&b));
         }
     }
-    let failures: Vec<&Sample> = samples.iter().filter(|s| s.reading.error.is_some()).collect();
+    let failures: Vec<&Sample> = samples
+        .iter()
+        .filter(|s| s.reading.error.is_some())
+        .collect();
     if !failures.is_empty() {
         let _ = writeln!(out, "\nNo reading ({}):\n", failures.len());
         for f in failures.iter().take(12) {
@@ -189,7 +216,10 @@ pub fn section(title: &str, samples: &[Sample]) -> String {
             );
         }
     }
-    let mut worst: Vec<&Sample> = samples.iter().filter(|s| s.reading.diameter_m.is_some()).collect();
+    let mut worst: Vec<&Sample> = samples
+        .iter()
+        .filter(|s| s.reading.diameter_m.is_some())
+        .collect();
     worst.sort_by(|a, b| {
         let e = |s: &Sample| (s.reading.diameter_m.unwrap_or(0.0) - s.truth_m).abs();
         e(b).total_cmp(&e(a))

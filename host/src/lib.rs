@@ -8,11 +8,11 @@
 
 pub mod calibrate;
 pub mod calibration_file;
-pub mod measure;
 pub mod capture;
 pub mod evaluate;
 pub mod fieldlog;
 pub mod link;
+pub mod measure;
 pub mod pgm;
 pub mod plot;
 pub mod simulate;

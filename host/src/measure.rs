@@ -12,7 +12,9 @@ use tangent_core::calibration::Calibration;
 use tangent_core::curve::CurvePoint;
 use tangent_core::image::segment::ObjectFeatures;
 use tangent_core::image::{Frame, Pixel};
-use tangent_core::pipeline::{self, PipelineConfig, PipelineError, StemMeasurement, Workspace, WorkspaceSizes};
+use tangent_core::pipeline::{
+    self, PipelineConfig, PipelineError, StemMeasurement, Workspace, WorkspaceSizes,
+};
 use tangent_core::real::{Real, Vec2, Vec3};
 use tangent_core::solvers::cylinder::{CylinderParams, Flags, Method};
 
@@ -42,7 +44,11 @@ pub const FLAG_NAMES: [(Flags, &str); 14] = [
 
 /// The names of the flags set in `flags`.
 pub fn flag_names(flags: Flags) -> Vec<&'static str> {
-    FLAG_NAMES.iter().filter(|(f, _)| flags.contains(*f)).map(|(_, n)| *n).collect()
+    FLAG_NAMES
+        .iter()
+        .filter(|(f, _)| flags.contains(*f))
+        .map(|(_, n)| *n)
+        .collect()
 }
 
 /// Name of a solver method as printed and exported.
@@ -127,7 +133,11 @@ pub struct Reading {
 }
 
 impl Reading {
-    fn from_result(capture: &str, result: &Result<StemMeasurement, PipelineError>, truth: Option<f64>) -> Self {
+    fn from_result(
+        capture: &str,
+        result: &Result<StemMeasurement, PipelineError>,
+        truth: Option<f64>,
+    ) -> Self {
         let capture = capture.to_string();
         match result {
             Ok(m) => {
@@ -226,7 +236,16 @@ impl<P: Pixel> HostWorkspace<P> {
             histogram: vec![0; s.histogram],
             label_table: vec![0; s.label_table],
             objects: vec![ObjectFeatures::empty(0); s.objects],
-            curve: vec![CurvePoint { column: 0, row: 0.0, amplitude: 0.0, curve: 0, saturated: false }; s.points],
+            curve: vec![
+                CurvePoint {
+                    column: 0,
+                    row: 0.0,
+                    amplitude: 0.0,
+                    curve: 0,
+                    saturated: false
+                };
+                s.points
+            ],
             points: vec![Vec3::zeros(); s.points],
             scratch_points: vec![Vec2::zeros(); s.points],
             scratch_values: vec![0.0; s.points],
@@ -283,10 +302,15 @@ pub struct Outcome {
 /// per-plane frames (see [`composite_on_frame`]).
 fn frame_pair(capture: &Capture, planes: usize) -> Result<(&Pgm, Cow<'_, Pgm>), MeasureError> {
     let off = capture.off_frame();
-    if let Some((_, on)) = capture.on_frames().find(|(lit, _)| (0..planes).all(|k| lit.contains(&k))) {
+    if let Some((_, on)) = capture
+        .on_frames()
+        .find(|(lit, _)| (0..planes).all(|k| lit.contains(&k)))
+    {
         return Ok((off, Cow::Borrowed(on)));
     }
-    composite_on_frame(capture, planes).map(|on| (off, Cow::Owned(on))).ok_or(MeasureError::NoFullFrame(planes))
+    composite_on_frame(capture, planes)
+        .map(|on| (off, Cow::Owned(on)))
+        .ok_or(MeasureError::NoFullFrame(planes))
 }
 
 /// Builds the laser-on frame of all `planes` from frames that lit them separately:
@@ -316,8 +340,20 @@ pub fn composite_on_frame(capture: &Capture, planes: usize) -> Option<Pgm> {
     let max = off.maxval as i64;
     let clamp = |v: i64| v.clamp(0, max);
     match off.samples {
-        PgmSamples::U8(_) => Pgm::from_u8(off.width, off.height, off.maxval as u8, acc.iter().map(|&v| clamp(v) as u8).collect()).ok(),
-        PgmSamples::U16(_) => Pgm::from_u16(off.width, off.height, off.maxval, acc.iter().map(|&v| clamp(v) as u16).collect()).ok(),
+        PgmSamples::U8(_) => Pgm::from_u8(
+            off.width,
+            off.height,
+            off.maxval as u8,
+            acc.iter().map(|&v| clamp(v) as u8).collect(),
+        )
+        .ok(),
+        PgmSamples::U16(_) => Pgm::from_u16(
+            off.width,
+            off.height,
+            off.maxval,
+            acc.iter().map(|&v| clamp(v) as u16).collect(),
+        )
+        .ok(),
     }
 }
 
@@ -332,8 +368,10 @@ fn run<P: Pixel>(
     let planes = calibration.planes.len();
     let mut hw = HostWorkspace::<P>::new(pgm.width, pgm.height, pgm.bit_depth(), planes);
     let result = (|| {
-        let off = Frame::new(off, pgm.width, pgm.height, pgm.width)?.with_bit_depth(pgm.bit_depth())?;
-        let on = Frame::new(on, pgm.width, pgm.height, pgm.width)?.with_bit_depth(pgm.bit_depth())?;
+        let off =
+            Frame::new(off, pgm.width, pgm.height, pgm.width)?.with_bit_depth(pgm.bit_depth())?;
+        let on =
+            Frame::new(on, pgm.width, pgm.height, pgm.width)?.with_bit_depth(pgm.bit_depth())?;
         pipeline::measure_stem(&off, &on, calibration, config, params, &mut hw.workspace())
     })();
     (result, hw)
@@ -348,7 +386,10 @@ pub fn truth_diameter(capture: &Capture) -> Option<f64> {
         .iter()
         .filter_map(|o| match o {
             Object::Cylinder(c) => {
-                let d = c.radius_m.map(|r| 2.0 * r).or(c.semi_axes_m.map(|[a, b]| a + b))?;
+                let d = c
+                    .radius_m
+                    .map(|r| 2.0 * r)
+                    .or(c.semi_axes_m.map(|[a, b]| a + b))?;
                 Some((axis_offset(c.axis_point_m, c.axis_direction), d))
             }
             _ => None,
@@ -377,7 +418,13 @@ pub fn measure_capture(
     params: &CylinderParams,
 ) -> Result<Outcome, MeasureError> {
     let capture = Capture::read(dir)?;
-    measure_loaded(&capture, &dir.display().to_string(), calibration, config, params)
+    measure_loaded(
+        &capture,
+        &dir.display().to_string(),
+        calibration,
+        config,
+        params,
+    )
 }
 
 /// Measures a capture already in memory (e.g. fresh from the simulator); `name` labels the
@@ -392,12 +439,19 @@ pub fn measure_loaded(
     if capture.meta.mode != Mode::Cylinder {
         return Err(MeasureError::UnsupportedMode(capture.meta.mode));
     }
-    let calibration = calibration.cloned().unwrap_or_else(|| capture.calibration.clone());
+    let calibration = calibration
+        .cloned()
+        .unwrap_or_else(|| capture.calibration.clone());
     let (off, on) = frame_pair(capture, calibration.planes.len())?;
     let (result, diff, curve, points) = match (&off.samples, &on.samples) {
         (PgmSamples::U8(a), PgmSamples::U8(b)) => {
             let (r, hw) = run(a, b, &on, &calibration, config, params);
-            (r, hw.diff.iter().map(|&v| v as u16).collect(), hw.curve, hw.points)
+            (
+                r,
+                hw.diff.iter().map(|&v| v as u16).collect(),
+                hw.curve,
+                hw.points,
+            )
         }
         (PgmSamples::U16(a), PgmSamples::U16(b)) => {
             let (r, hw) = run(a, b, &on, &calibration, config, params);
@@ -406,7 +460,14 @@ pub fn measure_loaded(
         _ => return Err(MeasureError::MixedDepth),
     };
     let reading = Reading::from_result(name, &result, truth_diameter(capture));
-    Ok(Outcome { reading, result, diff, curve, points, calibration })
+    Ok(Outcome {
+        reading,
+        result,
+        diff,
+        curve,
+        points,
+        calibration,
+    })
 }
 
 /// Lists capture directories: each argument is a capture (has `capture.toml`) or a directory
@@ -425,7 +486,10 @@ pub fn expand_captures(args: &[PathBuf]) -> std::io::Result<Vec<PathBuf>> {
         if subs.is_empty() {
             return Err(std::io::Error::new(
                 std::io::ErrorKind::NotFound,
-                format!("{} is neither a capture (no capture.toml) nor a directory of captures", a.display()),
+                format!(
+                    "{} is neither a capture (no capture.toml) nor a directory of captures",
+                    a.display()
+                ),
             ));
         }
         subs.sort();

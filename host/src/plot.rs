@@ -28,7 +28,12 @@ pub fn init_fonts() {
 }
 
 /// Colours of the curves of planes 0, 1, 2, 3.
-pub const PLANE_COLOURS: [RGBColor; 4] = [RGBColor(230, 40, 40), RGBColor(30, 120, 255), RGBColor(0, 170, 0), RGBColor(200, 0, 200)];
+pub const PLANE_COLOURS: [RGBColor; 4] = [
+    RGBColor(230, 40, 40),
+    RGBColor(30, 120, 255),
+    RGBColor(0, 170, 0),
+    RGBColor(200, 0, 200),
+];
 
 fn err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
     anyhow!("plot: {e:?}")
@@ -48,12 +53,17 @@ pub fn measurement_png(path: &Path, outcome: &Outcome, title: &str) -> Result<()
     // Difference frame, stretched to its 99.9th percentile so the stripe is visible.
     let mut sorted: Vec<u16> = outcome.diff.iter().copied().take(w * h).collect();
     sorted.sort_unstable();
-    let top = sorted.get(sorted.len().saturating_sub(1) * 999 / 1000).copied().unwrap_or(1).max(1) as f64;
+    let top = sorted
+        .get(sorted.len().saturating_sub(1) * 999 / 1000)
+        .copied()
+        .unwrap_or(1)
+        .max(1) as f64;
     for y in 0..h {
         for x in 0..w {
             let v = outcome.diff.get(y * w + x).copied().unwrap_or(0) as f64;
             let g = (255.0 * (v / top).min(1.0)) as u8;
-            left.draw_pixel((x as i32, y as i32), &RGBColor(g, g, g)).map_err(err)?;
+            left.draw_pixel((x as i32, y as i32), &RGBColor(g, g, g))
+                .map_err(err)?;
         }
     }
     let (planes, ranges) = match &outcome.result {
@@ -63,7 +73,8 @@ pub fn measurement_png(path: &Path, outcome: &Outcome, title: &str) -> Result<()
     for (k, &(s, e)) in ranges.iter().enumerate().take(planes) {
         let colour = PLANE_COLOURS[k % PLANE_COLOURS.len()];
         for p in outcome.curve.get(s..e).unwrap_or(&[]) {
-            left.draw_pixel((p.column as i32, p.row.round() as i32), &colour).map_err(err)?;
+            left.draw_pixel((p.column as i32, p.row.round() as i32), &colour)
+                .map_err(err)?;
         }
     }
 
@@ -82,7 +93,12 @@ pub fn measurement_png(path: &Path, outcome: &Outcome, title: &str) -> Result<()
         let c = plane0.to_plane_coords(m.solution.centre);
         (c, m.solution.diameter / 2.0)
     });
-    let (mut a0, mut a1, mut b0, mut b1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+    let (mut a0, mut a1, mut b0, mut b1) = (
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    );
     for (_, q) in &pts {
         a0 = a0.min(q.x);
         a1 = a1.max(q.x);
@@ -106,7 +122,10 @@ pub fn measurement_png(path: &Path, outcome: &Outcome, title: &str) -> Result<()
         .x_label_area_size(35)
         .y_label_area_size(55)
         .caption("section in laser plane 0", ("sans-serif", 16))
-        .build_cartesian_2d((am - span / 2.0)..(am + span / 2.0), (bm + span / 2.0)..(bm - span / 2.0))
+        .build_cartesian_2d(
+            (am - span / 2.0)..(am + span / 2.0),
+            (bm + span / 2.0)..(bm - span / 2.0),
+        )
         .map_err(err)?;
     chart
         .configure_mesh()
@@ -115,7 +134,10 @@ pub fn measurement_png(path: &Path, outcome: &Outcome, title: &str) -> Result<()
         .draw()
         .map_err(err)?;
     chart
-        .draw_series(pts.iter().map(|(k, q)| Circle::new((q.x, q.y), 1, PLANE_COLOURS[k % 4].filled())))
+        .draw_series(
+            pts.iter()
+                .map(|(k, q)| Circle::new((q.x, q.y), 1, PLANE_COLOURS[k % 4].filled())),
+        )
         .map_err(err)?;
     if let Some((c, r)) = circle {
         chart

@@ -29,14 +29,14 @@
 #[cfg(feature = "std")]
 extern crate std;
 
-pub mod real;
-pub mod camera;
-pub mod laser_plane;
 pub mod calibration;
-pub mod protocol;
-pub mod image;
-pub mod peaks;
+pub mod camera;
 pub mod curve;
-pub mod solvers;
 pub mod error_model;
+pub mod image;
+pub mod laser_plane;
+pub mod peaks;
 pub mod pipeline;
+pub mod protocol;
+pub mod real;
+pub mod solvers;

@@ -326,7 +326,11 @@ impl Profile {
 
 fn need(buffer: &'static str, needed: usize, actual: usize) -> Result<(), PipelineError> {
     if actual < needed {
-        Err(PipelineError::WorkspaceTooSmall { buffer, needed, actual })
+        Err(PipelineError::WorkspaceTooSmall {
+            buffer,
+            needed,
+            actual,
+        })
     } else {
         Ok(())
     }
@@ -353,7 +357,12 @@ pub struct StemMeasurement {
 /// Quality flags that the image alone tells (saturation, ambient light, other objects).
 pub fn image_flags(profile: &Profile, full_scale: u32) -> Flags {
     let mut flags = Flags::default();
-    let total: usize = profile.plane_points.iter().take(profile.planes).map(|(s, e)| e - s).sum();
+    let total: usize = profile
+        .plane_points
+        .iter()
+        .take(profile.planes)
+        .map(|(s, e)| e - s)
+        .sum();
     if total > 0 && profile.saturated_points as Real > SATURATED_FRACTION * total as Real {
         flags.insert(Flags::STRIPE_SATURATED);
     }
@@ -388,8 +397,14 @@ pub fn measure_stem<P: Pixel>(
     for (k, c) in curves.iter_mut().enumerate().take(n_planes) {
         *c = profile.points(ws.points, k);
     }
-    let input = CylinderInput { curves: &curves[..n_planes], planes: &calibration.planes[..n_planes] };
-    let scratch = cylinder::Scratch { points: &mut *ws.scratch_points, values: &mut *ws.scratch_values };
+    let input = CylinderInput {
+        curves: &curves[..n_planes],
+        planes: &calibration.planes[..n_planes],
+    };
+    let scratch = cylinder::Scratch {
+        points: &mut *ws.scratch_points,
+        values: &mut *ws.scratch_values,
+    };
     let mut solution = cylinder::solve(&input, params, scratch)?;
     solution.flags.insert(image_flags(&profile, on.max_value()));
     Ok(StemMeasurement { solution, profile })
@@ -439,7 +454,9 @@ pub fn extract_profile<P: Pixel>(
     config: &PipelineConfig,
     ws: &mut Workspace<'_, P>,
 ) -> Result<Profile, PipelineError> {
-    calibration.validate().map_err(|_| PipelineError::Calibration)?;
+    calibration
+        .validate()
+        .map_err(|_| PipelineError::Calibration)?;
     let cam = &calibration.camera;
     let (width, height) = (on.width(), on.height());
     if (cam.width as usize, cam.height as usize) != (width, height) {
@@ -459,10 +476,12 @@ pub fn extract_profile<P: Pixel>(
         .with_bit_depth(on.bit_depth())?;
     // One pass writes the difference, its statistics and its histogram (`ws.histogram`,
     // exactly `threshold::histogram` of the difference).
-    let stats = subtract::subtract_with_histogram(on, off, &mut diff, ws.histogram).map_err(|e| match e {
-        ThresholdError::Frame(e) => PipelineError::Frame(e),
-        e => PipelineError::Threshold(e),
-    })?;
+    let stats = subtract::subtract_with_histogram(on, off, &mut diff, ws.histogram).map_err(
+        |e| match e {
+            ThresholdError::Frame(e) => PipelineError::Frame(e),
+            e => PipelineError::Threshold(e),
+        },
+    )?;
     let diff = diff.as_frame();
     let full_scale = on.max_value();
     // The noise of the difference image, from its histogram (needed for both tests below).
@@ -471,11 +490,15 @@ pub fn extract_profile<P: Pixel>(
     let dark_floor = (config.min_contrast as Real).max(config.contrast_snr * noise);
     // `dark_floor` is finite: `difference_noise` of a histogram always is.
     if (stats.max_difference as Real) < dark_floor {
-        return Err(PipelineError::NoLaserLight { max_difference: stats.max_difference });
+        return Err(PipelineError::NoLaserLight {
+            max_difference: stats.max_difference,
+        });
     }
     // The off frame's mean at full scale means most of it is clipped: nothing can be seen.
     if stats.off_mean >= 0.9 * full_scale as Real {
-        return Err(PipelineError::AmbientSaturated { fraction: stats.off_mean / full_scale as Real });
+        return Err(PipelineError::AmbientSaturated {
+            fraction: stats.off_mean / full_scale as Real,
+        });
     }
 
     // 2. Threshold (§5.3.2), floored so that sensor noise never becomes foreground: at
@@ -483,12 +506,26 @@ pub fn extract_profile<P: Pixel>(
     let auto = config.threshold.threshold(&ws.histogram[..hist_len])?;
     let relative = (config.relative_threshold * stats.max_difference as Real) as u32;
     let noise_floor: Real = <Real as crate::real::Float>::ceil(config.threshold_snr * noise);
-    let noise_floor = if noise_floor.is_finite() && noise_floor > 0.0 { noise_floor as u32 } else { 0 };
-    let t = auto.max(config.min_threshold).max(relative).max(noise_floor);
+    let noise_floor = if noise_floor.is_finite() && noise_floor > 0.0 {
+        noise_floor as u32
+    } else {
+        0
+    };
+    let t = auto
+        .max(config.min_threshold)
+        .max(relative)
+        .max(noise_floor);
 
     // 3. Segmentation with the 2×2 mask (§5.4) and feature extraction (§5.5).
     let mut labels = FrameMut::new(&mut ws.labels[..pixels], width, height, width)?;
-    let seg = segment::segment(&diff, t, &mut labels, ws.label_table, ws.objects, Connectivity::Eight)?;
+    let seg = segment::segment(
+        &diff,
+        t,
+        &mut labels,
+        ws.label_table,
+        ws.objects,
+        Connectivity::Eight,
+    )?;
     let labels = labels.as_frame();
     let objects = &ws.objects[..seg.objects.min(ws.objects.len())];
 
@@ -501,8 +538,14 @@ pub fn extract_profile<P: Pixel>(
     if report.selected == 0 {
         return Err(PipelineError::NoCurve);
     }
-    let mut cands = [Candidate { label: 0, min_x: 0, max_x: 0, mean_row: 0.0, pixels: 0, plane: usize::MAX };
-        MAX_CURVES];
+    let mut cands = [Candidate {
+        label: 0,
+        min_x: 0,
+        max_x: 0,
+        mean_row: 0.0,
+        pixels: 0,
+        plane: usize::MAX,
+    }; MAX_CURVES];
     let n_cand = report.selected.min(MAX_CURVES);
     for (c, &label) in cands.iter_mut().zip(&selected[..n_cand]) {
         if let Some(f) = objects.iter().find(|f| f.label == label) {
@@ -510,7 +553,10 @@ pub fn extract_profile<P: Pixel>(
                 label,
                 min_x: f.min_x,
                 max_x: f.max_x,
-                mean_row: f.geometric_centroid().map(|(_, y)| y).unwrap_or(f.min_y as Real),
+                mean_row: f
+                    .geometric_centroid()
+                    .map(|(_, y)| y)
+                    .unwrap_or(f.min_y as Real),
                 pixels: f.pixel_count,
                 plane: usize::MAX,
             };
@@ -545,14 +591,25 @@ pub fn extract_profile<P: Pixel>(
     let (mut x0, mut x1, mut y0, mut y1) = (usize::MAX, 0usize, usize::MAX, 0usize);
     for &label in &labels_used[..n_used] {
         // features[i].label == i + 1 (segment::Segmentation).
-        if let Some(f) = objects.get((label as usize).wrapping_sub(1)).filter(|f| f.pixel_count > 0) {
+        if let Some(f) = objects
+            .get((label as usize).wrapping_sub(1))
+            .filter(|f| f.pixel_count > 0)
+        {
             x0 = x0.min(f.min_x as usize);
             x1 = x1.max(f.max_x as usize + 1);
             y0 = y0.min(f.min_y as usize);
             y1 = y1.max(f.max_y as usize + 1);
         }
     }
-    let n = curve::extract_window(&diff, &labels, &labels_used[..n_used], x0..x1, y0..y1, &extract_params, ws.curve)?;
+    let n = curve::extract_window(
+        &diff,
+        &labels,
+        &labels_used[..n_used],
+        x0..x1,
+        y0..y1,
+        &extract_params,
+        ws.curve,
+    )?;
     need("points", n, ws.points.len())?;
 
     // Reorder in place so that each plane's points are contiguous and ordered by column:
@@ -583,14 +640,21 @@ pub fn extract_profile<P: Pixel>(
     for (plane, &(s, e)) in plane_points.iter().enumerate().take(n_planes) {
         let pts = &mut curve_pts[s..e];
         if pts.len() < config.min_points {
-            return Err(PipelineError::CurveTooShort { plane, points: pts.len() });
+            return Err(PipelineError::CurveTooShort {
+                plane,
+                points: pts.len(),
+            });
         }
         curve::smooth(pts, &config.smooth)?;
         let (first, last) = (pts[0].column, pts[pts.len() - 1].column);
-        if first <= config.edge_margin || (last as usize) + (config.edge_margin as usize) + 1 >= width {
+        if first <= config.edge_margin
+            || (last as usize) + (config.edge_margin as usize) + 1 >= width
+        {
             touches_edge = true;
         }
-        let plane_model = calibration.plane(plane).map_err(|_| PipelineError::Calibration)?;
+        let plane_model = calibration
+            .plane(plane)
+            .map_err(|_| PipelineError::Calibration)?;
         for (cp, xyz) in pts.iter().zip(ws.points[s..e].iter_mut()) {
             saturated_points += cp.saturated as usize;
             *xyz = triangulate(cam, plane_model, Vec2::new(cp.column as Real, cp.row))?;
@@ -627,7 +691,9 @@ pub fn extract_profile<P: Pixel>(
 /// and whose mean row is within `max_fragment_step` rows joins that plane.
 fn assign_planes(cands: &mut [Candidate], calibration: &Calibration, config: &PipelineConfig) {
     let n_planes = calibration.planes.len();
-    let Some(first) = cands.first().copied() else { return };
+    let Some(first) = cands.first().copied() else {
+        return;
+    };
     // Candidates that share columns with the first one (including itself), by mean row.
     let mut group = [usize::MAX; MAX_PLANES];
     let mut g = 0;
@@ -640,7 +706,10 @@ fn assign_planes(cands: &mut [Candidate], calibration: &Calibration, config: &Pi
     }
     let group = &mut group[..g];
     group.sort_unstable_by(|&a, &b| {
-        cands[a].mean_row.partial_cmp(&cands[b].mean_row).unwrap_or(core::cmp::Ordering::Equal)
+        cands[a]
+            .mean_row
+            .partial_cmp(&cands[b].mean_row)
+            .unwrap_or(core::cmp::Ordering::Equal)
     });
     // Planes by image row on the central column, at the depth where plane 0 sees the first
     // candidate (the order is the same at every depth for parallel planes).
@@ -648,7 +717,12 @@ fn assign_planes(cands: &mut [Candidate], calibration: &Calibration, config: &Pi
     let depth = cam
         .pixel_to_ray(Vec2::new(cam.cx, first.mean_row))
         .ok()
-        .and_then(|ray| calibration.planes.first().and_then(|p0| p0.intersect_ray(ray).ok()))
+        .and_then(|ray| {
+            calibration
+                .planes
+                .first()
+                .and_then(|p0| p0.intersect_ray(ray).ok())
+        })
         .map(|p| p.z)
         .unwrap_or(1.5);
     let mut order = [0usize; MAX_PLANES];
@@ -665,7 +739,11 @@ fn assign_planes(cands: &mut [Candidate], calibration: &Calibration, config: &Pi
         }
     }
     let planes_order = &mut order[..n_planes.min(MAX_PLANES)];
-    planes_order.sort_unstable_by(|&a, &b| rows[a].partial_cmp(&rows[b]).unwrap_or(core::cmp::Ordering::Equal));
+    planes_order.sort_unstable_by(|&a, &b| {
+        rows[a]
+            .partial_cmp(&rows[b])
+            .unwrap_or(core::cmp::Ordering::Equal)
+    });
     if group.len() == n_planes {
         for (&ci, &plane) in group.iter().zip(planes_order.iter()) {
             cands[ci].plane = plane;
@@ -707,7 +785,9 @@ fn assign_planes(cands: &mut [Candidate], calibration: &Calibration, config: &Pi
                 } else {
                     u16::MAX // overlapping columns: another object, not a fragment
                 };
-                if gap <= config.max_fragment_gap && (c.mean_row - a.mean_row).abs() <= config.max_fragment_step {
+                if gap <= config.max_fragment_gap
+                    && (c.mean_row - a.mean_row).abs() <= config.max_fragment_step
+                {
                     join = a.plane;
                     break;
                 }
@@ -754,7 +834,16 @@ mod tests {
                 histogram: vec![0; s.histogram],
                 table: vec![0; s.label_table],
                 objects: vec![ObjectFeatures::empty(0); s.objects],
-                curve: vec![CurvePoint { column: 0, row: 0.0, amplitude: 0.0, curve: 0, saturated: false }; s.points],
+                curve: vec![
+                    CurvePoint {
+                        column: 0,
+                        row: 0.0,
+                        amplitude: 0.0,
+                        curve: 0,
+                        saturated: false
+                    };
+                    s.points
+                ],
                 points: vec![Vec3::zeros(); s.points],
                 scratch_points: vec![Vec2::zeros(); s.points],
                 scratch_values: vec![0.0; s.points],
@@ -795,7 +884,14 @@ mod tests {
     /// Renders the stripes of the given planes on a wall at depth `z` over columns
     /// `cols`: a Gaussian profile integrated over each pixel (erf-free: 8 sub-samples per
     /// pixel), amplitude `amp` over an ambient `ambient`.
-    fn render(cal: &Calibration, planes: &[usize], z: Real, cols: core::ops::Range<usize>, amp: Real, ambient: u8) -> (Vec<u8>, Vec<u8>) {
+    fn render(
+        cal: &Calibration,
+        planes: &[usize],
+        z: Real,
+        cols: core::ops::Range<usize>,
+        amp: Real,
+        ambient: u8,
+    ) -> (Vec<u8>, Vec<u8>) {
         let off = vec![ambient; W * H];
         let mut on = off.clone();
         let sigma = 1.3;
@@ -817,7 +913,10 @@ mod tests {
     }
 
     fn frames<'a>(off: &'a [u8], on: &'a [u8]) -> (Frame<'a, u8>, Frame<'a, u8>) {
-        (Frame::new(off, W, H, W).unwrap(), Frame::new(on, W, H, W).unwrap())
+        (
+            Frame::new(off, W, H, W).unwrap(),
+            Frame::new(on, W, H, W).unwrap(),
+        )
     }
 
     #[test]
@@ -828,7 +927,8 @@ mod tests {
         let (off_f, on_f) = frames(&off, &on);
         let mut b = Buffers::new(1);
         let mut ws = b.ws();
-        let prof = extract_profile(&off_f, &on_f, &cal, &PipelineConfig::default(), &mut ws).unwrap();
+        let prof =
+            extract_profile(&off_f, &on_f, &cal, &PipelineConfig::default(), &mut ws).unwrap();
         let pts = prof.points(ws.points, 0);
         // Every column of the stripe gives a point (the estimator needs the window inside the
         // frame, which holds here).
@@ -854,7 +954,8 @@ mod tests {
         let (off_f, on_f) = frames(&off, &on);
         let mut b = Buffers::new(2);
         let mut ws = b.ws();
-        let prof = extract_profile(&off_f, &on_f, &cal, &PipelineConfig::default(), &mut ws).unwrap();
+        let prof =
+            extract_profile(&off_f, &on_f, &cal, &PipelineConfig::default(), &mut ws).unwrap();
         for k in 0..2 {
             let pts = prof.points(ws.points, k);
             assert_eq!(pts.len(), 300, "plane {k}");
@@ -872,7 +973,8 @@ mod tests {
         let (off, on) = render(&cal, &[0], 1.0, 100..101, 0.0, 30);
         let (off_f, on_f) = frames(&off, &on);
         let mut b = Buffers::new(1);
-        let err = extract_profile(&off_f, &on_f, &cal, &PipelineConfig::default(), &mut b.ws()).unwrap_err();
+        let err = extract_profile(&off_f, &on_f, &cal, &PipelineConfig::default(), &mut b.ws())
+            .unwrap_err();
         assert_eq!(err, PipelineError::NoLaserLight { max_difference: 0 });
     }
 
@@ -883,10 +985,15 @@ mod tests {
         let on = off.clone();
         let (off_f, on_f) = frames(&off, &on);
         let mut b = Buffers::new(1);
-        let mut cfg = PipelineConfig::default();
-        cfg.min_contrast = 0;
+        let cfg = PipelineConfig {
+            min_contrast: 0,
+            ..PipelineConfig::default()
+        };
         let err = extract_profile(&off_f, &on_f, &cal, &cfg, &mut b.ws()).unwrap_err();
-        assert!(matches!(err, PipelineError::AmbientSaturated { .. }), "{err:?}");
+        assert!(
+            matches!(err, PipelineError::AmbientSaturated { .. }),
+            "{err:?}"
+        );
     }
 
     #[test]
@@ -901,7 +1008,8 @@ mod tests {
         }
         let (off_f, on_f) = frames(&off, &on);
         let mut b = Buffers::new(1);
-        let err = extract_profile(&off_f, &on_f, &cal, &PipelineConfig::default(), &mut b.ws()).unwrap_err();
+        let err = extract_profile(&off_f, &on_f, &cal, &PipelineConfig::default(), &mut b.ws())
+            .unwrap_err();
         assert_eq!(err, PipelineError::NoCurve);
     }
 
@@ -912,7 +1020,8 @@ mod tests {
         let (off_f, on_f) = frames(&off, &on);
         let mut b = Buffers::new(1);
         let mut ws = b.ws();
-        let prof = extract_profile(&off_f, &on_f, &cal, &PipelineConfig::default(), &mut ws).unwrap();
+        let prof =
+            extract_profile(&off_f, &on_f, &cal, &PipelineConfig::default(), &mut ws).unwrap();
         assert!(prof.touches_edge);
     }
 
@@ -922,15 +1031,32 @@ mod tests {
         let small = vec![0u8; 100 * 100];
         let f = Frame::new(&small, 100, 100, 100).unwrap();
         let mut b = Buffers::new(1);
-        let err = extract_profile(&f, &f, &cal, &PipelineConfig::default(), &mut b.ws()).unwrap_err();
-        assert_eq!(err, PipelineError::FrameSizeMismatch { calibrated: (752, 480), actual: (100, 100) });
+        let err =
+            extract_profile(&f, &f, &cal, &PipelineConfig::default(), &mut b.ws()).unwrap_err();
+        assert_eq!(
+            err,
+            PipelineError::FrameSizeMismatch {
+                calibrated: (752, 480),
+                actual: (100, 100)
+            }
+        );
 
         let (off, on) = render(&cal, &[0], 1.0, 100..400, 100.0, 10);
         let (off_f, on_f) = frames(&off, &on);
         let mut b = Buffers::new(1);
         b.points.truncate(10);
-        let err = extract_profile(&off_f, &on_f, &cal, &PipelineConfig::default(), &mut b.ws()).unwrap_err();
-        assert!(matches!(err, PipelineError::WorkspaceTooSmall { buffer: "points", .. }), "{err:?}");
+        let err = extract_profile(&off_f, &on_f, &cal, &PipelineConfig::default(), &mut b.ws())
+            .unwrap_err();
+        assert!(
+            matches!(
+                err,
+                PipelineError::WorkspaceTooSmall {
+                    buffer: "points",
+                    ..
+                }
+            ),
+            "{err:?}"
+        );
     }
 
     /// `difference_noise` recovers σ of Gaussian noise from the clamped difference's histogram
@@ -954,7 +1080,7 @@ mod tests {
         let (off, mut on) = render(&cal, &[0], 2.5, 300..450, 12.0, 4);
         // ±1 DN noise on the laser-on frame (σ ≈ 0.8 DN).
         for (i, v) in on.iter_mut().enumerate() {
-            let n = (i * 2_654_435_761usize >> 7) % 3;
+            let n = ((i * 2_654_435_761usize) >> 7) % 3;
             *v = (*v as i32 + n as i32 - 1).clamp(0, 255) as u8;
         }
         let (off_f, on_f) = frames(&off, &on);
@@ -962,12 +1088,23 @@ mod tests {
         let mut ws = b.ws();
         // With the absolute floor lowered (the default keeps 20 DN, see PipelineConfig), the
         // noise-relative test alone decides: 13 DN over σ̂ < 1 DN is light.
-        let cfg = PipelineConfig { min_contrast: 8, ..PipelineConfig::default() };
+        let cfg = PipelineConfig {
+            min_contrast: 8,
+            ..PipelineConfig::default()
+        };
         let prof = extract_profile(&off_f, &on_f, &cal, &cfg, &mut ws).unwrap();
-        assert!(prof.points(ws.points, 0).len() >= 140, "{:?}", prof.plane_points);
+        assert!(
+            prof.points(ws.points, 0).len() >= 140,
+            "{:?}",
+            prof.plane_points
+        );
         // Pure noise of the same level is dark.
         let (off_f, _) = frames(&off, &on);
-        let noisy: Vec<u8> = off.iter().enumerate().map(|(i, &v)| (v as i32 + ((i * 2_654_435_761usize >> 7) % 3) as i32 - 1) as u8).collect();
+        let noisy: Vec<u8> = off
+            .iter()
+            .enumerate()
+            .map(|(i, &v)| (v as i32 + (((i * 2_654_435_761usize) >> 7) % 3) as i32 - 1) as u8)
+            .collect();
         let noisy_f = Frame::new(&noisy, W, H, W).unwrap();
         let err = extract_profile(&off_f, &noisy_f, &cal, &cfg, &mut ws).unwrap_err();
         assert!(matches!(err, PipelineError::NoLaserLight { .. }), "{err:?}");

@@ -630,7 +630,9 @@ pub fn encode_raw<'s, T: Serialize>(
         .get_mut(crc_at..crc_at + 2)
         .ok_or(ProtocolError::BufferTooSmall)?
         .copy_from_slice(&crc.to_le_bytes());
-    scratch.get(..crc_at + 2).ok_or(ProtocolError::BufferTooSmall)
+    scratch
+        .get(..crc_at + 2)
+        .ok_or(ProtocolError::BufferTooSmall)
 }
 
 /// COBS-encodes `raw` into `out` and appends the delimiter; returns the frame length.
@@ -1162,7 +1164,7 @@ mod tests {
                 x ^= x << 13;
                 x ^= x >> 17;
                 x ^= x << 5;
-                *b = if x % 23 == 0 { 0 } else { x as u8 };
+                *b = if x.is_multiple_of(23) { 0 } else { x as u8 };
             }
             let mut input = &chunk[..];
             loop {

@@ -153,7 +153,7 @@ impl hal::Link for UsbLink {
         for packet in data.chunks(max) {
             self.class.write_packet(packet).await.map_err(link_err)?;
         }
-        if data.len() % max == 0 {
+        if data.len().is_multiple_of(max) {
             // A full last packet needs a zero-length packet to end the transfer.
             self.class.write_packet(&[]).await.map_err(link_err)?;
         }

@@ -13,10 +13,12 @@ use tangent_host::{calibration_file, plot};
 
 /// Arguments of `tangent accuracy`.
 #[derive(clap::Args, Debug)]
-#[command(long_about = "Plots the error model's predicted 1-sigma diameter error (mm) of a \
+#[command(
+    long_about = "Plots the error model's predicted 1-sigma diameter error (mm) of a \
 transversal stem against its distance (m), for several diameters, for the three-tangent method \
 (solid) and the circle fit (dashed), with the reference noise model (subpixel noise, speckle, \
-calibration errors). Also prints the table of the plotted values.")]
+calibration errors). Also prints the table of the plotted values."
+)]
 pub struct Args {
     /// Calibration file (default: the reference design, one plane).
     #[arg(long, value_name = "FILE")]
@@ -31,9 +33,23 @@ pub struct Args {
 
 /// Predicted σ (metres) of both methods for a stem of `d` at in-plane distance `z`.
 fn predict(cal: &Calibration, d: f64, z: f64, scratch: &mut [Vec2]) -> (Option<f64>, Option<f64>) {
-    let Some(plane) = cal.planes.first() else { return (None, None) };
-    match predict_diameter_sigma(plane, &cal.camera, &StemGeometry { distance: z, diameter: d }, &NoiseModel::reference(), scratch) {
-        Ok(p) => (p.three_tangent.map(|m| m.total), p.circle_fit.map(|m| m.total)),
+    let Some(plane) = cal.planes.first() else {
+        return (None, None);
+    };
+    match predict_diameter_sigma(
+        plane,
+        &cal.camera,
+        &StemGeometry {
+            distance: z,
+            diameter: d,
+        },
+        &NoiseModel::reference(),
+        scratch,
+    ) {
+        Ok(p) => (
+            p.three_tangent.map(|m| m.total),
+            p.circle_fit.map(|m| m.total),
+        ),
         Err(_) => (None, None),
     }
 }
@@ -71,7 +87,10 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     root.fill(&WHITE).map_err(|e| err(&e))?;
     let mut chart = ChartBuilder::on(&root)
         .margin(15)
-        .caption("Predicted 1σ diameter error (error model, reference noise)", ("sans-serif", 22))
+        .caption(
+            "Predicted 1σ diameter error (error model, reference noise)",
+            ("sans-serif", 22),
+        )
         .x_label_area_size(45)
         .y_label_area_size(60)
         .build_cartesian_2d(0.5f64..3.0f64, 0f64..y_max)
@@ -85,15 +104,27 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     for (i, (d_mm, tt, fit)) in series.iter().enumerate() {
         let colour = Palette99::pick(i).to_rgba();
         chart
-            .draw_series(LineSeries::new(tt.iter().map(|&(z, s)| (z, s.min(y_max))), colour.stroke_width(2)))
+            .draw_series(LineSeries::new(
+                tt.iter().map(|&(z, s)| (z, s.min(y_max))),
+                colour.stroke_width(2),
+            ))
             .map_err(|e| err(&e))?
             .label(format!("{d_mm:.0} mm, three-tangent"))
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2)));
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
+            });
         chart
-            .draw_series(DashedLineSeries::new(fit.iter().map(|&(z, s)| (z, s.min(y_max))), 6, 4, colour.stroke_width(1)))
+            .draw_series(DashedLineSeries::new(
+                fit.iter().map(|&(z, s)| (z, s.min(y_max))),
+                6,
+                4,
+                colour.stroke_width(1),
+            ))
             .map_err(|e| err(&e))?
             .label(format!("{d_mm:.0} mm, circle fit"))
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(1)));
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(1))
+            });
     }
     chart
         .configure_series_labels()
@@ -114,7 +145,10 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         print!("{z:>8.1}");
         for &d_mm in &args.diameters_mm {
             let (a, b) = predict(&cal, d_mm * 1e-3, z, &mut scratch);
-            let f = |v: Option<f64>| v.map(|v| format!("{:.2}", v * 1e3)).unwrap_or_else(|| "–".into());
+            let f = |v: Option<f64>| {
+                v.map(|v| format!("{:.2}", v * 1e3))
+                    .unwrap_or_else(|| "–".into())
+            };
             print!("{:>16}", format!("{} / {}", f(a), f(b)));
         }
         println!();

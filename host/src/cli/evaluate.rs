@@ -9,11 +9,13 @@ use tangent_host::evaluate::{run as run_samples, section};
 
 /// Arguments of `tangent evaluate`.
 #[derive(clap::Args, Debug)]
-#[command(long_about = "Simulates fresh random stems across the product's envelope (diameters \
+#[command(
+    long_about = "Simulates fresh random stems across the product's envelope (diameters \
 50–1000 mm log-uniform, distances 0.5–3 m, forest light), measures each end to end with the \
 device's core, and tabulates the errors against the simulator's truth per diameter and distance \
 bin, three-tangent and fit side by side. The seeds are not the corpus's and were not used to \
-tune anything.")]
+tune anything."
+)]
 pub struct Args {
     /// Transversal stems to simulate.
     #[arg(long, default_value_t = 200)]
@@ -56,9 +58,17 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         args.seed + args.count
     );
     doc += &section("Transversal stems (one laser plane)", &transversal);
-    doc += &section(&format!("Tilted stems up to {}° (two laser planes)", args.tilt_max_deg), &tilted);
+    doc += &section(
+        &format!(
+            "Tilted stems up to {}° (two laser planes)",
+            args.tilt_max_deg
+        ),
+        &tilted,
+    );
     match &args.out {
-        Some(path) => std::fs::write(path, &doc).with_context(|| format!("writing {}", path.display()))?,
+        Some(path) => {
+            std::fs::write(path, &doc).with_context(|| format!("writing {}", path.display()))?
+        }
         None => print!("{doc}"),
     }
     Ok(ExitCode::SUCCESS)

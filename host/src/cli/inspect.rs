@@ -14,8 +14,8 @@ use anyhow::Context;
 use image::{Rgb, RgbImage};
 use tangent_core::image::{Frame, Pixel};
 use tangent_core::pipeline::{self, PipelineConfig};
-use tangent_host::measure::HostWorkspace;
 use tangent_host::capture::Capture;
+use tangent_host::measure::HostWorkspace;
 use tangent_host::pgm::{Pgm, PgmSamples};
 
 /// Arguments of `tangent inspect`.

@@ -15,11 +15,13 @@ use tangent_host::plot;
 
 /// Arguments of `tangent measure`.
 #[derive(clap::Args, Debug)]
-#[command(long_about = "Replays recorded captures (a directory with capture.toml and its PGM frames, \
+#[command(
+    long_about = "Replays recorded captures (a directory with capture.toml and its PGM frames, \
 or a directory of such directories) through the same measurement core the device runs, and prints \
 per capture the stem diameter in mm with its 1-sigma uncertainty, the method used, the tilt and \
 quality flags — or why no trustworthy reading exists.\n\nExit status: 0 when every capture gave a \
-reading, 1 when some gave none (the reason is printed), 2 when a capture could not be read.")]
+reading, 1 when some gave none (the reason is printed), 2 when a capture could not be read."
+)]
 pub struct Args {
     /// Capture directories (or directories of captures).
     #[arg(required = true)]
@@ -41,7 +43,9 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let dirs = expand_captures(&args.captures)?;
     let calibration = match &args.calib {
-        Some(path) => Some(calibration_file::read(path).with_context(|| format!("reading {}", path.display()))?),
+        Some(path) => Some(
+            calibration_file::read(path).with_context(|| format!("reading {}", path.display()))?,
+        ),
         None => None,
     };
     if let Some(dir) = &args.plot {
@@ -50,8 +54,10 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let config = PipelineConfig::default();
     let params = CylinderParams::default();
     let bar = if dirs.len() > 1 && std::io::stderr().is_terminal() {
-        ProgressBar::new(dirs.len() as u64)
-            .with_style(ProgressStyle::with_template("{bar:40} {pos}/{len} captures {eta}").unwrap_or_else(|_| ProgressStyle::default_bar()))
+        ProgressBar::new(dirs.len() as u64).with_style(
+            ProgressStyle::with_template("{bar:40} {pos}/{len} captures {eta}")
+                .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        )
     } else {
         ProgressBar::hidden()
     };
@@ -62,10 +68,17 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             let outcome = measure_capture(dir, calibration.as_ref(), &config, &params)
                 .map_err(|e| format!("{}: {e}", dir.display()))?;
             if let Some(plot_dir) = &args.plot {
-                let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "capture".into());
+                let name = dir
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_else(|| "capture".into());
                 let path = plot_dir.join(format!("{name}.png"));
-                plot::measurement_png(&path, &outcome, &format!("{name}: {}", outcome.reading.summary()))
-                    .map_err(|e| format!("{}: {e:#}", path.display()))?;
+                plot::measurement_png(
+                    &path,
+                    &outcome,
+                    &format!("{name}: {}", outcome.reading.summary()),
+                )
+                .map_err(|e| format!("{}: {e:#}", path.display()))?;
             }
             Ok(outcome.reading)
         })

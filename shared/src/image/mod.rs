@@ -25,7 +25,11 @@ impl Pixel for u8 {
     const STORAGE_BITS: u8 = 8;
     #[inline]
     fn saturate_from(v: u32) -> Self {
-        if v > u8::MAX as u32 { u8::MAX } else { v as u8 }
+        if v > u8::MAX as u32 {
+            u8::MAX
+        } else {
+            v as u8
+        }
     }
 }
 
@@ -33,7 +37,11 @@ impl Pixel for u16 {
     const STORAGE_BITS: u8 = 16;
     #[inline]
     fn saturate_from(v: u32) -> Self {
-        if v > u16::MAX as u32 { u16::MAX } else { v as u16 }
+        if v > u16::MAX as u32 {
+            u16::MAX
+        } else {
+            v as u16
+        }
     }
 }
 
@@ -77,7 +85,9 @@ impl fmt::Display for FrameError {
             FrameError::BufferTooSmall { needed, actual } => {
                 write!(f, "frame buffer holds {actual} pixels, {needed} needed")
             }
-            FrameError::BadBitDepth(b) => write!(f, "bit depth {b} is not supported by the pixel type"),
+            FrameError::BadBitDepth(b) => {
+                write!(f, "bit depth {b} is not supported by the pixel type")
+            }
             FrameError::SizeMismatch { expected, actual } => write!(
                 f,
                 "frame is {}x{}, expected {}x{}",
@@ -100,9 +110,15 @@ fn check_layout(len: usize, width: usize, height: usize, stride: usize) -> Resul
     let needed = (height - 1)
         .checked_mul(stride)
         .and_then(|n| n.checked_add(width))
-        .ok_or(FrameError::BufferTooSmall { needed: usize::MAX, actual: len })?;
+        .ok_or(FrameError::BufferTooSmall {
+            needed: usize::MAX,
+            actual: len,
+        })?;
     if len < needed {
-        return Err(FrameError::BufferTooSmall { needed, actual: len });
+        return Err(FrameError::BufferTooSmall {
+            needed,
+            actual: len,
+        });
     }
     Ok(())
 }
@@ -128,9 +144,20 @@ pub struct Frame<'a, P: Pixel> {
 impl<'a, P: Pixel> Frame<'a, P> {
     /// Views `data` as a `width × height` frame whose rows start every `stride` pixels.
     /// The bit depth is that of the storage type; see [`Frame::with_bit_depth`].
-    pub fn new(data: &'a [P], width: usize, height: usize, stride: usize) -> Result<Self, FrameError> {
+    pub fn new(
+        data: &'a [P],
+        width: usize,
+        height: usize,
+        stride: usize,
+    ) -> Result<Self, FrameError> {
         check_layout(data.len(), width, height, stride)?;
-        Ok(Frame { data, width, height, stride, bit_depth: P::STORAGE_BITS })
+        Ok(Frame {
+            data,
+            width,
+            height,
+            stride,
+            bit_depth: P::STORAGE_BITS,
+        })
     }
 
     /// Declares the sensor's bit depth (e.g. 10 for a 10-bit sensor stored in `u16`), which sets
@@ -199,9 +226,20 @@ pub struct FrameMut<'a, P: Pixel> {
 
 impl<'a, P: Pixel> FrameMut<'a, P> {
     /// Views `data` as a mutable `width × height` frame with the given row stride.
-    pub fn new(data: &'a mut [P], width: usize, height: usize, stride: usize) -> Result<Self, FrameError> {
+    pub fn new(
+        data: &'a mut [P],
+        width: usize,
+        height: usize,
+        stride: usize,
+    ) -> Result<Self, FrameError> {
         check_layout(data.len(), width, height, stride)?;
-        Ok(FrameMut { data, width, height, stride, bit_depth: P::STORAGE_BITS })
+        Ok(FrameMut {
+            data,
+            width,
+            height,
+            stride,
+            bit_depth: P::STORAGE_BITS,
+        })
     }
     /// Declares the bit depth of the values written (see [`Frame::with_bit_depth`]).
     pub fn with_bit_depth(mut self, bits: u8) -> Result<Self, FrameError> {
@@ -257,16 +295,25 @@ mod tests {
         assert_eq!(Frame::new(&buf, 0, 1, 1).unwrap_err(), FrameError::Empty);
         assert_eq!(
             Frame::new(&buf, 4, 2, 3).unwrap_err(),
-            FrameError::StrideTooSmall { width: 4, stride: 3 }
+            FrameError::StrideTooSmall {
+                width: 4,
+                stride: 3
+            }
         );
         assert_eq!(
             Frame::new(&buf, 4, 3, 4).unwrap_err(),
-            FrameError::BufferTooSmall { needed: 12, actual: 10 }
+            FrameError::BufferTooSmall {
+                needed: 12,
+                actual: 10
+            }
         );
         // The last row need not be padded to the stride.
         assert!(Frame::new(&buf, 4, 2, 6).is_ok());
         assert_eq!(
-            Frame::new(&buf, 2, 2, 2).unwrap().with_bit_depth(9).unwrap_err(),
+            Frame::new(&buf, 2, 2, 2)
+                .unwrap()
+                .with_bit_depth(9)
+                .unwrap_err(),
             FrameError::BadBitDepth(9)
         );
     }
@@ -274,7 +321,10 @@ mod tests {
     #[test]
     fn strided_rows_and_saturation_level() {
         let buf: [u16; 8] = [1, 2, 9, 9, 3, 4, 9, 9];
-        let f = Frame::new(&buf, 2, 2, 4).unwrap().with_bit_depth(10).unwrap();
+        let f = Frame::new(&buf, 2, 2, 4)
+            .unwrap()
+            .with_bit_depth(10)
+            .unwrap();
         assert_eq!(f.row(1), &[3, 4]);
         assert_eq!(f.get(1, 1), Some(4));
         assert_eq!(f.get(2, 0), None);
