@@ -88,7 +88,7 @@ fn main() -> ! {
     for pair in files.chunks_exact(2) {
         let _ = scenes.push((pair[0], pair[1]));
     }
-    if scenes.is_empty() || files.len() % 2 != 0 {
+    if scenes.is_empty() || !files.len().is_multiple_of(2) {
         qemu::log(format_args!(
             "usage: tangent-qemu [--calib FILE] [--bench] OFF.pgm ON.pgm [OFF.pgm ON.pgm ...]"
         ));
