@@ -11,7 +11,6 @@
 //! `cargo run --release -p tangent-host --example firmware_bench`
 
 use std::path::Path;
-use std::process::Command;
 
 use tangent_core::protocol::{calibration_record, WireCalibration};
 use tangent_host::simulate::{corpus, simulate};
@@ -65,24 +64,7 @@ fn main() {
     args = format!("--calib {} {args}", cal_path.display());
 
     // The firmware writes its log to QEMU's stderr (semihosting `:tt` in append mode).
-    let out = Command::new("qemu-system-arm")
-        .args([
-            "-M",
-            "mps2-an500",
-            "-display",
-            "none",
-            "-monitor",
-            "none",
-            "-nodefaults",
-            "-net",
-            "none",
-        ])
-        .args(["-icount", "shift=0", "-serial", "null"])
-        .args(["-semihosting-config", "enable=on,target=native"])
-        .arg("-kernel")
-        .arg(&elf)
-        .arg("-append")
-        .arg(&args)
+    let out = tangent_host::emulator::qemu_command(&elf, "null", true, &args)
         .output()
         .expect("run qemu-system-arm");
     let status = out.status;

@@ -9,6 +9,7 @@
 pub mod calibrate;
 pub mod calibration_file;
 pub mod capture;
+pub mod emulator;
 pub mod evaluate;
 pub mod fieldlog;
 pub mod link;

@@ -93,22 +93,7 @@ impl Device {
             args += &format!(" {} {}", off.display(), on.display());
         }
         let log = dir.path().join("semihosting.log");
-        let mut child = Command::new("qemu-system-arm")
-            .args([
-                "-M",
-                "mps2-an500",
-                "-display",
-                "none",
-                "-monitor",
-                "none",
-                "-nodefaults",
-            ])
-            .args(["-net", "none", "-serial", "stdio"])
-            .args(["-semihosting-config", "enable=on,target=native"])
-            .arg("-kernel")
-            .arg(elf)
-            .arg("-append")
-            .arg(&args)
+        let mut child = tangent_host::emulator::qemu_command(elf, "stdio", false, &args)
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             // The firmware's semihosting log goes to QEMU's stderr.
