@@ -87,17 +87,10 @@ pub struct SmallBuffers<const POINTS: usize> {
 impl<const POINTS: usize> SmallBuffers<POINTS> {
     /// Zeroed buffers.
     pub const fn new() -> Self {
-        const ZERO_POINT: CurvePoint = CurvePoint {
-            column: 0,
-            row: 0.0,
-            amplitude: 0.0,
-            curve: 0,
-            saturated: false,
-        };
         SmallBuffers {
             histogram: [0; HISTOGRAM],
             label_table: [0; LABEL_TABLE],
-            curve: [ZERO_POINT; POINTS],
+            curve: [CurvePoint::ZERO; POINTS],
             points: [Vec3::new(0.0, 0.0, 0.0); POINTS],
             scratch_points: [Vec2::new(0.0, 0.0); POINTS],
             scratch_values: [0.0; POINTS],

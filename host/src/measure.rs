@@ -236,16 +236,7 @@ impl<P: Pixel> HostWorkspace<P> {
             histogram: vec![0; s.histogram],
             label_table: vec![0; s.label_table],
             objects: vec![ObjectFeatures::empty(0); s.objects],
-            curve: vec![
-                CurvePoint {
-                    column: 0,
-                    row: 0.0,
-                    amplitude: 0.0,
-                    curve: 0,
-                    saturated: false
-                };
-                s.points
-            ],
+            curve: vec![CurvePoint::ZERO; s.points],
             points: vec![Vec3::zeros(); s.points],
             scratch_points: vec![Vec2::zeros(); s.points],
             scratch_values: vec![0.0; s.points],

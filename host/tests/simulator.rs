@@ -293,16 +293,7 @@ fn extract(cap: &Capture) -> Vec<(u16, f64)> {
     let mut histogram = vec![0u32; sizes.histogram];
     let mut label_table = vec![0u16; sizes.label_table];
     let mut objects = vec![tangent_core::image::segment::ObjectFeatures::empty(0); sizes.objects];
-    let mut curve = vec![
-        CurvePoint {
-            column: 0,
-            row: 0.0,
-            amplitude: 0.0,
-            curve: 0,
-            saturated: false
-        };
-        sizes.points
-    ];
+    let mut curve = vec![CurvePoint::ZERO; sizes.points];
     let mut points = vec![Vec3::zeros(); sizes.points];
     let mut scratch_points = vec![Vec2::zeros(); sizes.points];
     let mut scratch_values = vec![0.0; sizes.points];

@@ -41,6 +41,17 @@ pub struct CurvePoint {
     pub saturated: bool,
 }
 
+impl CurvePoint {
+    /// An all-zero point, for initialising caller-owned buffers (usable in `const`/`static`).
+    pub const ZERO: CurvePoint = CurvePoint {
+        column: 0,
+        row: 0.0,
+        amplitude: 0.0,
+        curve: 0,
+        saturated: false,
+    };
+}
+
 /// Parameters of [`extract`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ExtractParams {
@@ -450,13 +461,7 @@ mod tests {
     fn extracts_a_sinusoidal_stripe_at_its_analytic_rows() {
         let (d, l) = scene(&[(7, row_a, AMP)]);
         let (diff, labels) = frames(&d, &l);
-        let mut out = [CurvePoint {
-            column: 0,
-            row: 0.0,
-            amplitude: 0.0,
-            curve: 0,
-            saturated: false,
-        }; 64];
+        let mut out = [CurvePoint::ZERO; 64];
         let n = extract(&diff, &labels, &[7], &ExtractParams::default(), &mut out).unwrap();
         assert_eq!(n, W);
         for (x, p) in out[..n].iter().enumerate() {
@@ -479,13 +484,7 @@ mod tests {
     fn extracts_two_curves_per_column_in_selection_order() {
         let (d, l) = scene(&[(3, row_a, AMP), (5, row_b, 0.6 * AMP)]);
         let (diff, labels) = frames(&d, &l);
-        let mut out = [CurvePoint {
-            column: 0,
-            row: 0.0,
-            amplitude: 0.0,
-            curve: 0,
-            saturated: false,
-        }; 128];
+        let mut out = [CurvePoint::ZERO; 128];
         // Label 5 first: curve 0 is the lower stripe.
         let n = extract(&diff, &labels, &[5, 3], &ExtractParams::default(), &mut out).unwrap();
         assert_eq!(n, 2 * W);
@@ -503,13 +502,7 @@ mod tests {
     fn window_over_the_labels_gives_the_same_points() {
         let (d, l) = scene(&[(3, row_a, AMP), (5, row_b, 0.6 * AMP)]);
         let (diff, labels) = frames(&d, &l);
-        let blank = CurvePoint {
-            column: 0,
-            row: 0.0,
-            amplitude: 0.0,
-            curve: 0,
-            saturated: false,
-        };
+        let blank = CurvePoint::ZERO;
         let params = ExtractParams::default();
         let mut full = [blank; 128];
         let n = extract(&diff, &labels, &[5, 3], &params, &mut full).unwrap();
@@ -555,13 +548,7 @@ mod tests {
         }
         let (d, l) = scene(&[(1, row_c, 1.5 * 1023.0)]);
         let (diff, labels) = frames(&d, &l);
-        let mut out = [CurvePoint {
-            column: 0,
-            row: 0.0,
-            amplitude: 0.0,
-            curve: 0,
-            saturated: false,
-        }; 64];
+        let mut out = [CurvePoint::ZERO; 64];
         let n = extract(&diff, &labels, &[1], &ExtractParams::default(), &mut out).unwrap();
         assert_eq!(n, W);
         for (x, p) in out[..n].iter().enumerate() {
@@ -580,13 +567,7 @@ mod tests {
         let (d, l) = scene(&[(7, row_a, AMP)]);
         let (diff, labels) = frames(&d, &l);
         let params = ExtractParams::default();
-        let mut small = [CurvePoint {
-            column: 0,
-            row: 0.0,
-            amplitude: 0.0,
-            curve: 0,
-            saturated: false,
-        }; 5];
+        let mut small = [CurvePoint::ZERO; 5];
         assert_eq!(
             extract(&diff, &labels, &[7], &params, &mut small),
             Err(CurveError::OutputFull { capacity: 5 })
