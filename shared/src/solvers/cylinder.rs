@@ -1370,7 +1370,20 @@ fn solve_tilted(
     let mut rsum = 0.0;
     let mut s2sum = 0.0;
     let mut k = 0;
+    // Σ of the per-curve data-driven radius variances of the projected circle fits.
+    let mut fit_s2sum = 0.0;
+    let mut kf = 0;
+    // Σ of the per-curve edge-fade bias σ's: a bias, common to the curves, so it is
+    // averaged, not reduced as independent noise.
+    let mut edge_sum = 0.0;
     for (curve, plane) in input.curves.iter().zip(input.planes) {
+        // The data-driven terms of the one-plane path on the projected curve
+        // (docs/cylinder.md, "Data-driven σ of the two-plane result").
+        let extra = projected_data_sigma(curve, plane, cyl.axis, params, scratch);
+        if let Some((_, sf, _)) = extra {
+            fit_s2sum += sf * sf;
+            kf += 1;
+        }
         if let Ok(t) = generalised_three_tangent(
             curve,
             plane.source,
@@ -1382,8 +1395,11 @@ fn solve_tilted(
             let s_alpha = params.noise.edge_angle_sigma(params.focal_px) / Real::sqrt(2.0);
             let s_point = one_point_sigma(plane, params, t.nearest_distance);
             let s_d = t.nearest_variance_factor.sqrt() * t.window_rms.max(s_point);
+            // Fade-out of the projected edges, judged against the projected fit.
+            let edge = extra.map_or(0.0, |(c, sf, _)| edge_bias_sigma(&t, &c, sf));
             rsum += t.radius;
             s2sum += (dr_da * s_alpha).powi(2) + (dr_dd * s_d).powi(2);
+            edge_sum += edge;
             k += 1;
         }
     }
@@ -1396,10 +1412,20 @@ fn solve_tilted(
     };
     let cal_rel =
         error_model::calibration_relative_sigma(plane0, centre, &params.noise, params.focal_px);
-    let fit_sigma = (fit.sigma_radius.powi(2) + (cal_rel * cyl.radius).powi(2)).sqrt();
+    // The cylinder fit's own σ assumes independent, equal point noise; the dim ends of a far
+    // curve and coherent bending break that as in one plane. σ of the mean of the per-curve
+    // data-driven terms (independent curves) is the floor, as `max` in `solve_plane`.
+    let data_sigma = if kf > 0 {
+        (fit_s2sum / (kf * kf) as Real).sqrt()
+    } else {
+        0.0
+    };
+    let fit_sigma =
+        (fit.sigma_radius.max(data_sigma).powi(2) + (cal_rel * cyl.radius).powi(2)).sqrt();
     let tt = if k > 0 {
         let r = rsum / k as Real;
-        let s = (s2sum / (k * k) as Real + (cal_rel * r).powi(2)).sqrt();
+        let edge = edge_sum / k as Real;
+        let s = (s2sum / (k * k) as Real + edge * edge + (cal_rel * r).powi(2)).sqrt();
         Some((r, s))
     } else {
         None
@@ -1505,6 +1531,63 @@ fn projected_non_round(
     let f = circle::fit_robust(pts, init, &rp, scratch.values).ok()?;
     let cutoff = rp.tuning * f.rms_residual.max(rp.min_scale);
     non_round(pts, &f, cutoff, params)
+}
+
+/// Data-driven radius σ of one curve projected along `axis` onto the plane perpendicular to
+/// it (origin at `plane.source`, as [`generalised_three_tangent`]; the projected lit arc is
+/// an arc of the true section): robust circle fit, then the larger of its Gauss–Newton σ and
+/// the residual sandwich σ ([`error_model::circle_radius_sigma_residuals`]), in quadrature
+/// with the coherent-bending term ([`bending_sigma`]) — the one-plane path's terms
+/// (`docs/cylinder.md`, "Data-driven σ of the two-plane result"). Returns the projected
+/// circle, that σ and the fit's RMS residual; `None` when the projection or fit fails.
+fn projected_data_sigma(
+    curve: &[Vec3],
+    plane: &LaserPlane,
+    axis: Vec3,
+    params: &CylinderParams,
+    scratch: &mut Scratch<'_>,
+) -> Option<(circle::Circle, Real, Real)> {
+    let an = axis.norm();
+    if !(an > 0.0 && an.is_finite()) {
+        return None;
+    }
+    let u = axis / an;
+    let (e1, e2) = basis(u);
+    let source = plane.source;
+    let out = scratch.points.get_mut(..curve.len())?;
+    for (o, x) in out.iter_mut().zip(curve) {
+        let w = x - source;
+        *o = Vec2::new(w.dot(&e1), w.dot(&e2));
+    }
+    let pts: &[Vec2] = out;
+    // Back from the projection to the laser plane: `x = s + q₁e₁ + q₂e₂ + t·u` with
+    // `n·(x − s) = 0` (the source lies in the plane).
+    let nu = plane.normal.dot(&u);
+    if !(nu.abs() > 1e-6) {
+        return None;
+    }
+    let noise = |q: Vec2| {
+        let w = e1 * q.x + e2 * q.y;
+        let x = source + w - u * (plane.normal.dot(&w) / nu);
+        let g = error_model::displacement_per_pixel(plane, params.focal_px, x)
+            .unwrap_or_else(|_| Vec3::zeros());
+        Vec2::new(g.dot(&e1), g.dot(&e2)) * params.noise.image_px()
+    };
+    let init = circle::fit_hyper(pts).ok()?;
+    let cn = init.centre.norm();
+    if !(cn > 0.0) {
+        return None;
+    }
+    let near = init.centre - init.centre / cn * init.radius;
+    let mut rp = params.robust;
+    rp.min_scale = rp.min_scale.max(noise(near).norm());
+    let f = circle::fit_robust(pts, init, &rp, scratch.values).ok()?;
+    let cutoff = rp.tuning * f.rms_residual.max(rp.min_scale);
+    let data = error_model::circle_radius_sigma_residuals(&f.circle, pts, cutoff);
+    let data = if data.is_finite() { data } else { 0.0 };
+    let bend = bending_sigma(&f, pts, noise, params);
+    let s = f.std_dev.z.max(data).hypot(bend);
+    s.is_finite().then_some((f.circle, s, f.rms_residual))
 }
 
 /// Model σ of one point (metres, along the viewing direction) at in-plane distance
