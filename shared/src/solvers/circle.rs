@@ -28,7 +28,7 @@
 use crate::real::Float;
 use crate::real::{Mat3, Real, Vec2, Vec3};
 
-use super::SolveError;
+use super::{levenberg_step, SolveError};
 
 /// A circle: centre and radius (same units as the points).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -370,21 +370,8 @@ fn lm<W: Fn(Vec2) -> Real>(
         return Err(SolveError::NonFinite);
     }
     for it in 1..=params.max_iterations {
-        let mut a = jtj;
-        for k in 0..3 {
-            // Marquardt's scaling by the diagonal, plus a floor so that a zero diagonal
-            // (all points on one side at the centre) still gives a damped step.
-            a[(k, k)] += lambda * (jtj[(k, k)] + Real::EPSILON);
-        }
-        let step = match a.cholesky() {
-            Some(ch) => ch.solve(&(-jtd)),
-            None => {
-                lambda = (lambda * 10.0).max(Real::EPSILON);
-                if lambda > 1e16 {
-                    return Err(SolveError::Degenerate);
-                }
-                continue;
-            }
+        let Some(step) = levenberg_step(&jtj, &jtd, &mut lambda)? else {
+            continue;
         };
         let cand = theta + step;
         let (jtj2, jtd2, cost2, _, used2) = accumulate(points, norm, cand, weight);
@@ -752,19 +739,8 @@ pub fn fit_ellipse(
     let mut converged = false;
     for it in 1..=params.max_iterations {
         iterations = it;
-        let mut a = jtj;
-        for k in 0..5 {
-            a[(k, k)] += lambda * (jtj[(k, k)] + Real::EPSILON);
-        }
-        let step = match a.cholesky() {
-            Some(ch) => ch.solve(&(-jtd)),
-            None => {
-                lambda = (lambda * 10.0).max(Real::EPSILON);
-                if lambda > 1e16 {
-                    return Err(SolveError::Degenerate);
-                }
-                continue;
-            }
+        let Some(step) = levenberg_step(&jtj, &jtd, &mut lambda)? else {
+            continue;
         };
         let cand = p + step;
         let next = if cand[2] > (cand[3] * cand[3] + cand[4] * cand[4]).sqrt() {

@@ -27,7 +27,7 @@ use crate::real::{Real, Vec2, Vec3, PI};
 use nalgebra::{SMatrix, SVector};
 
 use super::circle::{self, LmParams, RobustParams};
-use super::SolveError;
+use super::{levenberg_step, SolveError};
 use crate::error_model::{self, NoiseModel};
 use crate::laser_plane::LaserPlane;
 
@@ -523,19 +523,8 @@ pub fn fit_cylinder(
     let mut converged = false;
     for it in 1..=params.max_iterations {
         iterations = it;
-        let mut a = jtj;
-        for k in 0..5 {
-            a[(k, k)] += lambda * (jtj[(k, k)] + Real::EPSILON);
-        }
-        let step = match a.cholesky() {
-            Some(ch) => ch.solve(&(-jtd)),
-            None => {
-                lambda = (lambda * 10.0).max(Real::EPSILON);
-                if lambda > 1e16 {
-                    return Err(SolveError::Degenerate);
-                }
-                continue;
-            }
+        let Some(step) = levenberg_step(&jtj, &jtd, &mut lambda)? else {
+            continue;
         };
         let cand = cyl_step(&st, &step);
         let (jtj2, jtd2, cost2, _) = cyl_accumulate(curves, mean, scale, &cand);

@@ -15,6 +15,8 @@
 
 use core::fmt;
 
+use crate::real::Real;
+
 pub mod circle;
 pub mod cylinder;
 
@@ -67,3 +69,30 @@ impl fmt::Display for SolveError {
 
 #[cfg(feature = "std")]
 impl std::error::Error for SolveError {}
+
+/// One damped Gauss–Newton (Levenberg–Marquardt) step: solves
+/// `(JᵀJ + λ·(diag(JᵀJ) + ε))·δ = −Jᵀr` (Marquardt's diagonal scaling, with a floor so that a
+/// zero diagonal still gives a damped step). When the damped matrix is not positive definite,
+/// raises `λ` tenfold and returns `Ok(None)` (try again), or `Degenerate` once `λ > 10¹⁶`.
+/// Shared by the circle, ellipse and cylinder fits (`docs/cylinder.md`).
+pub(crate) fn levenberg_step<const N: usize>(
+    jtj: &nalgebra::SMatrix<Real, N, N>,
+    jtd: &nalgebra::SVector<Real, N>,
+    lambda: &mut Real,
+) -> Result<Option<nalgebra::SVector<Real, N>>, SolveError> {
+    let mut a = *jtj;
+    for k in 0..N {
+        a[(k, k)] += *lambda * (jtj[(k, k)] + Real::EPSILON);
+    }
+    match a.cholesky() {
+        Some(ch) => Ok(Some(ch.solve(&(-jtd)))),
+        None => {
+            *lambda = (*lambda * 10.0).max(Real::EPSILON);
+            if *lambda > 1e16 {
+                Err(SolveError::Degenerate)
+            } else {
+                Ok(None)
+            }
+        }
+    }
+}
