@@ -118,6 +118,11 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
         }
     }
 
+    /// The measurer (for its benchmark timings).
+    pub fn measurer(&self) -> &M {
+        &self.measurer
+    }
+
     /// The active calibration.
     pub fn calibration(&self) -> Option<&Calibration> {
         self.calibration.as_ref()

@@ -8,7 +8,7 @@ use tangent_core::calibration::Calibration;
 use tangent_core::curve::CurvePoint;
 use tangent_core::image::segment::ObjectFeatures;
 use tangent_core::image::Frame;
-use tangent_core::pipeline::{self, PipelineConfig, PipelineError, Workspace};
+use tangent_core::pipeline::{self, PipelineConfig, PipelineError, Stage, Workspace};
 use tangent_core::protocol::Method;
 use tangent_core::real::{Real, Vec2, Vec3};
 use tangent_core::solvers::cylinder::CylinderParams;
@@ -155,6 +155,22 @@ pub struct PipelineMeasurer<'w> {
     pub config: PipelineConfig,
     /// Cylinder-solver parameters.
     pub params: CylinderParams,
+    /// A free-running clock (µs) to time the two halves of the pipeline with, or `None`.
+    pub stage_clock: Option<fn() -> u64>,
+    /// Durations of the last measurement's image part and solver (µs of `stage_clock`;
+    /// zero without a clock or when the image part failed).
+    pub last_stages: StageTimes,
+}
+
+/// Durations of the stages of the last measurement (µs of the measurer's `stage_clock`), for
+/// the instruction-count benchmark: the image stages in the order of
+/// [`pipeline::Stage`] (each from the end of the previous one), then the solver.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct StageTimes {
+    /// Subtraction, threshold, segmentation, selection, curve extraction, triangulation.
+    pub image_us: [u64; 6],
+    /// Cylinder solver ([`pipeline::solve_stem`]).
+    pub solver_us: u64,
 }
 
 impl<'w> PipelineMeasurer<'w> {
@@ -164,6 +180,8 @@ impl<'w> PipelineMeasurer<'w> {
             ws,
             config: PipelineConfig::default(),
             params: CylinderParams::default(),
+            stage_clock: None,
+            last_stages: StageTimes::default(),
         }
     }
 }
@@ -211,9 +229,36 @@ impl Measurer for PipelineMeasurer<'_> {
             windowed = window_calibration(calibration, pair.row_offset, pair.height);
             &windowed
         };
-        let m = pipeline::measure_stem(&off, &on, cal, &self.config, &self.params, &mut self.ws)
-            .map_err(|e| error_code(&e))?;
-        let s = m.solution;
+        let clock = self.stage_clock;
+        let now = move || clock.map_or(0, |clock| clock());
+        let mut stages = StageTimes::default();
+        let mut last = now();
+        let profile = pipeline::extract_profile_probed(
+            &off,
+            &on,
+            cal,
+            &self.config,
+            &mut self.ws,
+            |stage| {
+                let t = now();
+                let i = match stage {
+                    Stage::Subtracted => 0,
+                    Stage::Thresholded => 1,
+                    Stage::Segmented => 2,
+                    Stage::Selected => 3,
+                    Stage::Extracted => 4,
+                    Stage::Triangulated => 5,
+                };
+                stages.image_us[i] = t.saturating_sub(last);
+                last = t;
+            },
+        );
+        self.last_stages = stages;
+        let profile = profile.map_err(|e| error_code(&e))?;
+        let t = now();
+        let solved = pipeline::solve_stem(&profile, on.max_value(), cal, &self.params, &mut self.ws);
+        self.last_stages.solver_us = now().saturating_sub(t);
+        let s = solved.map_err(|e| error_code(&e))?.solution;
         Ok(Outcome {
             method: s.method.into(),
             diameter_m: s.diameter as f32,

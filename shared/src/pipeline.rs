@@ -377,9 +377,7 @@ pub fn image_flags(profile: &Profile, full_scale: u32) -> Flags {
     flags
 }
 
-/// Measures a stem: [`extract_profile`], then the cylinder solver
-/// ([`cylinder::solve`]: three-tangent, circle or cylinder fit, chosen by the data) on the
-/// points of every plane. A curve that runs off the frame is [`PipelineError::OutsideFrame`].
+/// Measures a stem: [`extract_profile`], then [`solve_stem`] on its points.
 pub fn measure_stem<P: Pixel>(
     off: &Frame<'_, P>,
     on: &Frame<'_, P>,
@@ -389,10 +387,25 @@ pub fn measure_stem<P: Pixel>(
     ws: &mut Workspace<'_, P>,
 ) -> Result<StemMeasurement, PipelineError> {
     let profile = extract_profile(off, on, calibration, config, ws)?;
+    solve_stem(&profile, on.max_value(), calibration, params, ws)
+}
+
+/// The solver half of [`measure_stem`]: the cylinder solver ([`cylinder::solve`]:
+/// three-tangent, circle or cylinder fit, chosen by the data) on the points of every plane
+/// that [`extract_profile`] left in `ws`, with the [`image_flags`] added (`full_scale`: the
+/// laser-on frame's [`Frame::max_value`]). A curve that runs off the frame is
+/// [`PipelineError::OutsideFrame`]. Separate so that the two halves can be timed apart.
+pub fn solve_stem<P: Pixel>(
+    profile: &Profile,
+    full_scale: u32,
+    calibration: &Calibration,
+    params: &CylinderParams,
+    ws: &mut Workspace<'_, P>,
+) -> Result<StemMeasurement, PipelineError> {
     if profile.touches_edge {
         return Err(PipelineError::OutsideFrame);
     }
-    let n_planes = profile.planes.min(MAX_PLANES);
+    let n_planes = profile.planes.min(MAX_PLANES).min(calibration.planes.len());
     let mut curves: [&[Vec3]; MAX_PLANES] = [&[]; MAX_PLANES];
     for (k, c) in curves.iter_mut().enumerate().take(n_planes) {
         *c = profile.points(ws.points, k);
@@ -406,8 +419,11 @@ pub fn measure_stem<P: Pixel>(
         values: &mut *ws.scratch_values,
     };
     let mut solution = cylinder::solve(&input, params, scratch)?;
-    solution.flags.insert(image_flags(&profile, on.max_value()));
-    Ok(StemMeasurement { solution, profile })
+    solution.flags.insert(image_flags(profile, full_scale));
+    Ok(StemMeasurement {
+        solution,
+        profile: *profile,
+    })
 }
 
 /// One selected object and what the plane assignment needs of it.
@@ -453,6 +469,37 @@ pub fn extract_profile<P: Pixel>(
     calibration: &Calibration,
     config: &PipelineConfig,
     ws: &mut Workspace<'_, P>,
+) -> Result<Profile, PipelineError> {
+    extract_profile_probed(off, on, calibration, config, ws, |_| {})
+}
+
+/// A point of [`extract_profile`] that its probe is told about, each when its stage is done.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stage {
+    /// Subtraction, histogram and the darkness tests.
+    Subtracted,
+    /// Threshold chosen.
+    Thresholded,
+    /// Segmentation and object features.
+    Segmented,
+    /// Selection and plane assignment.
+    Selected,
+    /// Subpixel curve extracted.
+    Extracted,
+    /// Curves smoothed and triangulated: the profile is complete.
+    Triangulated,
+}
+
+/// [`extract_profile`] that calls `probe` as each [`Stage`] completes (the firmware's
+/// instruction-count benchmark time-stamps them; `docs/performance.md`). With an empty
+/// closure it compiles to [`extract_profile`].
+pub fn extract_profile_probed<P: Pixel>(
+    off: &Frame<'_, P>,
+    on: &Frame<'_, P>,
+    calibration: &Calibration,
+    config: &PipelineConfig,
+    ws: &mut Workspace<'_, P>,
+    mut probe: impl FnMut(Stage),
 ) -> Result<Profile, PipelineError> {
     calibration
         .validate()
@@ -501,6 +548,8 @@ pub fn extract_profile<P: Pixel>(
         });
     }
 
+    probe(Stage::Subtracted);
+
     // 2. Threshold (§5.3.2), floored so that sensor noise never becomes foreground: at
     //    least `threshold_snr` noise σ's and `min_threshold` grey levels.
     let auto = config.threshold.threshold(&ws.histogram[..hist_len])?;
@@ -516,6 +565,8 @@ pub fn extract_profile<P: Pixel>(
         .max(relative)
         .max(noise_floor);
 
+    probe(Stage::Thresholded);
+
     // 3. Segmentation with the 2×2 mask (§5.4) and feature extraction (§5.5).
     let mut labels = FrameMut::new(&mut ws.labels[..pixels], width, height, width)?;
     let seg = segment::segment(
@@ -528,6 +579,8 @@ pub fn extract_profile<P: Pixel>(
     )?;
     let labels = labels.as_frame();
     let objects = &ws.objects[..seg.objects.min(ws.objects.len())];
+
+    probe(Stage::Segmented);
 
     // 4. Selection (§5.6): the per-object criteria, nearest to the central column first.
     let mut sel_params = config.selection;
@@ -571,6 +624,8 @@ pub fn extract_profile<P: Pixel>(
         return Err(PipelineError::NoCurve);
     }
 
+    probe(Stage::Selected);
+
     // 6. Subpixel curve extraction (§5.7.1) of the used candidates, then per plane: sort by
     //    column (extraction is column-major, so points already are), smooth and triangulate.
     let mut labels_used = [0u16; MAX_CURVES];
@@ -611,6 +666,7 @@ pub fn extract_profile<P: Pixel>(
         ws.curve,
     )?;
     need("points", n, ws.points.len())?;
+    probe(Stage::Extracted);
 
     // Reorder in place so that each plane's points are contiguous and ordered by column:
     // a stable partition by plane (curve points are already column-major).
@@ -660,6 +716,8 @@ pub fn extract_profile<P: Pixel>(
             *xyz = triangulate(cam, plane_model, Vec2::new(cp.column as Real, cp.row))?;
         }
     }
+
+    probe(Stage::Triangulated);
 
     let (unused_candidates, largest_unused) = cands
         .iter()

@@ -128,12 +128,15 @@ fn main() -> ! {
         store: RamStore::new(calibration),
         watchdog: qemu::NoWatchdog,
     };
-    let measurer = PipelineMeasurer::new(measure::workspace(
+    let mut measurer = PipelineMeasurer::new(measure::workspace(
         &mut diff[..pixels],
         &mut labels[..pixels],
         objects,
         small,
     ));
+    if bench {
+        measurer.stage_clock = Some(|| qemu::ticks() * 1_000_000 / qemu::SYSCLK_HZ);
+    }
     let mut app = App::new(dev, measurer, Buffers { off, on, rx });
 
     if bench {
@@ -154,8 +157,15 @@ fn main() -> ! {
             for i in 0..n_scenes {
                 match app.measure_once().await {
                     Ok(r) => qemu::log(format_args!(
-                        "bench scene={} pipeline_us={} diameter_m={} uncertainty_m={} method={:?} flags={:#x}",
-                        i, app.last_pipeline_us, r.diameter_m, r.uncertainty_m, r.method, r.flags
+                        "bench scene={} pipeline_us={} stages_us={:?} solver_us={} diameter_m={} uncertainty_m={} method={:?} flags={:#x}",
+                        i,
+                        app.last_pipeline_us,
+                        app.measurer().last_stages.image_us,
+                        app.measurer().last_stages.solver_us,
+                        r.diameter_m,
+                        r.uncertainty_m,
+                        r.method,
+                        r.flags
                     )),
                     Err(e) => {
                         ok = false;

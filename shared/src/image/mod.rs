@@ -8,6 +8,7 @@
 use core::fmt;
 
 pub mod filter;
+mod lanes;
 pub mod segment;
 pub mod select;
 pub mod subtract;

@@ -22,7 +22,7 @@
 
 use core::fmt;
 
-use super::subtract::{pack4, ByteGreater};
+use super::lanes::{pack4, ByteGreater};
 use super::{Frame, FrameError, FrameMut, Pixel};
 use crate::real::Real;
 

@@ -701,6 +701,44 @@ fn ellipse_accumulate(
     Some((jtj, jtd, meat, cost, n))
 }
 
+/// Score-test (Lagrange-multiplier) form of [`EllipseFit::f_statistic`] at the circle, without
+/// fitting the ellipse (`docs/cylinder.md`, "Screening"): the cost decrease one Gauss–Newton
+/// step of the ellipse model predicts from `circle`, `Δ = gᵀ(JᵀJ)⁻¹g` (`g = Jᵀd` over the
+/// points within `cutoff` of the circle, the set [`fit_ellipse`] uses), as
+/// `(Δ/2) / ((SSR_c − Δ)/(n − 5))`. One pass over the points, where the ellipse fit needs up
+/// to hundreds (its valley is long and flat); close to the fitted `F` when the section is
+/// nearly round, and large whenever the circle leaves a pattern the ellipse explains.
+///
+/// Errors: as [`fit_ellipse`] for the data (fewer than 8 points kept, non-finite values,
+/// singular normal matrix).
+pub fn ellipse_score_f(points: &[Vec2], circle: &Circle, cutoff: Real) -> Result<Real, SolveError> {
+    if !(cutoff > 0.0 && circle.radius > 0.0 && circle.radius.is_finite()) {
+        return Err(SolveError::InvalidParameter);
+    }
+    let keep = |q: Vec2| circle.distance(q).abs() <= cutoff;
+    let norm = Normalisation::of(points, 8)?;
+    let c0 = norm.apply(circle.centre);
+    let r0 = circle.radius / norm.scale;
+    let p = V5::new(c0.x, c0.y, 1.0 / (r0 * r0), 0.0, 0.0);
+    let (jtj, jtd, _, cost, n) =
+        ellipse_accumulate(points, keep, &norm, &p).ok_or(SolveError::Degenerate)?;
+    if n < 8 {
+        return Err(SolveError::TooFewPoints);
+    }
+    let inv = jtj.try_inverse().ok_or(SolveError::Degenerate)?;
+    let decrease = (jtd.transpose() * inv * jtd)[(0, 0)].clamp(0.0, cost);
+    let rest = cost - decrease;
+    if !(rest > 0.0) {
+        return Ok(Real::INFINITY);
+    }
+    let f = 0.5 * decrease / (rest / (n - 5) as Real);
+    if f.is_finite() {
+        Ok(f)
+    } else {
+        Err(SolveError::Degenerate)
+    }
+}
+
 /// Geometric ellipse fit (radial residuals about the centre) to the points whose orthogonal
 /// distance from `circle` is at most `cutoff` (the circle fit's inliers), started from that
 /// circle (`docs/cylinder.md`, "Elliptic stems").
@@ -933,6 +971,43 @@ pub(crate) mod tests {
         let c = start(&pts);
         let e = fit_ellipse(&pts, &c.circle, 5e-3, &lm).unwrap();
         assert!(e.f_statistic() < 14.0, "{e:?}");
+    }
+
+    #[test]
+    fn ellipse_score_test_follows_the_f_distribution_and_the_fitted_f() {
+        let mut rng = Rng::new(4242);
+        let lm = LmParams {
+            max_iterations: 1000,
+            ..LmParams::default()
+        };
+        // Round sections, independent noise: the score statistic is F(2, n − 5) under the
+        // null, mean m/(m − 2) ≈ 1 and standard deviation ≈ 1, so the mean of 100 trials is
+        // 1 ± 0.1 (0.35 = 3.5 standard errors). The fitted F agrees with it closely where
+        // the ellipse model is nearly linear (near the circle).
+        let trials = 100;
+        let mut sum = 0.0;
+        for _ in 0..trials {
+            let pts = ellipse_front(Vec2::new(0.0, 1.6), (0.17, 0.17), 0.0, 600, 3e-4, &mut rng);
+            let c = fit_geometric(&pts, fit_hyper(&pts).unwrap(), &lm).unwrap();
+            let score = ellipse_score_f(&pts, &c.circle, 5e-3).unwrap();
+            let fitted = fit_ellipse(&pts, &c.circle, 5e-3, &lm).unwrap().f_statistic();
+            assert!((fitted - score).abs() <= 0.1 * score + 0.05, "{score} {fitted}");
+            sum += score;
+        }
+        let mean = sum / trials as Real;
+        assert!((mean - 1.0).abs() < 0.35, "mean score F {mean}");
+        // An elliptic section (axes 0.2 × 0.15 m): far above any screening level.
+        let pts = ellipse_front(Vec2::new(0.0, 1.6), (0.2, 0.15), 0.0, 600, 3e-4, &mut rng);
+        let c = fit_geometric(&pts, fit_hyper(&pts).unwrap(), &lm).unwrap();
+        assert!(ellipse_score_f(&pts, &c.circle, 5e-3).unwrap() > 100.0);
+        assert_eq!(
+            ellipse_score_f(&pts[..7], &c.circle, 5e-3),
+            Err(SolveError::TooFewPoints)
+        );
+        assert_eq!(
+            ellipse_score_f(&pts, &c.circle, 0.0),
+            Err(SolveError::InvalidParameter)
+        );
     }
 
     fn ggs() -> [Vec2; 6] {

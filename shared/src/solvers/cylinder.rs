@@ -831,6 +831,10 @@ pub struct CylinderParams {
 /// statistic only screens, the eccentricity decides (`docs/cylinder.md`, "Elliptic stems").
 pub const ELLIPTIC_MIN_F: Real = 30.0;
 
+/// Fraction of [`CylinderParams::elliptic_min_f`] below which the score-test F
+/// ([`circle::ellipse_score_f`]) settles the non-roundness test without fitting the ellipse.
+const ELLIPTIC_SCREEN: Real = 0.5;
+
 /// Iteration budget of the ellipse fit in the non-roundness test.
 const ELLIPSE_MAX_ITERATIONS: u32 = 1000;
 
@@ -1059,6 +1063,14 @@ fn non_round(
         max_iterations: params.robust.lm.max_iterations.max(ELLIPSE_MAX_ITERATIONS),
         ..params.robust.lm
     };
+    // Screening (`docs/cylinder.md`, "Screening"): the score-test F costs one pass over the
+    // points; the fitted F never exceeded it by more than 14 % on the corpus and 367
+    // evaluation curves, so below half the threshold the fit cannot flag the stem.
+    if circle::ellipse_score_f(pts, &fit.circle, cutoff).ok()?
+        < ELLIPTIC_SCREEN * params.elliptic_min_f
+    {
+        return None;
+    }
     let e = circle::fit_ellipse(pts, &fit.circle, cutoff, &lm).ok()?;
     (e.f_statistic() > params.elliptic_min_f && e.eccentricity() > params.elliptic_min_eccentricity)
         .then_some(e)
