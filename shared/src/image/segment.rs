@@ -300,30 +300,53 @@ impl Labeller<'_> {
 
 /// Index of the first 4-pixel word `k` in `from..words` of an 8-bit `row` holding a pixel
 /// above the level of `greater`, or `words` if none: the background scan of [`segment`],
-/// two words per iteration with the level's branch out of the loop.
+/// two words per iteration with the level's branch out of the loop. The labels (`labels`,
+/// the row's label row) of the words it passes over are set to 0 on the way — cheaper than
+/// clearing the whole row first, which costs as much again as the scan.
 #[inline(never)]
 fn next_foreground_word<P: Pixel>(
     row: &[P],
+    labels: &mut [u16],
     from: usize,
     words: usize,
     greater: ByteGreater,
 ) -> usize {
-    let end = words.min(row.len() / 4);
-    let Some(words_row) = row.get(4 * from.min(end)..4 * end) else {
+    let end = words.min(row.len() / 4).min(labels.len() / 4);
+    let from = from.min(end);
+    let (Some(words_row), Some(labels)) = (row.get(4 * from..4 * end), labels.get_mut(4 * from..4 * end))
+    else {
         return words;
     };
-    let mut k = from.min(end);
-    let mut pairs = words_row.chunks_exact(8);
-    for pair in &mut pairs {
-        let (w0, w1) = (pack4(pair), pack4(pair.get(4..).unwrap_or(&[])));
-        if greater.test(w0) | greater.test(w1) != 0 {
-            return if greater.test(w0) != 0 { k } else { k + 1 };
+    let mut k = from;
+    // Four words (16 pixels) per iteration; the rare chunk holding foreground is resolved
+    // word by word below.
+    let mut quads = words_row.chunks_exact(16);
+    let mut label_quads = labels.chunks_exact_mut(16);
+    for (quad, label_quad) in (&mut quads).zip(&mut label_quads) {
+        let (w01, w23) = quad.split_at(8);
+        let (w0, w1) = w01.split_at(4);
+        let (w2, w3) = w23.split_at(4);
+        let hit = greater.test(pack4(w0))
+            | greater.test(pack4(w1))
+            | greater.test(pack4(w2))
+            | greater.test(pack4(w3));
+        if hit != 0 {
+            break;
         }
-        k += 2;
+        label_quad.fill(0);
+        k += 4;
     }
-    let rest = pairs.remainder();
-    if rest.len() >= 4 && greater.test(pack4(rest)) != 0 {
-        return k;
+    // The chunk with foreground (if any) and the remainder, one word at a time.
+    let rest_start = 4 * (k - from);
+    for (word, label_word) in words_row[rest_start..]
+        .chunks_exact(4)
+        .zip(labels[rest_start..].chunks_exact_mut(4))
+    {
+        if greater.test(pack4(word)) != 0 {
+            return k;
+        }
+        label_word.fill(0);
+        k += 1;
     }
     words
 }
@@ -411,20 +434,23 @@ pub fn segment<P: Pixel>(
         // only read for foreground pixels.
         let n = cur.len().min(row.len()).min(prev.len());
         let (cur, row, prev) = (&mut cur[..n], &row[..n], &prev[..n]);
-        // Background is most of a laser image: clear the row at memset speed, then visit only
-        // the 4-pixel words that hold a foreground pixel (8-bit pixels: one word test for 4
-        // pixels; a background pixel's label is 0 whatever its neighbours are).
-        cur.fill(0);
+        // Background is most of a laser image: visit only the 4-pixel words that hold a
+        // foreground pixel (8-bit pixels: one word test for 4 pixels; a background pixel's
+        // label is 0 whatever its neighbours are), zeroing the others' labels on the way.
         let word_skip = P::STORAGE_BITS == 8 && threshold < 255;
-        let greater = ByteGreater::new(threshold.min(255));
+        let greater = ByteGreater::new(threshold);
         if P::STORAGE_BITS == 8 && threshold >= 255 {
+            cur.fill(0);
             continue; // no 8-bit value exceeds 255
         }
         let mut any = false;
-        // One pixel: its label given the label `left` of its left neighbour; returns it.
-        let mut pixel = |x: usize, left: u16| -> Result<u16, SegmentError> {
+        // One pixel: writes its label given the label `left` of its left neighbour; returns it.
+        let mut pixel = |cur: &mut [u16], x: usize, left: u16| -> Result<u16, SegmentError> {
             let v: u32 = row.get(x).map_or(0, |&p| p.into());
             if v <= threshold {
+                if let Some(c) = cur.get_mut(x) {
+                    *c = 0;
+                }
                 return Ok(0);
             }
             let up = prev.get(x).copied().unwrap_or(0);
@@ -485,7 +511,7 @@ pub fn segment<P: Pixel>(
         let mut left = 0u16;
         let mut k = 0;
         loop {
-            let next = next_foreground_word(row, k, words, greater);
+            let next = next_foreground_word(row, cur, k, words, greater);
             if next >= words {
                 break;
             }
@@ -493,7 +519,7 @@ pub fn segment<P: Pixel>(
                 left = 0; // the pixel left of word `next` is background
             }
             for x in 4 * next..4 * next + 4 {
-                left = pixel(x, left)?;
+                left = pixel(cur, x, left)?;
             }
             k = next + 1;
         }
@@ -501,7 +527,7 @@ pub fn segment<P: Pixel>(
             left = 0;
         }
         for x in 4 * words..n {
-            left = pixel(x, left)?;
+            left = pixel(cur, x, left)?;
         }
         if any {
             first_row = first_row.min(y);
