@@ -28,7 +28,14 @@ fn main() {
         "cyl-d1000-z100-shade",
         "cyl-d300-z150-sun",
     ];
-    let dir = tempfile::tempdir().expect("temp dir");
+    // `FIRMWARE_BENCH_DIR=dir` keeps the frames and calibration there (to rerun QEMU by hand,
+    // e.g. with `-d exec` to profile); otherwise a temporary directory.
+    let temp = tempfile::tempdir().expect("temp dir");
+    let kept = std::env::var_os("FIRMWARE_BENCH_DIR").map(std::path::PathBuf::from);
+    if let Some(d) = &kept {
+        std::fs::create_dir_all(d).expect("create FIRMWARE_BENCH_DIR");
+    }
+    let dir_path = kept.unwrap_or_else(|| temp.path().to_path_buf());
     let mut args = String::from("--bench");
     let mut calibration = None;
     let mut sizes = Vec::new();
@@ -48,7 +55,7 @@ fn main() {
                 .into_iter()
                 .map(|v| (v >> bits.saturating_sub(8)) as u8)
                 .collect();
-            let path = dir.path().join(format!("{}-{tag}.pgm", e.name));
+            let path = dir_path.join(format!("{}-{tag}.pgm", e.name));
             let mut bytes = format!("P5\n{} {}\n255\n", pgm.width, pgm.height).into_bytes();
             bytes.extend_from_slice(&data);
             std::fs::write(&path, bytes).expect("write pgm");
@@ -59,7 +66,7 @@ fn main() {
     let cal = calibration.expect("captures rendered");
     let mut rec = [0u8; calibration_record::MAX_RECORD];
     let n = calibration_record::encode(&WireCalibration::from(&cal), &mut rec).expect("record");
-    let cal_path = dir.path().join("calib.bin");
+    let cal_path = dir_path.join("calib.bin");
     std::fs::write(&cal_path, &rec[..n]).expect("write calibration");
     args = format!("--calib {} {args}", cal_path.display());
 

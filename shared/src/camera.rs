@@ -25,7 +25,7 @@ use serde::{Deserialize, Serialize};
 // `Float` supplies sqrt/atan2/… in `no_std`; with `std` the inherent methods win.
 #[allow(unused_imports)]
 use crate::real::Float;
-use crate::real::{Mat3, Real, Vec2, Vec3};
+use crate::real::{norm, sqrt, Mat3, Real, Vec2, Vec3};
 
 /// Most Newton iterations [`Camera::undistort`] makes. Newton converges quadratically from the
 /// distorted point for any realistic lens (`docs/camera-model.md`, "Convergence"): 3–5
@@ -136,7 +136,7 @@ impl Distortion {
             let disc = b * b - 4.0 * a * c;
             if disc >= 0.0 {
                 // Numerically stable quadratic roots (no cancellation).
-                let q = -0.5 * (b + b.signum() * disc.sqrt());
+                let q = -0.5 * (b + b.signum() * sqrt(disc));
                 roots[0] = q / a;
                 if q != 0.0 {
                     roots[1] = c / q;
@@ -304,7 +304,7 @@ impl Camera {
     /// ~5e-3 px. `docs/camera-model.md`, "Accuracy in f32".
     pub fn undistort_tolerance_px(&self, distorted: Vec2) -> Real {
         let f = self.fx.max(self.fy);
-        let floor = 32.0 * Real::EPSILON * (1.0 + distorted.norm()) * f;
+        let floor = 32.0 * Real::EPSILON * (1.0 + norm(&distorted)) * f;
         floor.max(UNDISTORT_TOLERANCE_PX)
     }
 
@@ -329,7 +329,7 @@ impl Camera {
         let residual_px = |p: Vec2| {
             let r = dist.apply(p) - distorted;
             let (ru, rv) = (r.x * self.fx, r.y * self.fy);
-            (ru * ru + rv * rv).sqrt()
+            sqrt(ru * ru + rv * rv)
         };
         let accept = |p: Vec2| -> Result<Vec2, CameraError> {
             if !(p.x.is_finite() && p.y.is_finite()) {
@@ -367,11 +367,11 @@ impl Camera {
         // Stop once a step is below √ε·(1 + |p|): Newton's error after such a step is
         // O(step²) = O(ε), the rounding floor (docs/camera-model.md, "Convergence").
         // One more "polishing" step is then taken to settle on the floor.
-        let sqrt_eps = Real::EPSILON.sqrt();
+        let sqrt_eps = sqrt(Real::EPSILON);
         let mut p = d;
         let (f0, mut jac) = dist.apply_with_jacobian(p);
         let mut r = f0 - d;
-        let mut r_norm = r.norm();
+        let mut r_norm = norm(&r);
         let mut polishing = false;
         for _ in 0..MAX_NEWTON_ITERATIONS {
             let [[a, b], [c, e]] = jac;
@@ -388,7 +388,7 @@ impl Camera {
                 let cand = p - step * scale;
                 let (fc, jc) = dist.apply_with_jacobian(cand);
                 let rc = fc - d;
-                let rc_norm = rc.norm();
+                let rc_norm = norm(&rc);
                 // Accept a step that does not increase the residual; at the rounding floor
                 // the residual only fluctuates, so "not larger" (not "smaller") is used.
                 if rc_norm.is_finite() && rc_norm <= r_norm {
@@ -408,8 +408,8 @@ impl Camera {
             if polishing {
                 return Some(p);
             }
-            let step_norm = step.norm() * scale;
-            if step_norm <= sqrt_eps * (1.0 + p.norm()) {
+            let step_norm = norm(&step) * scale;
+            if step_norm <= sqrt_eps * (1.0 + norm(&p)) {
                 polishing = true;
             }
         }
@@ -432,12 +432,12 @@ impl Camera {
             let tx = 2.0 * k.p1 * x * y + k.p2 * (r2 + 2.0 * x * x);
             let ty = k.p1 * (r2 + 2.0 * y * y) + 2.0 * k.p2 * x * y;
             let next = Vec2::new((d.x - tx) / radial, (d.y - ty) / radial);
-            let step = (next - p).norm();
+            let step = norm(&(next - p));
             p = next;
             if !step.is_finite() {
                 return None;
             }
-            if step <= 4.0 * Real::EPSILON * (1.0 + p.norm()) {
+            if step <= 4.0 * Real::EPSILON * (1.0 + norm(&p)) {
                 break;
             }
         }
@@ -660,17 +660,17 @@ mod tests {
                     let (xd, yd) = distort_f64(&cam.distortion, p.x as f64, p.y as f64);
                     let ru = (xd - d.x as f64) * cam.fx as f64;
                     let rv = (yd - d.y as f64) * cam.fy as f64;
-                    let res = (ru * ru + rv * rv).sqrt();
+                    let res = sqrt(ru * ru + rv * rv);
                     // Error model: the solution is exact up to the rounding of evaluating
                     // the distortion in `Real` (≈ 4 ε|d|) and of storing p (ε|p|/2),
                     // amplified by |J⁻¹| ≤ 1.5 here: ≤ 8 ε (1 + |d|) in normalised units.
                     // In f64 that is ~1e-11 px, far inside the brief's 1e-4 px; in f32
                     // ~1.4e-3 px at f = 1000.
-                    let tol = (8.0 * EPS * (1.0 + d.norm() as f64) * f).min(1e-4);
+                    let tol = (8.0 * EPS * (1.0 + norm(&d) as f64) * f).min(1e-4);
                     let tol = if EPS < 1e-10 {
                         tol
                     } else {
-                        8.0 * EPS * (1.0 + d.norm() as f64) * f
+                        8.0 * EPS * (1.0 + norm(&d) as f64) * f
                     };
                     assert!(res <= tol, "pixel ({u}, {v}): residual {res} px > {tol}");
                     worst = worst.max(res);
@@ -712,7 +712,7 @@ mod tests {
             let p = cam.undistort_fixed_point(d).unwrap();
             let (xd, yd) = distort_f64(&cam.distortion, p.x as f64, p.y as f64);
             let res = ((xd - d.x as f64).hypot(yd - d.y as f64)) * cam.fx as f64;
-            let tol = 8.0 * EPS * (1.0 + d.norm() as f64) * cam.fx as f64;
+            let tol = 8.0 * EPS * (1.0 + norm(&d) as f64) * cam.fx as f64;
             assert!(res <= tol, "({u}, {v}): {res} px");
         }
     }
@@ -734,7 +734,7 @@ mod tests {
             k2: 0.02,
             ..Distortion::default()
         };
-        let s1 = (0.9 - (0.41 as Real).sqrt()) / 0.2;
+        let s1 = (0.9 - sqrt(0.41 as Real)) / 0.2;
         assert!(k.radially_monotone_up_to(s1 - 1e-3));
         assert!(!k.radially_monotone_up_to(s1 + 1e-3));
         assert!(!k.radially_monotone_up_to(9.0));

@@ -21,7 +21,7 @@ use core::fmt;
 
 #[allow(unused_imports)]
 use crate::real::Float;
-use crate::real::{Mat3, Real, Vec2, Vec3, PI};
+use crate::real::{norm, sqrt, Mat3, Real, Vec2, Vec3, PI};
 
 use crate::camera::Camera;
 use crate::laser_plane::LaserPlane;
@@ -119,7 +119,7 @@ impl NoiseModel {
     /// Total random σ of the stripe centre (pixels): subpixel and speckle in quadrature.
     pub fn image_px(&self) -> Real {
         let s = self.speckle_px();
-        (self.subpixel_px * self.subpixel_px + s * s).sqrt()
+        sqrt(self.subpixel_px * self.subpixel_px + s * s)
     }
 
     /// σ of one grazing-ray angle (radians): `edge_px / f` (a column is `1/f` rad near the
@@ -265,12 +265,12 @@ pub fn calibration_relative_sigma(
                 None => return 0.0,
             }
         }
-        let sa = (m[0] - m[1]).norm() / (2.0 * h) - 1.0;
-        let sb = (m[2] - m[3]).norm() / (2.0 * h) - 1.0;
+        let sa = norm(&(m[0] - m[1])) / (2.0 * h) - 1.0;
+        let sb = norm(&(m[2] - m[3])) / (2.0 * h) - 1.0;
         let rel = 0.5 * (sa + sb);
         total += rel * rel;
     }
-    total.sqrt()
+    sqrt(total)
 }
 
 /// σ of the radius of a geometric circle fit estimated from the data's own residuals: the
@@ -287,7 +287,7 @@ pub fn circle_radius_sigma_residuals(c: &Circle, points: &[Vec2], cutoff: Real) 
     let mut n = 0usize;
     for q in points {
         let d = q - c.centre;
-        let len = d.norm();
+        let len = norm(&d);
         if !(len > 0.0) {
             continue;
         }
@@ -309,7 +309,7 @@ pub fn circle_radius_sigma_residuals(c: &Circle, points: &[Vec2], cutoff: Real) 
     match a.try_inverse() {
         Some(inv) => {
             let cov = inv * b * inv;
-            (cov[(2, 2)] * k).max(0.0).sqrt()
+            sqrt((cov[(2, 2)] * k).max(0.0))
         }
         None => Real::INFINITY,
     }
@@ -324,7 +324,7 @@ pub fn circle_radius_sigma<I: Iterator<Item = (Vec2, Vec2)>>(c: &Circle, points:
     let mut b = Mat3::zeros();
     for (q, g) in points {
         let d = q - c.centre;
-        let n = d.norm();
+        let n = norm(&d);
         if !(n > 0.0) {
             continue;
         }
@@ -338,7 +338,7 @@ pub fn circle_radius_sigma<I: Iterator<Item = (Vec2, Vec2)>>(c: &Circle, points:
     match a.try_inverse() {
         Some(inv) => {
             let cov = inv * b * inv;
-            cov[(2, 2)].max(0.0).sqrt()
+            sqrt(cov[(2, 2)].max(0.0))
         }
         None => Real::INFINITY,
     }
@@ -410,7 +410,7 @@ pub fn sample_columns(
         }
         let h = -m.dot(&s);
         let q0 = g * (h / gn2);
-        let dir = Vec2::new(-g.y, g.x) / gn2.sqrt();
+        let dir = Vec2::new(-g.y, g.x) / sqrt(gn2);
         let rel = q0 - c.centre;
         let bb = dir.dot(&rel);
         let cc = rel.norm_squared() - c.radius * c.radius;
@@ -418,7 +418,7 @@ pub fn sample_columns(
         if !(disc >= 0.0) {
             continue;
         }
-        let sq = disc.sqrt();
+        let sq = sqrt(disc);
         for t in [-bb - sq, -bb + sq] {
             let q = q0 + dir * t;
             let nrm = q - c.centre;
@@ -498,8 +498,7 @@ pub fn predict_diameter_sigma(
         let psi = |q: Vec2| q.x.atan2(q.y);
         let dpsi_first = (psi(pts[1]) - psi(pts[0])).abs();
         let dpsi_last = (psi(pts[n - 1]) - psi(pts[n - 2])).abs();
-        let s_alpha =
-            0.5 * noise.edge_px * (dpsi_first * dpsi_first + dpsi_last * dpsi_last).sqrt();
+        let s_alpha = 0.5 * noise.edge_px * sqrt(dpsi_first * dpsi_first + dpsi_last * dpsi_last);
         let win = ThreeTangentParams::default().nearest_window * r;
         let mut xtx = SMatrix::<Real, 3, 3>::zeros();
         let mut xsx = SMatrix::<Real, 3, 3>::zeros();
@@ -515,7 +514,7 @@ pub fn predict_diameter_sigma(
             xsx += xv * xv.transpose() * (s * s);
         }
         let inv = xtx.try_inverse().ok_or(ErrorModelError::NotVisible)?;
-        let s_d = (inv * xsx * inv)[(0, 0)].max(0.0).sqrt();
+        let s_d = sqrt((inv * xsx * inv)[(0, 0)].max(0.0));
         let sin_a = r / (stem.distance + r);
         let alpha = sin_a.asin();
         let k = 1.0 - sin_a;
@@ -562,15 +561,15 @@ pub fn predict_diameter_sigma(
     let fit = MethodSigma {
         random: 2.0 * fit_random,
         edges: 0.0,
-        calibration: 2.0 * cal_fit.sqrt(),
-        total: 2.0 * (fit_random * fit_random + cal_fit).sqrt(),
+        calibration: 2.0 * sqrt(cal_fit),
+        total: 2.0 * sqrt(fit_random * fit_random + cal_fit),
     };
     let tt = match (tt_random_edges, base_tt) {
         (Some((rnd, edg)), Some(_)) => Some(MethodSigma {
             random: 2.0 * rnd,
             edges: 2.0 * edg,
-            calibration: 2.0 * cal_tt.sqrt(),
-            total: 2.0 * (rnd * rnd + edg * edg + cal_tt).sqrt(),
+            calibration: 2.0 * sqrt(cal_tt),
+            total: 2.0 * sqrt(rnd * rnd + edg * edg + cal_tt),
         }),
         _ => None,
     };
@@ -613,8 +612,8 @@ mod tests {
             // is ≤ 1e-6 relative; rounding ε·|X|/h. Tolerance 1e-5·|g| + 10ε|X|/h.
             let h: Real = 0.01;
             let fd = (tri(v + h) - tri(v - h)) / (2.0 * h);
-            let tol = 1e-5 * g.norm() + 10.0 * Real::EPSILON * x.norm() / h;
-            assert!((fd - g).norm() < tol, "{fd} {g}");
+            let tol = 1e-5 * norm(&g) + 10.0 * Real::EPSILON * norm(&x) / h;
+            assert!(norm(&(fd - g)) < tol, "{fd} {g}");
             // Thesis §7.2: σ_z = z²·σ_v/(e·f) on the optical axis (x = 0, zero roll).
             if u == 375.5 {
                 let (e, _) = plane.baseline_tilt();
@@ -635,7 +634,7 @@ mod tests {
             .unwrap();
         let d = calibration_displacements(&plane, cam.fx, x, &noise).unwrap();
         let want = x * (noise.baseline / e);
-        assert!((d[0] - want).norm() < 1e-6 * want.norm() + 100.0 * Real::EPSILON * x.norm());
+        assert!(norm(&(d[0] - want)) < 1e-6 * norm(&want) + 100.0 * Real::EPSILON * norm(&x));
         let rel = calibration_relative_sigma(&plane, x, &noise, cam.fx);
         assert!(rel >= noise.baseline / e * 0.999, "{rel}");
     }
@@ -686,8 +685,8 @@ mod tests {
                 sf2 += f * f;
             }
             let m = trials as f64;
-            let sd_t = 2.0 * (st2 / m - (st / m).powi(2)).max(0.0).sqrt();
-            let sd_f = 2.0 * (sf2 / m - (sf / m).powi(2)).max(0.0).sqrt();
+            let sd_t = 2.0 * sqrt((st2 / m - (st / m).powi(2)).max(0.0));
+            let sd_f = 2.0 * sqrt((sf2 / m - (sf / m).powi(2)).max(0.0));
             let pt = pred.three_tangent.unwrap().random as f64;
             let pf = pred.circle_fit.unwrap().random as f64;
             println!("d={dist} D={diam}: 3T obs {sd_t:.2e} pred {pt:.2e}; fit obs {sd_f:.2e} pred {pf:.2e}");
@@ -802,7 +801,7 @@ mod tests {
             lm += f.std_dev.z;
         }
         let k = reps as Real;
-        let observed = (sum2 / k - (sum / k).powi(2)).max(0.0).sqrt();
+        let observed = sqrt((sum2 / k - (sum / k).powi(2)).max(0.0));
         let (sand, lm) = (sand / k, lm / k);
         println!("observed {observed:.3e}, sandwich {sand:.3e}, equal-noise {lm:.3e}");
         assert!(

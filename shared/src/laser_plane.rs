@@ -34,7 +34,7 @@ use crate::camera::{Camera, CameraError};
 // `Float` supplies sqrt/atan2/… in `no_std`; with `std` the inherent methods win.
 #[allow(unused_imports)]
 use crate::real::Float;
-use crate::real::{Mat3, Real, Vec2, Vec3, PI};
+use crate::real::{norm, sqrt, Mat3, Real, Vec2, Vec3, PI};
 
 /// Largest distance (metres) between the given source point and the plane that
 /// [`LaserPlane::new`] silently corrects by projecting the source onto the plane.
@@ -126,8 +126,8 @@ impl LaserPlane {
     /// offset is positive, and projects `source` onto the plane if it is at most
     /// [`SOURCE_IN_PLANE_TOLERANCE`] away (rejecting it otherwise).
     pub fn new(normal: Vec3, offset: Real, source: Vec3) -> Result<Self, LaserPlaneError> {
-        let len = normal.norm();
-        if !(len.is_finite() && len > Real::MIN_POSITIVE.sqrt()) {
+        let len = norm(&normal);
+        if !(len.is_finite() && len > sqrt(Real::MIN_POSITIVE)) {
             return Err(LaserPlaneError::DegenerateNormal);
         }
         let mut n = normal / len;
@@ -168,8 +168,8 @@ impl LaserPlane {
         let n = a.cross(&b);
         // |a × b| = |a||b| sin θ; reject sin θ below √ε (the normal's direction would then
         // carry less than half the significant digits).
-        let scale = a.norm() * b.norm();
-        if !(scale.is_finite() && n.norm() > Real::EPSILON.sqrt() * scale) {
+        let scale = norm(&a) * norm(&b);
+        if !(scale.is_finite() && norm(&n) > sqrt(Real::EPSILON) * scale) {
             return Err(LaserPlaneError::DegenerateNormal);
         }
         Self::new(n, n.dot(&p0), source)
@@ -226,7 +226,7 @@ impl LaserPlane {
     pub fn baseline_tilt(&self) -> (Real, Real) {
         let nz = self.normal.z.clamp(-1.0, 1.0);
         let tilt = nz.asin();
-        let cos_tilt = (self.normal.x * self.normal.x + self.normal.y * self.normal.y).sqrt();
+        let cos_tilt = sqrt(self.normal.x * self.normal.x + self.normal.y * self.normal.y);
         let baseline = if cos_tilt > 0.0 {
             self.offset / cos_tilt
         } else {
@@ -258,7 +258,7 @@ impl LaserPlane {
     /// "Unit" is checked to `1e-4` relative: enough to catch an unnormalised or corrupted
     /// normal, loose enough for a normal stored in `f32` text (7 digits).
     pub fn validate(&self) -> Result<(), LaserPlaneError> {
-        let len = self.normal.norm();
+        let len = norm(&self.normal);
         if !(len.is_finite() && (len - 1.0).abs() <= 1e-4) {
             return Err(LaserPlaneError::DegenerateNormal);
         }
@@ -279,7 +279,7 @@ impl LaserPlane {
     /// plane is at the rounding level) or the ray is zero / not finite;
     /// [`LaserPlaneError::BehindCamera`] if `t ≤ 0`.
     pub fn intersect_ray(&self, ray: Vec3) -> Result<Vec3, LaserPlaneError> {
-        let len = ray.norm();
+        let len = norm(&ray);
         if !(len.is_finite() && len > 0.0) {
             return Err(LaserPlaneError::RayParallel);
         }
@@ -321,7 +321,7 @@ impl LaserPlane {
         } else {
             project(Vec3::new(0.0, -1.0, 0.0))
         };
-        let b = b_raw / b_raw.norm();
+        let b = b_raw / norm(&b_raw);
         let a = n.cross(&b);
         (a, b)
     }
@@ -476,7 +476,7 @@ mod tests {
             assert!((t2 - t).abs() as f64 <= 16.0 * EPS, "{t} {t2}");
             assert!((p.roll() - r).abs() as f64 <= 16.0 * EPS, "{r}");
             // The source is at distance e from the camera, in the plane.
-            assert!((p.source.norm() - e).abs() as f64 <= 4.0 * EPS);
+            assert!((norm(&p.source) - e).abs() as f64 <= 4.0 * EPS);
         }
     }
 
@@ -490,7 +490,7 @@ mod tests {
             Vec3::new(0.0, 0.0, 2.0),
         )
         .unwrap();
-        let s = 14f64.sqrt();
+        let s = sqrt(14f64);
         assert!(close(p.normal, [1.0 / s, 2.0 / s, 3.0 / s], 8.0 * EPS));
         assert!((p.offset as f64 - 6.0 / s).abs() <= 16.0 * EPS * 6.0);
         // Collinear points: no plane.
@@ -608,7 +608,7 @@ mod tests {
         let q = p.to_plane_coords(Vec3::new(0.0, 0.0, 1.5));
         assert!(
             (q.x as f64).abs() <= 8.0 * EPS
-                && (q.y as f64 - (e * e + 2.25).sqrt()).abs() <= 8.0 * EPS * 1.5
+                && (q.y as f64 - sqrt(e * e + 2.25)).abs() <= 8.0 * EPS * 1.5
         );
         // Camera centre's foot: (0, e sin δ).
         let c = p.camera_centre_in_plane();
@@ -619,8 +619,8 @@ mod tests {
         let p = LaserPlane::from_baseline_tilt_roll(0.12, 0.3, 0.4).unwrap();
         let (a, b) = p.plane_axes();
         assert!(
-            (a.norm() - 1.0).abs() as f64 <= 4.0 * EPS
-                && (b.norm() - 1.0).abs() as f64 <= 4.0 * EPS
+            (norm(&a) - 1.0).abs() as f64 <= 4.0 * EPS
+                && (norm(&b) - 1.0).abs() as f64 <= 4.0 * EPS
         );
         assert!((a.dot(&b) as f64).abs() <= 4.0 * EPS);
         assert!(
@@ -632,12 +632,12 @@ mod tests {
         let x = p.from_plane_coords(q);
         assert!((p.signed_distance(x) as f64).abs() <= 8.0 * EPS * 2.0);
         let q2 = p.to_plane_coords(x);
-        assert!(((q2 - q).norm() as f64) <= 8.0 * EPS * 2.0);
+        assert!((norm(&(q2 - q)) as f64) <= 8.0 * EPS * 2.0);
         // Plane perpendicular to the optical axis: fallback axes still orthonormal.
         let f = LaserPlane::new(Vec3::new(0.0, 0.0, 1.0), 1.0, Vec3::new(0.0, 0.1, 1.0)).unwrap();
         let (a, b) = f.plane_axes();
         assert!(
-            close(b, [0.0, -1.0, 0.0], 4.0 * EPS) && (a.norm() - 1.0).abs() as f64 <= 4.0 * EPS
+            close(b, [0.0, -1.0, 0.0], 4.0 * EPS) && (norm(&a) - 1.0).abs() as f64 <= 4.0 * EPS
         );
     }
 
@@ -663,7 +663,7 @@ mod tests {
             // Forward: plane point → its normalised image.
             let x = p.from_plane_coords(q);
             let h = g * Vec3::new(q.x, q.y, 1.0);
-            assert!(((h / h.z - x / x.z).norm() as f64) <= 32.0 * EPS);
+            assert!((norm(&(h / h.z - x / x.z)) as f64) <= 32.0 * EPS);
             // Backward: image → plane through the inverse equals the ray–plane intersection.
             let ray = x / x.z;
             let back = gi * ray;
@@ -671,11 +671,11 @@ mod tests {
             let q_i = p.to_plane_coords(p.intersect_ray(ray).unwrap());
             // In-plane metres at ≤ 2.5 m: ~ε·2.5·(condition ≈ 20).
             assert!(
-                ((q_h - q).norm() as f64) <= 64.0 * EPS * 2.5,
+                (norm(&(q_h - q)) as f64) <= 64.0 * EPS * 2.5,
                 "{q_h:?} {q:?}"
             );
             assert!(
-                ((q_i - q).norm() as f64) <= 64.0 * EPS * 2.5,
+                (norm(&(q_i - q)) as f64) <= 64.0 * EPS * 2.5,
                 "{q_i:?} {q:?}"
             );
         }
@@ -711,7 +711,7 @@ mod tests {
             let z = x.z as f64;
             let tol = z * z / 0.1 * 16.0 * EPS * 1.5 + 8.0 * EPS * z;
             assert!(
-                ((t - x).norm() as f64) <= tol,
+                (norm(&(t - x)) as f64) <= tol,
                 "{q:?}: {t:?} vs {x:?} (tol {tol})"
             );
         }

@@ -21,8 +21,9 @@
 //! | the whole chain, frame pair → result | [`pipeline`] | `docs/pipeline.md` |
 #![no_std]
 #![deny(missing_docs)]
-// No unsafe code, except the two DSP instructions of `image::lanes` (feature `dsp`, ARM only),
-// which allow it locally: inline assembly is the stable way to reach them.
+// No unsafe code, except three single instructions of the Cortex-M7 (feature `cortex-m7`, ARM
+// only: `image::lanes`, `real::sqrt`), which allow it locally: inline assembly is the stable
+// way to reach them.
 #![deny(unsafe_code)]
 // `x as Real` is a no-op in the default f64 build but a real conversion with `f32`: the casts
 // stay so that one source serves both precisions.

@@ -13,6 +13,42 @@ pub type Real = f32;
 
 pub use num_traits::Float;
 
+/// Square root, correctly rounded: the core's one way to take it.
+///
+/// `Float::sqrt` (and nalgebra's `norm`) reach `libm`'s software square root in `no_std`
+/// builds, about 50 instructions on the Cortex-M7, whose FPU has a correctly rounded
+/// `VSQRT.F32` (same result: IEEE 754 requires correct rounding of both). In the `f32` build
+/// with the feature `cortex-m7` on ARM it is that instruction (inline assembly: no stable
+/// intrinsic reaches it); everywhere else `Float::sqrt`.
+#[inline(always)]
+pub fn sqrt(x: Real) -> Real {
+    #[cfg(all(feature = "f32", feature = "cortex-m7", target_arch = "arm"))]
+    {
+        let r: f32;
+        // SAFETY: VSQRT.F32 reads one FPU register and writes one; no memory or stack.
+        #[allow(unsafe_code)]
+        unsafe {
+            core::arch::asm!(
+                "vsqrt.f32 {r}, {x}",
+                r = lateout(sreg) r,
+                x = in(sreg) x,
+                options(pure, nomem, nostack),
+            );
+        }
+        r
+    }
+    #[cfg(not(all(feature = "f32", feature = "cortex-m7", target_arch = "arm")))]
+    {
+        Float::sqrt(x)
+    }
+}
+
+/// Euclidean norm of a vector through [`sqrt`] (nalgebra's `norm` takes `libm`'s).
+#[inline(always)]
+pub fn norm<const D: usize>(v: &nalgebra::SVector<Real, D>) -> Real {
+    sqrt(v.norm_squared())
+}
+
 /// π in the core's precision.
 pub const PI: Real = core::f64::consts::PI as Real;
 

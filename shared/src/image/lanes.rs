@@ -2,7 +2,7 @@
 //! (subtraction, histogram, segmentation's background scan; `docs/performance.md`).
 //!
 //! Every operation acts on the four byte lanes of a word independently. With the crate
-//! feature `dsp` on an ARM target (Cortex-M4/M7: the firmware enables it) they are the
+//! feature `cortex-m7` on an ARM target (the firmware enables it) they are the
 //! single DSP-extension instructions `UQSUB8` (per-lane saturating subtraction) and `USADA8`
 //! (sum of the four lanes, accumulated) through inline assembly — the `core::arch::arm`
 //! intrinsics for them are not stable Rust, inline assembly is. Everywhere else they are
@@ -15,17 +15,17 @@ use super::Pixel;
 /// One in each byte lane.
 pub(crate) const ONES: u32 = 0x0101_0101;
 /// Lane mask of the low 7 bits of each byte.
-#[cfg(not(all(feature = "dsp", target_arch = "arm")))]
+#[cfg(not(all(feature = "cortex-m7", target_arch = "arm")))]
 const LOW7: u32 = 0x7F7F_7F7F;
 /// The top bit of each byte lane.
-#[cfg(not(all(feature = "dsp", target_arch = "arm")))]
+#[cfg(not(all(feature = "cortex-m7", target_arch = "arm")))]
 const HIGH: u32 = 0x8080_8080;
 /// Even byte lanes (bytes 0 and 2) of a word, as two 16-bit lanes.
-#[cfg(not(all(feature = "dsp", target_arch = "arm")))]
+#[cfg(not(all(feature = "cortex-m7", target_arch = "arm")))]
 const EVEN: u32 = 0x00FF_00FF;
 
 /// Per-lane `max(a − b, 0)`.
-#[cfg(all(feature = "dsp", target_arch = "arm"))]
+#[cfg(all(feature = "cortex-m7", target_arch = "arm"))]
 #[inline(always)]
 #[allow(unsafe_code)]
 pub(crate) fn sub_sat(a: u32, b: u32) -> u32 {
@@ -50,7 +50,7 @@ pub(crate) fn sub_sat(a: u32, b: u32) -> u32 {
 /// low 7 bits). The true lane difference is `t` with bit 7 flipped when `a_7 == b_7`; `a ≥ b`
 /// iff `a_7 > b_7`, or `a_7 == b_7` and `a_lo ≥ b_lo`. That bit, spread to the whole lane
 /// (`2·g − g/128` per lane), masks the negative differences to 0.
-#[cfg(not(all(feature = "dsp", target_arch = "arm")))]
+#[cfg(not(all(feature = "cortex-m7", target_arch = "arm")))]
 #[inline(always)]
 pub(crate) fn sub_sat(a: u32, b: u32) -> u32 {
     let t = (a | HIGH).wrapping_sub(b & !HIGH);
@@ -62,7 +62,7 @@ pub(crate) fn sub_sat(a: u32, b: u32) -> u32 {
 }
 
 /// `acc` plus the sum of the four lanes of `x` (wrapping; callers keep it below 2^32).
-#[cfg(all(feature = "dsp", target_arch = "arm"))]
+#[cfg(all(feature = "cortex-m7", target_arch = "arm"))]
 #[inline(always)]
 #[allow(unsafe_code)]
 pub(crate) fn add_lane_sum(acc: u32, x: u32) -> u32 {
@@ -84,7 +84,7 @@ pub(crate) fn add_lane_sum(acc: u32, x: u32) -> u32 {
 /// `acc` plus the sum of the four lanes of `x` (wrapping; callers keep it below 2^32).
 /// The two 16-bit lane pairs `x₀ + x₁`, `x₂ + x₃` (≤ 510) are added by the multiplication
 /// into the top half.
-#[cfg(not(all(feature = "dsp", target_arch = "arm")))]
+#[cfg(not(all(feature = "cortex-m7", target_arch = "arm")))]
 #[inline(always)]
 pub(crate) fn add_lane_sum(acc: u32, x: u32) -> u32 {
     let pairs = (x & EVEN) + ((x >> 8) & EVEN);
@@ -109,11 +109,11 @@ pub(crate) fn pack4<P: Pixel>(p: &[P]) -> u32 {
 /// constant precomputed (for loops that test every word of a frame against one level).
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct ByteGreater {
-    #[cfg(all(feature = "dsp", target_arch = "arm"))]
+    #[cfg(all(feature = "cortex-m7", target_arch = "arm"))]
     level: u32,
-    #[cfg(not(all(feature = "dsp", target_arch = "arm")))]
+    #[cfg(not(all(feature = "cortex-m7", target_arch = "arm")))]
     add: u32,
-    #[cfg(not(all(feature = "dsp", target_arch = "arm")))]
+    #[cfg(not(all(feature = "cortex-m7", target_arch = "arm")))]
     high: bool,
 }
 
@@ -122,11 +122,11 @@ impl ByteGreater {
     #[inline(always)]
     pub(crate) fn new(m: u32) -> Self {
         let m = m.min(255);
-        #[cfg(all(feature = "dsp", target_arch = "arm"))]
+        #[cfg(all(feature = "cortex-m7", target_arch = "arm"))]
         {
             ByteGreater { level: m * ONES }
         }
-        #[cfg(not(all(feature = "dsp", target_arch = "arm")))]
+        #[cfg(not(all(feature = "cortex-m7", target_arch = "arm")))]
         {
             // At 255 the constant is 0 and `t & x & HIGH` never fires (t ≤ 127 per lane).
             ByteGreater {
@@ -144,11 +144,11 @@ impl ByteGreater {
     /// bit 7 set.
     #[inline(always)]
     pub(crate) fn test(self, x: u32) -> u32 {
-        #[cfg(all(feature = "dsp", target_arch = "arm"))]
+        #[cfg(all(feature = "cortex-m7", target_arch = "arm"))]
         {
             sub_sat(x, self.level)
         }
-        #[cfg(not(all(feature = "dsp", target_arch = "arm")))]
+        #[cfg(not(all(feature = "cortex-m7", target_arch = "arm")))]
         {
             let t = (x & LOW7) + self.add;
             if self.high {

@@ -313,8 +313,10 @@ fn next_foreground_word<P: Pixel>(
 ) -> usize {
     let end = words.min(row.len() / 4).min(labels.len() / 4);
     let from = from.min(end);
-    let (Some(words_row), Some(labels)) = (row.get(4 * from..4 * end), labels.get_mut(4 * from..4 * end))
-    else {
+    let (Some(words_row), Some(labels)) = (
+        row.get(4 * from..4 * end),
+        labels.get_mut(4 * from..4 * end),
+    ) else {
         return words;
     };
     let mut k = from;

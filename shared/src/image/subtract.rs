@@ -60,7 +60,9 @@ pub fn subtract<P: Pixel>(
 
 /// `sum / (width · height)` of `frame` (a Frame is never empty).
 fn mean<P: Pixel>(sum: u64, frame: &Frame<'_, P>) -> Real {
-    let pixels = (frame.width() as u64).saturating_mul(frame.height() as u64).max(1);
+    let pixels = (frame.width() as u64)
+        .saturating_mul(frame.height() as u64)
+        .max(1);
     (sum as f64 / pixels as f64) as Real
 }
 

@@ -26,7 +26,7 @@
 // `Float` supplies sqrt/atan2/… in `no_std`.
 #[allow(unused_imports)]
 use crate::real::Float;
-use crate::real::{Mat3, Real, Vec2, Vec3};
+use crate::real::{self, sqrt, Mat3, Real, Vec2, Vec3};
 
 use super::{levenberg_step, SolveError};
 
@@ -47,7 +47,7 @@ impl Circle {
 
     /// Signed orthogonal distance of `p` from the circle: `|p − c| − r` (positive outside).
     pub fn distance(&self, p: Vec2) -> Real {
-        (p - self.centre).norm() - self.radius
+        real::norm(&(p - self.centre)) - self.radius
     }
 }
 
@@ -133,7 +133,7 @@ impl Normalisation {
         for p in points {
             ss += (p - mean).norm_squared();
         }
-        let scale = (ss / n).sqrt();
+        let scale = sqrt(ss / n);
         if !(scale.is_finite() && scale > 0.0) {
             return Err(if scale.is_finite() {
                 SolveError::Degenerate
@@ -273,7 +273,7 @@ fn fit_algebraic(points: &[Vec2], kind: Algebraic) -> Result<Circle, SolveError>
     }
     let circle = Circle::new(
         norm.mean + Vec2::new(xc, yc) * norm.scale,
-        r2.sqrt() * norm.scale,
+        sqrt(r2) * norm.scale,
     );
     if !(circle.centre.x.is_finite() && circle.centre.y.is_finite() && circle.radius.is_finite()) {
         return Err(SolveError::Degenerate);
@@ -333,7 +333,7 @@ fn accumulate<W: Fn(Vec2) -> Real>(
             continue;
         }
         let (dx, dy) = (q.x - theta.x, q.y - theta.y);
-        let rho = (dx * dx + dy * dy).sqrt();
+        let rho = sqrt(dx * dx + dy * dy);
         // A point exactly at the centre has no defined normal; its residual −r still pulls
         // on r only.
         let (ux, uy) = if rho > 0.0 {
@@ -380,9 +380,10 @@ fn lm<W: Fn(Vec2) -> Real>(
         // fit"): accept a step that leaves the cost equal to rounding and lowers the
         // gradient, which reaches ε/λ_min instead of √(ε/λ_min) — matters in f32.
         let rounding = 8.0 * Real::EPSILON * cost;
-        let better = cost2 < cost || (cost2 <= cost + rounding && jtd2.norm() < jtd.norm());
+        let better =
+            cost2 < cost || (cost2 <= cost + rounding && real::norm(&jtd2) < real::norm(&jtd));
         if cost2.is_finite() && better && used2 >= 3 {
-            let small = step.norm() <= params.tolerance * (1.0 + theta.norm());
+            let small = real::norm(&step) <= params.tolerance * (1.0 + real::norm(&theta));
             theta = cand;
             jtj = jtj2;
             jtd = jtd2;
@@ -425,12 +426,12 @@ fn finish<W: Fn(Vec2) -> Real>(
         .map(|inv| inv * (s2 * s * s))
         .unwrap_or_else(|| Mat3::from_element(Real::INFINITY));
     let std_dev = Vec3::new(
-        cov[(0, 0)].max(0.0).sqrt(),
-        cov[(1, 1)].max(0.0).sqrt(),
-        cov[(2, 2)].max(0.0).sqrt(),
+        sqrt(cov[(0, 0)].max(0.0)),
+        sqrt(cov[(1, 1)].max(0.0)),
+        sqrt(cov[(2, 2)].max(0.0)),
     );
     let rms = if wsum > 0.0 {
-        (cost / wsum).sqrt() * s
+        sqrt(cost / wsum) * s
     } else {
         0.0
     };
@@ -544,7 +545,7 @@ pub fn fit_robust(
         let centre = Vec2::new(theta.x, theta.y);
         let r = theta.z;
         for (b, p) in buf.iter_mut().zip(points) {
-            *b = ((norm.apply(*p) - centre).norm() - r).abs();
+            *b = (real::norm(&(norm.apply(*p) - centre)) - r).abs();
         }
         let mid = buf.len() / 2;
         let (_, median, _) = buf.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
@@ -553,13 +554,13 @@ pub fn fit_robust(
             return Err(SolveError::Degenerate);
         }
         let cs = params.tuning * scale;
-        let weight = move |q: Vec2| tukey(((q - centre).norm() - r) / cs);
+        let weight = move |q: Vec2| tukey((real::norm(&(q - centre)) - r) / cs);
         let (next, it) = lm(points, &norm, theta, &params.lm, &weight)?;
         last_it = it;
-        let change = (next - theta).norm();
+        let change = real::norm(&(next - theta));
         theta = next;
-        if change <= params.lm.tolerance * (1.0 + theta.norm()) {
-            let weight = move |q: Vec2| tukey(((q - centre).norm() - r) / cs);
+        if change <= params.lm.tolerance * (1.0 + real::norm(&theta)) {
+            let weight = move |q: Vec2| tukey((real::norm(&(q - centre)) - r) / cs);
             return finish(points, &norm, theta, last_it, &weight);
         }
     }
@@ -568,15 +569,15 @@ pub fn fit_robust(
     let centre = Vec2::new(theta.x, theta.y);
     let r = theta.z;
     for (b, p) in buf.iter_mut().zip(points) {
-        *b = ((norm.apply(*p) - centre).norm() - r).abs();
+        *b = (real::norm(&(norm.apply(*p) - centre)) - r).abs();
     }
     let mid = buf.len() / 2;
     let (_, median, _) = buf.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
     let scale = (1.4826 * *median).max(min_scale);
     let cs = params.tuning * scale;
-    let weight = move |q: Vec2| tukey(((q - centre).norm() - r) / cs);
+    let weight = move |q: Vec2| tukey((real::norm(&(q - centre)) - r) / cs);
     let (next, it) = lm(points, &norm, theta, &params.lm, &weight)?;
-    if (next - theta).norm() > scale {
+    if real::norm(&(next - theta)) > scale {
         return Err(SolveError::NotConverged);
     }
     finish(points, &norm, next, it.max(last_it), &weight)
@@ -653,14 +654,14 @@ fn ellipse_residual(q: Vec2, p: &V5) -> Option<(Real, V5)> {
     if !(l2 > 0.0) {
         return None;
     }
-    let l = l2.sqrt();
+    let l = sqrt(l2);
     let (cth, sth) = (d.x / l, d.y / l);
     let (c2, s2) = (cth * cth - sth * sth, 2.0 * sth * cth);
     let g = p[2] + p[3] * c2 + p[4] * s2;
     if !(g > 0.0) {
         return None;
     }
-    let r = 1.0 / g.sqrt();
+    let r = 1.0 / sqrt(g);
     let h = 0.5 * r * r * r; // −∂r/∂g
                              // ∂r/∂θ = −½ g^(−3/2) ∂g/∂θ, ∂g/∂θ = −2B sin 2θ + 2C cos 2θ.
     let dr_dth = -h * (-2.0 * p[3] * s2 + 2.0 * p[4] * c2);
@@ -781,7 +782,7 @@ pub fn fit_ellipse(
             continue;
         };
         let cand = p + step;
-        let next = if cand[2] > (cand[3] * cand[3] + cand[4] * cand[4]).sqrt() {
+        let next = if cand[2] > sqrt(cand[3] * cand[3] + cand[4] * cand[4]) {
             ellipse_accumulate(points, keep, &norm, &cand)
         } else {
             None
@@ -789,12 +790,15 @@ pub fn fit_ellipse(
         let accepted = match next {
             Some((jtj2, jtd2, meat2, cost2, n2)) if n2 == n && cost2.is_finite() => {
                 let rounding = 8.0 * Real::EPSILON * cost;
-                if cost2 < cost || (cost2 <= cost + rounding && jtd2.norm() < jtd.norm()) {
+                if cost2 < cost
+                    || (cost2 <= cost + rounding && real::norm(&jtd2) < real::norm(&jtd))
+                {
                     // Also stop when the cost has settled: the F statistic and the axes'
                     // σ need it to far better than their own noise, not to the last ulp of
                     // a valley that is flat along the unseen back's extrapolation.
                     let settled = cost - cost2 <= COST_SETTLED * cost;
-                    let small = settled || step.norm() <= params.tolerance * (1.0 + p.norm());
+                    let small =
+                        settled || real::norm(&step) <= params.tolerance * (1.0 + real::norm(&p));
                     p = cand;
                     jtj = jtj2;
                     jtd = jtd2;
@@ -825,12 +829,12 @@ pub fn fit_ellipse(
     if !converged {
         return Err(SolveError::NotConverged);
     }
-    let (aa, m) = (p[2], (p[3] * p[3] + p[4] * p[4]).sqrt());
+    let (aa, m) = (p[2], sqrt(p[3] * p[3] + p[4] * p[4]));
     if !(aa > m) {
         return Err(SolveError::Degenerate);
     }
-    let major = 1.0 / (aa - m).sqrt();
-    let minor = 1.0 / (aa + m).sqrt();
+    let major = 1.0 / sqrt(aa - m);
+    let minor = 1.0 / sqrt(aa + m);
     // Gradient of a + b in (A, B, C): ∂a/∂A = −a³/2, ∂a/∂m = a³/2, ∂b/∂A = ∂b/∂m = −b³/2,
     // ∂m/∂(B, C) = (B, C)/m (the m-derivative of a + b vanishes at m = 0).
     let (a3, b3) = (major * major * major, minor * minor * minor);
@@ -845,7 +849,7 @@ pub fn fit_ellipse(
     let dof = (n - 5).max(1) as Real;
     let gn = (grad.transpose() * inv * grad)[(0, 0)] * cost / dof;
     let sandwich = (grad.transpose() * (inv * meat * inv) * grad)[(0, 0)] * n as Real / dof;
-    let sigma = gn.max(sandwich).max(0.0).sqrt() * norm.scale;
+    let sigma = sqrt(gn.max(sandwich).max(0.0)) * norm.scale;
     // Major axis direction: 1/r² is smallest there, i.e. cos 2(θ − φ) = −(B, C)/m.
     let angle = if m > 0.0 {
         0.5 * (-p[4]).atan2(-p[3])
@@ -898,7 +902,7 @@ pub(crate) mod tests {
         pub(crate) fn gauss(&mut self) -> f64 {
             let u1 = self.uniform().max(1e-300);
             let u2 = self.uniform();
-            (-2.0 * u1.ln()).sqrt() * (2.0 * core::f64::consts::PI * u2).cos()
+            sqrt(-2.0 * u1.ln()) * (2.0 * core::f64::consts::PI * u2).cos()
         }
     }
 
@@ -948,7 +952,7 @@ pub(crate) mod tests {
             assert!((e.semi_axes.0 - 0.2).abs() < tol * 0.2, "{phi}: {e:?}");
             assert!((e.semi_axes.1 - 0.15).abs() < tol * 0.2, "{phi}: {e:?}");
             assert!(
-                (e.centre - Vec2::new(0.02, 1.6)).norm() < tol,
+                real::norm(&(e.centre - Vec2::new(0.02, 1.6))) < tol,
                 "{phi}: {e:?}"
             );
         }
@@ -990,8 +994,13 @@ pub(crate) mod tests {
             let pts = ellipse_front(Vec2::new(0.0, 1.6), (0.17, 0.17), 0.0, 600, 3e-4, &mut rng);
             let c = fit_geometric(&pts, fit_hyper(&pts).unwrap(), &lm).unwrap();
             let score = ellipse_score_f(&pts, &c.circle, 5e-3).unwrap();
-            let fitted = fit_ellipse(&pts, &c.circle, 5e-3, &lm).unwrap().f_statistic();
-            assert!((fitted - score).abs() <= 0.1 * score + 0.05, "{score} {fitted}");
+            let fitted = fit_ellipse(&pts, &c.circle, 5e-3, &lm)
+                .unwrap()
+                .f_statistic();
+            assert!(
+                (fitted - score).abs() <= 0.1 * score + 0.05,
+                "{score} {fitted}"
+            );
             sum += score;
         }
         let mean = sum / trials as Real;
@@ -1055,11 +1064,11 @@ pub(crate) mod tests {
         let tol = 200.0 * Real::EPSILON * 2.0;
         for fit in [fit_kasa(&pts), fit_taubin(&pts), fit_hyper(&pts)] {
             let f = fit.unwrap();
-            assert!((f.centre - c).norm() < tol, "{f:?}");
+            assert!(real::norm(&(f.centre - c)) < tol, "{f:?}");
             assert!((f.radius - r).abs() < tol);
         }
         let g = fit_geometric(&pts, fit_hyper(&pts).unwrap(), &LmParams::default()).unwrap();
-        assert!((g.circle.centre - c).norm() < tol);
+        assert!(real::norm(&(g.circle.centre - c)) < tol);
         assert!((g.circle.radius - r).abs() < tol);
         assert!(g.rms_residual < tol);
         let mut scratch = [0.0; 40];
@@ -1116,7 +1125,7 @@ pub(crate) mod tests {
         );
         // Three points on a circle: the circumcircle exactly.
         let g = fit_geometric(&tri, c, &LmParams::default()).unwrap();
-        assert!((g.circle.centre - Vec2::new(0.5, 0.5)).norm() < 100.0 * Real::EPSILON);
+        assert!(real::norm(&(g.circle.centre - Vec2::new(0.5, 0.5))) < 100.0 * Real::EPSILON);
     }
 
     #[test]
@@ -1143,8 +1152,8 @@ pub(crate) mod tests {
         let n = trials as f64;
         let (mk, mh) = (sk / n, sh / n);
         // Standard errors of the means from the samples themselves.
-        let se_h = (sh2 / n - (mh - 1.0) * (mh - 1.0)).sqrt() / n.sqrt();
-        let se_d = (sd2 / n - (mh - mk) * (mh - mk)).sqrt() / n.sqrt();
+        let se_h = sqrt(sh2 / n - (mh - 1.0) * (mh - 1.0)) / sqrt(n);
+        let se_d = sqrt(sd2 / n - (mh - mk) * (mh - mk)) / sqrt(n);
         assert!(mh - mk > 5.0 * se_d, "kasa {mk} hyper {mh} se {se_d}");
         assert!(mk < 1.0 - 5.0 * se_d);
         // Hyper: unbiased to the statistical resolution (4 standard errors).
@@ -1172,7 +1181,7 @@ pub(crate) mod tests {
             pred += f.std_dev.z as f64;
         }
         let n = trials as f64;
-        let sd = (s2 / n - (s / n).powi(2)).sqrt();
+        let sd = sqrt(s2 / n - (s / n).powi(2));
         let p = pred / n;
         assert!((sd / p - 1.0).abs() < 0.2, "observed {sd} predicted {p}");
     }

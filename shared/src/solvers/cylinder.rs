@@ -22,7 +22,7 @@
 
 #[allow(unused_imports)]
 use crate::real::Float;
-use crate::real::{Real, Vec2, Vec3, PI};
+use crate::real::{norm, sqrt, Real, Vec2, Vec3, PI};
 
 use nalgebra::{SMatrix, SVector};
 
@@ -150,13 +150,13 @@ pub fn three_tangent(
         if !(q.x.is_finite() && q.y.is_finite()) {
             return Err(SolveError::NonFinite);
         }
-        let n = q.norm();
+        let n = norm(&q);
         if !(n > 0.0) {
             return Err(SolveError::Degenerate);
         }
         sum += q / n;
     }
-    let len = sum.norm();
+    let len = norm(&sum);
     if !(len > 1e-3 * points.len() as Real) {
         return Err(SolveError::Degenerate);
     }
@@ -209,7 +209,7 @@ pub fn three_tangent(
 fn higher_order(t: Real, r: Real) -> Real {
     let s = r * r - t * t;
     if s > 0.0 {
-        r - s.sqrt() - t * t / (2.0 * r)
+        r - sqrt(s) - t * t / (2.0 * r)
     } else {
         0.0
     }
@@ -271,7 +271,7 @@ fn nearest_parabola(
             ss += e * e;
         }
         let rms = if m > 3 {
-            (ss / (m - 3) as Real).sqrt()
+            sqrt(ss / (m - 3) as Real)
         } else {
             0.0
         };
@@ -296,7 +296,7 @@ pub fn tilted_axis(theta: Real, phi: Real) -> Result<Vec3, SolveError> {
         return Err(SolveError::InvalidParameter);
     }
     let v = Vec3::new(phi.tan(), theta.tan(), 1.0);
-    Ok(v / v.norm())
+    Ok(v / norm(&v))
 }
 
 /// Ratio `r_3T / r` of the three-tangent radius to the true radius when a cylinder tilted by
@@ -316,7 +316,7 @@ pub fn tilt_error_ratio(theta: Real, phi: Real, l_over_r: Real) -> Result<Real, 
     let r: Real = 1.0;
     let c = Vec2::new(0.0, l_over_r);
     let proj = Vec2::new(u.x, u.y);
-    let pn = proj.norm();
+    let pn = norm(&proj);
     let (e_maj, e_min) = if pn > 0.0 {
         let e = proj / pn;
         (e, Vec2::new(-e.y, e.x))
@@ -338,7 +338,7 @@ pub fn tilt_error_ratio(theta: Real, phi: Real, l_over_r: Real) -> Result<Real, 
     if !(disc > 0.0) {
         return Err(SolveError::Degenerate);
     }
-    let sq = disc.sqrt();
+    let sq = sqrt(disc);
     let dirs = if m22.abs() >= m11.abs() {
         [Vec2::new(m22, -m12 + sq), Vec2::new(m22, -m12 - sq)]
     } else {
@@ -357,7 +357,7 @@ pub fn tilt_error_ratio(theta: Real, phi: Real, l_over_r: Real) -> Result<Real, 
     let u_c = Vec2::new(psi_c.sin(), psi_c.cos());
     // Support function of the ellipse in direction −u_c: min over the ellipse of q·u_c.
     let (ua, ub) = (u_c.dot(&e_maj), u_c.dot(&e_min));
-    let d = c.dot(&u_c) - (big * big * ua * ua + small * small * ub * ub).sqrt();
+    let d = c.dot(&u_c) - sqrt(big * big * ua * ua + small * small * ub * ub);
     Ok(three_tangent_radius(alpha, d)? / r)
 }
 
@@ -380,7 +380,7 @@ impl Cylinder {
     /// Signed distance of `x` from the surface: distance to the axis minus the radius.
     pub fn distance(&self, x: Vec3) -> Real {
         let w = x - self.point;
-        (w - self.axis * w.dot(&self.axis)).norm() - self.radius
+        norm(&(w - self.axis * w.dot(&self.axis))) - self.radius
     }
 }
 
@@ -412,7 +412,7 @@ fn basis(u: Vec3) -> (Vec3, Vec3) {
         Vec3::new(0.0, 1.0, 0.0)
     };
     let e1 = u.cross(&helper);
-    let e1 = e1 / e1.norm();
+    let e1 = e1 / norm(&e1);
     (e1, u.cross(&e1))
 }
 
@@ -439,7 +439,7 @@ fn cyl_accumulate(
             let w = y - st.p;
             let wu = w.dot(&st.u);
             let q = w - st.u * wu;
-            let rho = q.norm();
+            let rho = norm(&q);
             let g = if rho > 0.0 { q / rho } else { Vec3::zeros() };
             let (g1, g2) = (g.dot(&e1), g.dot(&e2));
             let j = V5::new(-g1, -g2, -wu * g1, -wu * g2, -1.0);
@@ -456,7 +456,7 @@ fn cyl_accumulate(
 fn cyl_step(st: &CylState, step: &V5) -> CylState {
     let (e1, e2) = basis(st.u);
     let u = st.u + e1 * step[2] + e2 * step[3];
-    let u = u / u.norm();
+    let u = u / norm(&u);
     let p = st.p + e1 * step[0] + e2 * step[1];
     // Keep the axis point canonical: nearest the (normalised) centroid, the origin.
     let p = p - u * p.dot(&u);
@@ -502,11 +502,11 @@ pub fn fit_cylinder(
             ss += (x - mean).norm_squared();
         }
     }
-    let scale = (ss / n as Real).sqrt();
+    let scale = sqrt(ss / n as Real);
     if !(scale > 0.0 && scale.is_finite()) {
         return Err(SolveError::Degenerate);
     }
-    let an = initial.axis.norm();
+    let an = norm(&initial.axis);
     if !(an > 0.0 && initial.radius > 0.0 && an.is_finite() && initial.radius.is_finite()) {
         return Err(SolveError::InvalidParameter);
     }
@@ -529,9 +529,9 @@ pub fn fit_cylinder(
         let cand = cyl_step(&st, &step);
         let (jtj2, jtd2, cost2, _) = cyl_accumulate(curves, mean, scale, &cand);
         let rounding = 8.0 * Real::EPSILON * cost;
-        let better = cost2 < cost || (cost2 <= cost + rounding && jtd2.norm() < jtd.norm());
+        let better = cost2 < cost || (cost2 <= cost + rounding && norm(&jtd2) < norm(&jtd));
         if cost2.is_finite() && better {
-            let small = step.norm() <= params.tolerance * (1.0 + st.p.norm() + st.r);
+            let small = norm(&step) <= params.tolerance * (1.0 + norm(&st.p) + st.r);
             st = cand;
             jtj = jtj2;
             jtd = jtd2;
@@ -559,8 +559,8 @@ pub fn fit_cylinder(
     let s2 = if n > 5 { cost / (n - 5) as Real } else { 0.0 };
     let (sr, sa) = match jtj.try_inverse() {
         Some(inv) => (
-            (inv[(4, 4)] * s2).max(0.0).sqrt() * scale,
-            (inv[(2, 2)] * s2).max((inv[(3, 3)] * s2).max(0.0)).sqrt(),
+            sqrt((inv[(4, 4)] * s2).max(0.0)) * scale,
+            sqrt((inv[(2, 2)] * s2).max((inv[(3, 3)] * s2).max(0.0))),
         ),
         None => return Err(SolveError::Degenerate),
     };
@@ -570,7 +570,7 @@ pub fn fit_cylinder(
             axis: st.u,
             radius: r * scale,
         },
-        rms_residual: (cost / n as Real).sqrt() * scale,
+        rms_residual: sqrt(cost / n as Real) * scale,
         iterations,
         sigma_radius: sr,
         sigma_axis: sa,
@@ -607,7 +607,7 @@ pub fn initial_cylinder(
         rsum += c.radius;
     }
     let mut axis = last - first;
-    let len = axis.norm();
+    let len = norm(&axis);
     if !(len > 0.0 && len.is_finite()) {
         return Err(SolveError::Degenerate);
     }
@@ -651,7 +651,7 @@ pub fn generalised_three_tangent(
     params: &ThreeTangentParams,
     scratch: &mut [Vec2],
 ) -> Result<ThreeTangent, SolveError> {
-    let an = axis.norm();
+    let an = norm(&axis);
     if !(an > 0.0 && an.is_finite()) {
         return Err(SolveError::InvalidParameter);
     }
@@ -766,7 +766,7 @@ impl Tilt {
     pub fn of(axis: Vec3, plane: &LaserPlane, sigma: Real) -> Tilt {
         let (a, b) = plane.plane_axes();
         let n = plane.normal;
-        let mut u = axis / axis.norm();
+        let mut u = axis / norm(&axis);
         if u.dot(&n) < 0.0 {
             u = -u;
         }
@@ -910,12 +910,12 @@ fn arc_angle(points: &[Vec2], centre: Vec2) -> Real {
     let mut sum = Vec2::zeros();
     for q in points {
         let d = q - centre;
-        let n = d.norm();
+        let n = norm(&d);
         if n > 0.0 {
             sum += d / n;
         }
     }
-    let len = sum.norm();
+    let len = norm(&sum);
     if !(len > 0.0) {
         return 2.0 * PI;
     }
@@ -972,9 +972,9 @@ fn solve_plane(
             let s_alpha = params.noise.edge_angle_sigma(params.focal_px) / Real::sqrt(2.0);
             let near = t.bisector * t.nearest_distance;
             let s_point = noise_vector(plane, near, params).dot(&t.bisector).abs();
-            let s_d = t.nearest_variance_factor.sqrt() * s_point.max(t.window_rms);
-            let random = ((dr_da * s_alpha).powi(2) + (dr_dd * s_d).powi(2)).sqrt();
-            let s = (random * random + cal(t.radius, t.centre).powi(2)).sqrt();
+            let s_d = sqrt(t.nearest_variance_factor) * s_point.max(t.window_rms);
+            let random = sqrt((dr_da * s_alpha).powi(2) + (dr_dd * s_d).powi(2));
+            let s = sqrt(random * random + cal(t.radius, t.centre).powi(2));
             Some((t, s))
         }
         Err(_) => {
@@ -987,8 +987,8 @@ fn solve_plane(
     let fit = match circle::fit_hyper(pts) {
         Ok(init) => {
             let mut rp = params.robust;
-            let near = init.centre - init.centre / init.centre.norm() * init.radius;
-            let s_point = noise_vector(plane, near, params).norm();
+            let near = init.centre - init.centre / norm(&init.centre) * init.radius;
+            let s_point = norm(&noise_vector(plane, near, params));
             rp.min_scale = rp.min_scale.max(s_point);
             match circle::fit_robust(pts, init, &rp, scratch.values) {
                 Ok(f) => {
@@ -1003,8 +1003,7 @@ fn solve_plane(
                     let data = if data.is_finite() { data } else { 0.0 };
                     let bend = bending_sigma(&f, pts, |q| noise_vector(plane, q, params), params);
                     let random = f.std_dev.z.max(model).max(data).hypot(bend);
-                    let s =
-                        (random * random + cal(f.circle.radius, f.circle.centre).powi(2)).sqrt();
+                    let s = sqrt(random * random + cal(f.circle.radius, f.circle.centre).powi(2));
                     let arc = arc_angle(pts, f.circle.centre);
                     let rejected = 1.0 - f.inliers as Real / pts.len() as Real;
                     if rejected > params.max_outlier_fraction {
@@ -1088,7 +1087,7 @@ fn elliptic_diameter(e: &circle::EllipseFit, cal_rel: Real) -> Result<(Real, Rea
     if !(e.sigma_mean_diameter < 2.0 * (a - b)) {
         return Err(SolveError::NotRound);
     }
-    let s = (e.sigma_mean_diameter.powi(2) + (a - b).powi(2) + (cal_rel * d).powi(2)).sqrt();
+    let s = sqrt(e.sigma_mean_diameter.powi(2) + (a - b).powi(2) + (cal_rel * d).powi(2));
     Ok((d, s))
 }
 
@@ -1124,7 +1123,7 @@ fn bending_sigma(
     }
     for (i, q) in pts.iter().enumerate() {
         let d = q - c.centre;
-        let len = d.norm();
+        let len = norm(&d);
         if !(len > 0.0) {
             continue;
         }
@@ -1132,7 +1131,7 @@ fn bending_sigma(
         let j = Vec3::new(-nn.x, -nn.y, -1.0);
         // `noise_dir` is the 1σ vector for `image_px` pixels: per pixel, divide.
         let g = noise_dir(*q) / per_px;
-        px_sum += g.norm();
+        px_sum += norm(&g);
         let tau = 2.0 * i as Real / (n - 1) as Real - 1.0;
         let p2 = 0.5 * (3.0 * tau * tau - 1.0);
         a += j * j.transpose();
@@ -1163,7 +1162,7 @@ fn bending_sigma(
 /// same way (`∂α_f/∂R = 1/(|C| cos α_f)`). Zero when the circle does not enclose a grazing
 /// geometry (source inside it).
 pub fn edge_bias_sigma(t: &ThreeTangent, circle: &circle::Circle, sigma_fit: Real) -> Real {
-    let l = circle.centre.norm();
+    let l = norm(&circle.centre);
     if !(l > circle.radius && circle.radius > 0.0) {
         return 0.0;
     }
@@ -1196,7 +1195,7 @@ fn choose(tt: Option<(Real, Real)>, fit: Option<(Real, Real, bool)>) -> Option<(
             }
         }
         (Some((rt, st)), Some((rf, sf, short))) => {
-            let inconsistent = (rt - rf).abs() > 3.0 * (st * st + sf * sf).sqrt();
+            let inconsistent = (rt - rf).abs() > 3.0 * sqrt(st * st + sf * sf);
             if short {
                 Some((false, inconsistent))
             } else if inconsistent {
@@ -1296,7 +1295,7 @@ fn finish_plane(
             three_tangent_uncertainty: one.tt.map(|(_, s)| 2.0 * s),
             fit_diameter: Some(2.0 * f.circle.radius),
             fit_uncertainty: one.fit.map(|(_, s, _)| 2.0 * s),
-            distance: c.norm() - f.circle.radius,
+            distance: norm(&c) - f.circle.radius,
             centre: plane.from_plane_coords(e.centre),
             axes: Some((2.0 * e.semi_axes.0, 2.0 * e.semi_axes.1)),
         });
@@ -1326,7 +1325,7 @@ fn finish_plane(
             s,
             Method::CircleFit,
             c,
-            c.norm() - f.circle.radius,
+            norm(&c) - f.circle.radius,
         )
     } else {
         let (t, s) = one.tt.ok_or(SolveError::NotConverged)?;
@@ -1395,7 +1394,7 @@ fn solve_tilted(
             let (dr_da, dr_dd) = t.partials();
             let s_alpha = params.noise.edge_angle_sigma(params.focal_px) / Real::sqrt(2.0);
             let s_point = one_point_sigma(plane, params, t.nearest_distance);
-            let s_d = t.nearest_variance_factor.sqrt() * t.window_rms.max(s_point);
+            let s_d = sqrt(t.nearest_variance_factor) * t.window_rms.max(s_point);
             // Fade-out of the projected edges, judged against the projected fit.
             let edge = extra.map_or(0.0, |(c, sf, _)| edge_bias_sigma(&t, &c, sf));
             rsum += t.radius;
@@ -1417,16 +1416,15 @@ fn solve_tilted(
     // curve and coherent bending break that as in one plane. σ of the mean of the per-curve
     // data-driven terms (independent curves) is the floor, as `max` in `solve_plane`.
     let data_sigma = if kf > 0 {
-        (fit_s2sum / (kf * kf) as Real).sqrt()
+        sqrt(fit_s2sum / (kf * kf) as Real)
     } else {
         0.0
     };
-    let fit_sigma =
-        (fit.sigma_radius.max(data_sigma).powi(2) + (cal_rel * cyl.radius).powi(2)).sqrt();
+    let fit_sigma = sqrt(fit.sigma_radius.max(data_sigma).powi(2) + (cal_rel * cyl.radius).powi(2));
     let tt = if k > 0 {
         let r = rsum / k as Real;
         let edge = edge_sum / k as Real;
-        let s = (s2sum / (k * k) as Real + edge * edge + (cal_rel * r).powi(2)).sqrt();
+        let s = sqrt(s2sum / (k * k) as Real + edge * edge + (cal_rel * r).powi(2));
         Some((r, s))
     } else {
         None
@@ -1448,7 +1446,7 @@ fn solve_tilted(
     if tilt.total > params.max_tilt {
         flags.insert(Flags::LARGE_TILT);
     }
-    let point_sigma = one_point_sigma(plane0, params, (centre - plane0.source).norm() - cyl.radius);
+    let point_sigma = one_point_sigma(plane0, params, norm(&(centre - plane0.source)) - cyl.radius);
     if fit.rms_residual > 3.0 * point_sigma.max(params.robust.min_scale) {
         flags.insert(Flags::POOR_FIT);
     }
@@ -1481,7 +1479,7 @@ fn solve_tilted(
             three_tangent_uncertainty: tt.map(|(_, s)| 2.0 * s),
             fit_diameter: Some(2.0 * cyl.radius),
             fit_uncertainty: Some(2.0 * fit_sigma),
-            distance: c0.norm() - cyl.radius,
+            distance: norm(&c0) - cyl.radius,
             centre,
             axes: Some((2.0 * e.semi_axes.0, 2.0 * e.semi_axes.1)),
         });
@@ -1498,7 +1496,7 @@ fn solve_tilted(
         three_tangent_uncertainty: tt.map(|(_, s)| 2.0 * s),
         fit_diameter: Some(2.0 * cyl.radius),
         fit_uncertainty: Some(2.0 * fit_sigma),
-        distance: c0.norm() - cyl.radius,
+        distance: norm(&c0) - cyl.radius,
         centre,
         axes: None,
     })
@@ -1515,7 +1513,7 @@ fn projected_non_round(
     scratch: &mut Scratch<'_>,
     point_sigma: Real,
 ) -> Option<circle::EllipseFit> {
-    let an = axis.norm();
+    let an = norm(&axis);
     if !(an > 0.0 && an.is_finite()) {
         return None;
     }
@@ -1548,7 +1546,7 @@ fn projected_data_sigma(
     params: &CylinderParams,
     scratch: &mut Scratch<'_>,
 ) -> Option<(circle::Circle, Real, Real)> {
-    let an = axis.norm();
+    let an = norm(&axis);
     if !(an > 0.0 && an.is_finite()) {
         return None;
     }
@@ -1575,13 +1573,13 @@ fn projected_data_sigma(
         Vec2::new(g.dot(&e1), g.dot(&e2)) * params.noise.image_px()
     };
     let init = circle::fit_hyper(pts).ok()?;
-    let cn = init.centre.norm();
+    let cn = norm(&init.centre);
     if !(cn > 0.0) {
         return None;
     }
     let near = init.centre - init.centre / cn * init.radius;
     let mut rp = params.robust;
-    rp.min_scale = rp.min_scale.max(noise(near).norm());
+    rp.min_scale = rp.min_scale.max(norm(&noise(near)));
     let f = circle::fit_robust(pts, init, &rp, scratch.values).ok()?;
     let cutoff = rp.tuning * f.rms_residual.max(rp.min_scale);
     let data = error_model::circle_radius_sigma_residuals(&f.circle, pts, cutoff);
@@ -1594,7 +1592,11 @@ fn projected_data_sigma(
 /// Model σ of one point (metres, along the viewing direction) at in-plane distance
 /// `distance` straight ahead of the source.
 fn one_point_sigma(plane: &LaserPlane, params: &CylinderParams, distance: Real) -> Real {
-    noise_vector(plane, Vec2::new(0.0, distance.max(0.0)), params).norm()
+    norm(&noise_vector(
+        plane,
+        Vec2::new(0.0, distance.max(0.0)),
+        params,
+    ))
 }
 
 #[cfg(test)]
@@ -1618,7 +1620,7 @@ mod tests {
     /// The lit arc of a circle seen from the origin, sampled uniformly in the angle at the
     /// centre between the two analytic tangent points (inclusive).
     fn lit_arc(c: Vec2, r: Real, n: usize, out: &mut [Vec2]) {
-        let l = c.norm();
+        let l = norm(&c);
         let beta = (r / l).acos(); // angle at the centre between −c and a tangent point
         let base = (-c.y).atan2(-c.x);
         for (i, o) in out.iter_mut().take(n).enumerate() {
@@ -1656,10 +1658,10 @@ mod tests {
             // Exact geometry: only rounding. ψ and the parabola carry ~ε relative errors on
             // O(L) quantities, amplified by ∂r/∂α ≈ D/(1−sin α)² ≤ 4L here and by the
             // window fit's conditioning (≲ 10): 100·ε·L.
-            let tol = 100.0 * EPS * c.norm();
+            let tol = 100.0 * EPS * norm(&c);
             assert!((t.radius - r).abs() < tol, "{t:?} r={r}");
-            assert!((t.centre - c).norm() < 10.0 * tol);
-            assert!((t.nearest_distance - (c.norm() - r)).abs() < tol);
+            assert!(norm(&(t.centre - c)) < 10.0 * tol);
+            assert!((t.nearest_distance - (norm(&c) - r)).abs() < tol);
         }
     }
 
@@ -1714,8 +1716,8 @@ mod tests {
             let u = tilted_axis(th, ph).unwrap();
             let big = 1.0 / u.z;
             let proj = Vec2::new(u.x, u.y);
-            let (em, en) = if proj.norm() > 0.0 {
-                let e = proj / proj.norm();
+            let (em, en) = if norm(&proj) > 0.0 {
+                let e = proj / norm(&proj);
                 (e, Vec2::new(-e.y, e.x))
             } else {
                 (Vec2::new(1.0, 0.0), Vec2::new(0.0, 1.0))
@@ -1800,7 +1802,7 @@ mod tests {
             let fit = fit_cylinder(&curves, init, &LmParams::default()).unwrap();
             let tol = 1e4 * EPS * 1.5;
             assert!((fit.cylinder.radius - 0.15).abs() < tol, "{fit:?}");
-            assert!(fit.cylinder.axis.cross(&truth.axis).norm() < tol * 10.0);
+            assert!(norm(&fit.cylinder.axis.cross(&truth.axis)) < tol * 10.0);
         }
         // Lit but not necessarily visible: the grazing rays' ends (the camera, 10 cm
         // above the source, sees a slightly different limb of a tilted stem — a second-
@@ -1824,7 +1826,7 @@ mod tests {
             (fit.cylinder.radius - 0.15).abs() < 4.0 * fit.sigma_radius,
             "{fit:?}"
         );
-        let ang = fit.cylinder.axis.cross(&truth.axis).norm().asin();
+        let ang = norm(&fit.cylinder.axis.cross(&truth.axis)).asin();
         assert!(
             ang < 4.0 * fit.sigma_axis * Real::sqrt(2.0),
             "{ang} {}",
@@ -2032,7 +2034,7 @@ mod tests {
         let (c, r) = (Vec2::new(0.05, 2.0), 0.15);
         let mut pts = std::vec![Vec2::zeros(); 400];
         lit_arc(c, r, 400, &mut pts);
-        let l = c.norm();
+        let l = norm(&c);
         let alpha_true = (r / l).asin();
         // Drop the outer points until the aperture has lost about 1 % of α on each side.
         let keep: std::vec::Vec<Vec2> = pts
