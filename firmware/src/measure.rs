@@ -233,13 +233,8 @@ impl Measurer for PipelineMeasurer<'_> {
         let now = move || clock.map_or(0, |clock| clock());
         let mut stages = StageTimes::default();
         let mut last = now();
-        let profile = pipeline::extract_profile_probed(
-            &off,
-            &on,
-            cal,
-            &self.config,
-            &mut self.ws,
-            |stage| {
+        let profile =
+            pipeline::extract_profile_probed(&off, &on, cal, &self.config, &mut self.ws, |stage| {
                 let t = now();
                 let i = match stage {
                     Stage::Subtracted => 0,
@@ -251,12 +246,12 @@ impl Measurer for PipelineMeasurer<'_> {
                 };
                 stages.image_us[i] = t.saturating_sub(last);
                 last = t;
-            },
-        );
+            });
         self.last_stages = stages;
         let profile = profile.map_err(|e| error_code(&e))?;
         let t = now();
-        let solved = pipeline::solve_stem(&profile, on.max_value(), cal, &self.params, &mut self.ws);
+        let solved =
+            pipeline::solve_stem(&profile, on.max_value(), cal, &self.params, &mut self.ws);
         self.last_stages.solver_us = now().saturating_sub(t);
         let s = solved.map_err(|e| error_code(&e))?.solution;
         Ok(Outcome {

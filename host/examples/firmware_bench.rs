@@ -2,18 +2,35 @@
 //!
 //! Renders a few corpus captures with the simulator, writes them as 8-bit PGMs, runs the
 //! emulated firmware (`cargo firmware-qemu` first) with `-icount shift=0` in `--bench`
-//! mode, and prints the pipeline's instructions per frame pair and per pixel. Under
-//! `-icount shift=0` QEMU advances its virtual clock 1 ns per guest instruction, and the
-//! firmware times the pipeline with SysTick (25 MHz: one tick per 40 instructions), so the
-//! microseconds it reports are thousands of instructions. The firmware first times a loop
-//! of known length to check that scale. Method and results: `docs/performance.md`.
+//! mode, and prints the pipeline's instructions per frame pair, per pixel and per stage —
+//! once on the full 752 × 480 frames and once on the H743 board's read-out window (rows
+//! 160–319, `--window 160`). Under `-icount shift=0` QEMU advances its virtual clock 1 ns per
+//! guest instruction, and the firmware times the pipeline with SysTick (25 MHz: one tick per
+//! 40 instructions), so the microseconds it reports are thousands of instructions. The
+//! firmware first times a loop of known length to check that scale. Method and results:
+//! `docs/performance.md`.
 //!
 //! `cargo run --release -p tangent-host --example firmware_bench`
+//! (`FIRMWARE_BENCH_DIR=dir` keeps the frames and calibration there, to rerun QEMU by hand.)
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use tangent_core::protocol::{calibration_record, WireCalibration};
 use tangent_host::simulate::{corpus, simulate};
+
+/// The H743 board's read-out window (firmware/src/board/h743.rs: `WINDOW_ROWS`,
+/// `WINDOW_ROW_OFFSET`).
+const WINDOW: (usize, usize) = (160, 160);
+
+const STAGES: [&str; 7] = [
+    "subtraction + histogram",
+    "threshold",
+    "segmentation",
+    "selection",
+    "curve extraction",
+    "smoothing + triangulation",
+    "cylinder solver",
+];
 
 fn main() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
@@ -28,75 +45,125 @@ fn main() {
         "cyl-d1000-z100-shade",
         "cyl-d300-z150-sun",
     ];
-    // `FIRMWARE_BENCH_DIR=dir` keeps the frames and calibration there (to rerun QEMU by hand,
-    // e.g. with `-d exec` to profile); otherwise a temporary directory.
     let temp = tempfile::tempdir().expect("temp dir");
-    let kept = std::env::var_os("FIRMWARE_BENCH_DIR").map(std::path::PathBuf::from);
+    let kept = std::env::var_os("FIRMWARE_BENCH_DIR").map(PathBuf::from);
     if let Some(d) = &kept {
         std::fs::create_dir_all(d).expect("create FIRMWARE_BENCH_DIR");
     }
-    let dir_path = kept.unwrap_or_else(|| temp.path().to_path_buf());
-    let mut args = String::from("--bench");
+    let dir = kept.unwrap_or_else(|| temp.path().to_path_buf());
+
     let mut calibration = None;
-    let mut sizes = Vec::new();
+    // Per capture: name, and the 8-bit off/on frames (width, height, bytes).
+    let mut frames = Vec::new();
     for e in corpus::entries()
         .into_iter()
         .filter(|e| names.contains(&e.name.as_str()))
     {
         let (capture, _) = simulate(&e.spec).expect("simulate");
-        let cal = capture.calibration.clone();
         // One calibration for all (every chosen capture uses the one-plane reference).
-        calibration.get_or_insert(cal);
+        calibration.get_or_insert(capture.calibration.clone());
         let (_, on) = capture.on_frames().next().expect("on frame");
-        for (tag, pgm) in [("off", capture.off_frame()), ("on", on)] {
+        let to8 = |pgm: &tangent_host::pgm::Pgm| -> Vec<u8> {
             let bits = pgm.bit_depth() as u32;
-            let data: Vec<u8> = pgm
-                .to_u16()
+            pgm.to_u16()
                 .into_iter()
                 .map(|v| (v >> bits.saturating_sub(8)) as u8)
-                .collect();
-            let path = dir_path.join(format!("{}-{tag}.pgm", e.name));
-            let mut bytes = format!("P5\n{} {}\n255\n", pgm.width, pgm.height).into_bytes();
-            bytes.extend_from_slice(&data);
-            std::fs::write(&path, bytes).expect("write pgm");
-            args += &format!(" {}", path.display());
-        }
-        sizes.push((e.name.clone(), on.width * on.height));
+                .collect()
+        };
+        frames.push((
+            e.name.clone(),
+            on.width,
+            on.height,
+            to8(capture.off_frame()),
+            to8(on),
+        ));
     }
     let cal = calibration.expect("captures rendered");
     let mut rec = [0u8; calibration_record::MAX_RECORD];
     let n = calibration_record::encode(&WireCalibration::from(&cal), &mut rec).expect("record");
-    let cal_path = dir_path.join("calib.bin");
+    let cal_path = dir.join("calib.bin");
     std::fs::write(&cal_path, &rec[..n]).expect("write calibration");
-    args = format!("--calib {} {args}", cal_path.display());
 
-    // The firmware writes its log to QEMU's stderr (semihosting `:tt` in append mode).
-    let out = tangent_host::emulator::qemu_command(&elf, "null", true, &args)
-        .output()
-        .expect("run qemu-system-arm");
-    let status = out.status;
-    let text = String::from_utf8_lossy(&out.stderr).into_owned();
-    println!("{text}");
-    println!("| capture | pixels | instructions (pipeline) | per pixel | at 480 MHz, 1 IPC |");
-    println!("|---|---|---|---|---|");
-    for line in text.lines().filter(|l| l.starts_with("bench scene=")) {
-        let field = |k: &str| {
-            line.split_whitespace()
-                .find_map(|w| w.strip_prefix(k))
-                .unwrap_or("")
-        };
-        let i: usize = field("scene=").parse().unwrap_or(0);
-        let us: f64 = field("pipeline_us=").parse().unwrap_or(0.0);
-        let (name, pixels) = &sizes[i.min(sizes.len() - 1)];
-        let instr = us * 1000.0;
-        println!(
-            "| {name} | {pixels} | {:.2} M | {:.2} | {:.1} ms |",
-            instr / 1e6,
-            instr / *pixels as f64,
-            instr / 480e6 * 1e3
-        );
+    let mut failed = false;
+    for (label, window) in [("full frame", None), ("H743 window", Some(WINDOW))] {
+        let mut args = format!("--bench --calib {}", cal_path.display());
+        if let Some((row, _)) = window {
+            args += &format!(" --window {row}");
+        }
+        let mut sizes = Vec::new();
+        for (name, width, height, off, on) in &frames {
+            let (first, rows) = window.unwrap_or((0, *height));
+            let tag = if window.is_some() { "-window" } else { "" };
+            for (kind, data) in [("off", off), ("on", on)] {
+                let path = dir.join(format!("{name}{tag}-{kind}.pgm"));
+                let mut bytes = format!("P5\n{width} {rows}\n255\n").into_bytes();
+                bytes.extend_from_slice(&data[first * width..(first + rows) * width]);
+                std::fs::write(&path, bytes).expect("write pgm");
+                args += &format!(" {}", path.display());
+            }
+            sizes.push((name.clone(), width * rows));
+        }
+        // The firmware writes its log to QEMU's stderr (semihosting `:tt` in append mode).
+        let out = tangent_host::emulator::qemu_command(&elf, "null", true, &args)
+            .output()
+            .expect("run qemu-system-arm");
+        failed |= !out.status.success();
+        let text = String::from_utf8_lossy(&out.stderr).into_owned();
+        println!("## {label}\n\n{text}");
+        println!("| capture | pixels | instructions (pipeline) | per pixel | at 480 MHz, 1 IPC | result |");
+        println!("|---|---|---|---|---|---|");
+        let mut stage_rows = Vec::new();
+        for line in text.lines().filter(|l| l.starts_with("bench scene=")) {
+            let field = |k: &str| {
+                line.split_whitespace()
+                    .find_map(|w| w.strip_prefix(k))
+                    .unwrap_or("")
+            };
+            let i: usize = field("scene=").parse().unwrap_or(0);
+            let us: f64 = field("pipeline_us=").parse().unwrap_or(0.0);
+            let (name, pixels) = &sizes[i.min(sizes.len() - 1)];
+            let instr = us * 1000.0;
+            let result = match field("diameter_m=").parse::<f64>() {
+                Ok(d) => format!("d = {:.1} mm", d * 1e3),
+                Err(_) => format!("error {}", field("detail=")),
+            };
+            println!(
+                "| {name} | {pixels} | {:.2} M | {:.2} | {:.1} ms | {result} |",
+                instr / 1e6,
+                instr / *pixels as f64,
+                instr / 480e6 * 1e3
+            );
+            // "stages_us=[a, b, c, d, e, f]" (split by the whitespace after the commas).
+            if let Some(start) = line.find("stages_us=[") {
+                let rest = &line[start + "stages_us=[".len()..];
+                let mut stages: Vec<f64> = rest
+                    .split(']')
+                    .next()
+                    .unwrap_or("")
+                    .split(',')
+                    .filter_map(|v| v.trim().parse().ok())
+                    .collect();
+                stages.push(field("solver_us=").parse().unwrap_or(0.0));
+                stage_rows.push((name.clone(), stages));
+            }
+        }
+        if !stage_rows.is_empty() {
+            println!("\n| stage (M instructions) | {} |", {
+                let names: Vec<&str> = stage_rows.iter().map(|(n, _)| n.as_str()).collect();
+                names.join(" | ")
+            });
+            println!("|---|{}", "---|".repeat(stage_rows.len()));
+            for (k, stage) in STAGES.iter().enumerate() {
+                let cells: Vec<String> = stage_rows
+                    .iter()
+                    .map(|(_, s)| format!("{:.2}", s.get(k).copied().unwrap_or(0.0) / 1e3))
+                    .collect();
+                println!("| {stage} | {} |", cells.join(" | "));
+            }
+        }
+        println!();
     }
-    if !status.success() {
-        eprintln!("the firmware reported a failed measurement (see the log above)");
+    if failed {
+        eprintln!("some measurement failed (see the logs above; the sun capture fails by design)");
     }
 }

@@ -660,17 +660,17 @@ mod tests {
                     let (xd, yd) = distort_f64(&cam.distortion, p.x as f64, p.y as f64);
                     let ru = (xd - d.x as f64) * cam.fx as f64;
                     let rv = (yd - d.y as f64) * cam.fy as f64;
-                    let res = sqrt(ru * ru + rv * rv);
+                    let res = (ru * ru + rv * rv).sqrt();
                     // Error model: the solution is exact up to the rounding of evaluating
                     // the distortion in `Real` (≈ 4 ε|d|) and of storing p (ε|p|/2),
                     // amplified by |J⁻¹| ≤ 1.5 here: ≤ 8 ε (1 + |d|) in normalised units.
                     // In f64 that is ~1e-11 px, far inside the brief's 1e-4 px; in f32
                     // ~1.4e-3 px at f = 1000.
-                    let tol = (8.0 * EPS * (1.0 + norm(&d) as f64) * f).min(1e-4);
+                    let tol = (8.0 * EPS * (1.0 + d.norm() as f64) * f).min(1e-4);
                     let tol = if EPS < 1e-10 {
                         tol
                     } else {
-                        8.0 * EPS * (1.0 + norm(&d) as f64) * f
+                        8.0 * EPS * (1.0 + d.norm() as f64) * f
                     };
                     assert!(res <= tol, "pixel ({u}, {v}): residual {res} px > {tol}");
                     worst = worst.max(res);
@@ -712,7 +712,7 @@ mod tests {
             let p = cam.undistort_fixed_point(d).unwrap();
             let (xd, yd) = distort_f64(&cam.distortion, p.x as f64, p.y as f64);
             let res = ((xd - d.x as f64).hypot(yd - d.y as f64)) * cam.fx as f64;
-            let tol = 8.0 * EPS * (1.0 + norm(&d) as f64) * cam.fx as f64;
+            let tol = 8.0 * EPS * (1.0 + d.norm() as f64) * cam.fx as f64;
             assert!(res <= tol, "({u}, {v}): {res} px");
         }
     }
@@ -734,7 +734,7 @@ mod tests {
             k2: 0.02,
             ..Distortion::default()
         };
-        let s1 = (0.9 - sqrt(0.41 as Real)) / 0.2;
+        let s1 = (0.9 - (0.41 as Real).sqrt()) / 0.2;
         assert!(k.radially_monotone_up_to(s1 - 1e-3));
         assert!(!k.radially_monotone_up_to(s1 + 1e-3));
         assert!(!k.radially_monotone_up_to(9.0));

@@ -612,8 +612,8 @@ mod tests {
             // is ≤ 1e-6 relative; rounding ε·|X|/h. Tolerance 1e-5·|g| + 10ε|X|/h.
             let h: Real = 0.01;
             let fd = (tri(v + h) - tri(v - h)) / (2.0 * h);
-            let tol = 1e-5 * norm(&g) + 10.0 * Real::EPSILON * norm(&x) / h;
-            assert!(norm(&(fd - g)) < tol, "{fd} {g}");
+            let tol = 1e-5 * g.norm() + 10.0 * Real::EPSILON * x.norm() / h;
+            assert!((fd - g).norm() < tol, "{fd} {g}");
             // Thesis §7.2: σ_z = z²·σ_v/(e·f) on the optical axis (x = 0, zero roll).
             if u == 375.5 {
                 let (e, _) = plane.baseline_tilt();
@@ -634,7 +634,7 @@ mod tests {
             .unwrap();
         let d = calibration_displacements(&plane, cam.fx, x, &noise).unwrap();
         let want = x * (noise.baseline / e);
-        assert!(norm(&(d[0] - want)) < 1e-6 * norm(&want) + 100.0 * Real::EPSILON * norm(&x));
+        assert!((d[0] - want).norm() < 1e-6 * want.norm() + 100.0 * Real::EPSILON * x.norm());
         let rel = calibration_relative_sigma(&plane, x, &noise, cam.fx);
         assert!(rel >= noise.baseline / e * 0.999, "{rel}");
     }
@@ -685,8 +685,8 @@ mod tests {
                 sf2 += f * f;
             }
             let m = trials as f64;
-            let sd_t = 2.0 * sqrt((st2 / m - (st / m).powi(2)).max(0.0));
-            let sd_f = 2.0 * sqrt((sf2 / m - (sf / m).powi(2)).max(0.0));
+            let sd_t = 2.0 * (st2 / m - (st / m).powi(2)).max(0.0).sqrt();
+            let sd_f = 2.0 * (sf2 / m - (sf / m).powi(2)).max(0.0).sqrt();
             let pt = pred.three_tangent.unwrap().random as f64;
             let pf = pred.circle_fit.unwrap().random as f64;
             println!("d={dist} D={diam}: 3T obs {sd_t:.2e} pred {pt:.2e}; fit obs {sd_f:.2e} pred {pf:.2e}");
@@ -801,7 +801,7 @@ mod tests {
             lm += f.std_dev.z;
         }
         let k = reps as Real;
-        let observed = sqrt((sum2 / k - (sum / k).powi(2)).max(0.0));
+        let observed = (sum2 / k - (sum / k).powi(2)).max(0.0).sqrt();
         let (sand, lm) = (sand / k, lm / k);
         println!("observed {observed:.3e}, sandwich {sand:.3e}, equal-noise {lm:.3e}");
         assert!(

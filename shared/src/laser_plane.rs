@@ -476,7 +476,7 @@ mod tests {
             assert!((t2 - t).abs() as f64 <= 16.0 * EPS, "{t} {t2}");
             assert!((p.roll() - r).abs() as f64 <= 16.0 * EPS, "{r}");
             // The source is at distance e from the camera, in the plane.
-            assert!((norm(&p.source) - e).abs() as f64 <= 4.0 * EPS);
+            assert!((p.source.norm() - e).abs() as f64 <= 4.0 * EPS);
         }
     }
 
@@ -490,7 +490,7 @@ mod tests {
             Vec3::new(0.0, 0.0, 2.0),
         )
         .unwrap();
-        let s = sqrt(14f64);
+        let s = 14f64.sqrt();
         assert!(close(p.normal, [1.0 / s, 2.0 / s, 3.0 / s], 8.0 * EPS));
         assert!((p.offset as f64 - 6.0 / s).abs() <= 16.0 * EPS * 6.0);
         // Collinear points: no plane.
@@ -608,7 +608,7 @@ mod tests {
         let q = p.to_plane_coords(Vec3::new(0.0, 0.0, 1.5));
         assert!(
             (q.x as f64).abs() <= 8.0 * EPS
-                && (q.y as f64 - sqrt(e * e + 2.25)).abs() <= 8.0 * EPS * 1.5
+                && (q.y as f64 - (e * e + 2.25).sqrt()).abs() <= 8.0 * EPS * 1.5
         );
         // Camera centre's foot: (0, e sin δ).
         let c = p.camera_centre_in_plane();
@@ -619,8 +619,8 @@ mod tests {
         let p = LaserPlane::from_baseline_tilt_roll(0.12, 0.3, 0.4).unwrap();
         let (a, b) = p.plane_axes();
         assert!(
-            (norm(&a) - 1.0).abs() as f64 <= 4.0 * EPS
-                && (norm(&b) - 1.0).abs() as f64 <= 4.0 * EPS
+            (a.norm() - 1.0).abs() as f64 <= 4.0 * EPS
+                && (b.norm() - 1.0).abs() as f64 <= 4.0 * EPS
         );
         assert!((a.dot(&b) as f64).abs() <= 4.0 * EPS);
         assert!(
@@ -632,12 +632,12 @@ mod tests {
         let x = p.from_plane_coords(q);
         assert!((p.signed_distance(x) as f64).abs() <= 8.0 * EPS * 2.0);
         let q2 = p.to_plane_coords(x);
-        assert!((norm(&(q2 - q)) as f64) <= 8.0 * EPS * 2.0);
+        assert!(((q2 - q).norm() as f64) <= 8.0 * EPS * 2.0);
         // Plane perpendicular to the optical axis: fallback axes still orthonormal.
         let f = LaserPlane::new(Vec3::new(0.0, 0.0, 1.0), 1.0, Vec3::new(0.0, 0.1, 1.0)).unwrap();
         let (a, b) = f.plane_axes();
         assert!(
-            close(b, [0.0, -1.0, 0.0], 4.0 * EPS) && (norm(&a) - 1.0).abs() as f64 <= 4.0 * EPS
+            close(b, [0.0, -1.0, 0.0], 4.0 * EPS) && (a.norm() - 1.0).abs() as f64 <= 4.0 * EPS
         );
     }
 
@@ -663,7 +663,7 @@ mod tests {
             // Forward: plane point → its normalised image.
             let x = p.from_plane_coords(q);
             let h = g * Vec3::new(q.x, q.y, 1.0);
-            assert!((norm(&(h / h.z - x / x.z)) as f64) <= 32.0 * EPS);
+            assert!(((h / h.z - x / x.z).norm() as f64) <= 32.0 * EPS);
             // Backward: image → plane through the inverse equals the ray–plane intersection.
             let ray = x / x.z;
             let back = gi * ray;
@@ -671,11 +671,11 @@ mod tests {
             let q_i = p.to_plane_coords(p.intersect_ray(ray).unwrap());
             // In-plane metres at ≤ 2.5 m: ~ε·2.5·(condition ≈ 20).
             assert!(
-                (norm(&(q_h - q)) as f64) <= 64.0 * EPS * 2.5,
+                ((q_h - q).norm() as f64) <= 64.0 * EPS * 2.5,
                 "{q_h:?} {q:?}"
             );
             assert!(
-                (norm(&(q_i - q)) as f64) <= 64.0 * EPS * 2.5,
+                ((q_i - q).norm() as f64) <= 64.0 * EPS * 2.5,
                 "{q_i:?} {q:?}"
             );
         }
@@ -711,7 +711,7 @@ mod tests {
             let z = x.z as f64;
             let tol = z * z / 0.1 * 16.0 * EPS * 1.5 + 8.0 * EPS * z;
             assert!(
-                (norm(&(t - x)) as f64) <= tol,
+                ((t - x).norm() as f64) <= tol,
                 "{q:?}: {t:?} vs {x:?} (tol {tol})"
             );
         }

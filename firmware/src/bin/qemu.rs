@@ -65,6 +65,7 @@ fn main() -> ! {
 
     let mut calib_path = None;
     let mut bench = false;
+    let mut row_offset = 0u16;
     let mut files: heapless::Vec<&str, { 2 * qemu::MAX_SCENES }> = heapless::Vec::new();
     let mut args = cmdline.split_ascii_whitespace();
     // The first word is the program (the -kernel file name).
@@ -73,6 +74,15 @@ fn main() -> ! {
         match a {
             "--calib" => calib_path = args.next(),
             "--bench" => bench = true,
+            "--window" => match args.next().and_then(|r| r.parse().ok()) {
+                Some(r) => row_offset = r,
+                None => {
+                    qemu::log(format_args!(
+                        "--window needs the sensor row of the files' first row"
+                    ));
+                    qemu::exit(false)
+                }
+            },
             f => {
                 if files.push(f).is_err() {
                     qemu::log(format_args!(
@@ -90,12 +100,12 @@ fn main() -> ! {
     }
     if scenes.is_empty() || !files.len().is_multiple_of(2) {
         qemu::log(format_args!(
-            "usage: tangent-qemu [--calib FILE] [--bench] OFF.pgm ON.pgm [OFF.pgm ON.pgm ...]"
+            "usage: tangent-qemu [--calib FILE] [--bench] [--window ROW] OFF.pgm ON.pgm [OFF.pgm ON.pgm ...]"
         ));
         qemu::exit(false)
     }
     let camera = match FileCamera::new(scenes) {
-        Ok(c) => c,
+        Ok(c) => c.with_row_offset(row_offset),
         Err(e) => {
             qemu::log(format_args!("cannot read the first frame: {:?}", e));
             qemu::exit(false)

@@ -13,7 +13,7 @@
 //! * calibration store: RAM, initialised from a calibration record file (`--calib`).
 //!
 //! Command line (semihosting `SYS_GET_CMDLINE`, QEMU's `-append`):
-//! `[--calib FILE] [--bench] OFF.pgm ON.pgm [OFF.pgm ON.pgm …]`.
+//! `[--calib FILE] [--bench] [--window ROW] OFF.pgm ON.pgm [OFF.pgm ON.pgm …]`.
 
 use core::fmt::Write as _;
 use core::future::poll_fn;
@@ -248,6 +248,13 @@ impl<'c> FileCamera<'c> {
             next: 0,
             geometry,
         })
+    }
+
+    /// The files are a window of the sensor starting at row `row_offset` (the H743 board's
+    /// read-out window, for benchmarks of its frame size).
+    pub fn with_row_offset(mut self, row_offset: u16) -> Self {
+        self.geometry.row_offset = row_offset;
+        self
     }
 
     /// Number of frame pairs.

@@ -94,7 +94,9 @@ fn difference_word<P: Pixel>(
     }
     *off_sum = lanes::add_lane_sum(*off_sum, b);
     if d & 0xFCFC_FCFC == 0 {
-        quads[((d | d >> 6 | d >> 12 | d >> 18) & 0xFF) as usize] += 1;
+        // The four 2-bit values to bits 24–31 (lane i's to bits 24 + 2i) by one multiplication:
+        // the other partial products land below bit 24 in disjoint 2-bit fields or beyond 31.
+        quads[(d.wrapping_mul(0x0104_1040) >> 24) as usize] += 1;
     } else {
         count_lanes(bins, d);
     }

@@ -902,7 +902,7 @@ pub(crate) mod tests {
         pub(crate) fn gauss(&mut self) -> f64 {
             let u1 = self.uniform().max(1e-300);
             let u2 = self.uniform();
-            sqrt(-2.0 * u1.ln()) * (2.0 * core::f64::consts::PI * u2).cos()
+            (-2.0 * u1.ln()).sqrt() * (2.0 * core::f64::consts::PI * u2).cos()
         }
     }
 
@@ -952,7 +952,7 @@ pub(crate) mod tests {
             assert!((e.semi_axes.0 - 0.2).abs() < tol * 0.2, "{phi}: {e:?}");
             assert!((e.semi_axes.1 - 0.15).abs() < tol * 0.2, "{phi}: {e:?}");
             assert!(
-                real::norm(&(e.centre - Vec2::new(0.02, 1.6))) < tol,
+                (e.centre - Vec2::new(0.02, 1.6)).norm() < tol,
                 "{phi}: {e:?}"
             );
         }
@@ -1064,11 +1064,11 @@ pub(crate) mod tests {
         let tol = 200.0 * Real::EPSILON * 2.0;
         for fit in [fit_kasa(&pts), fit_taubin(&pts), fit_hyper(&pts)] {
             let f = fit.unwrap();
-            assert!(real::norm(&(f.centre - c)) < tol, "{f:?}");
+            assert!((f.centre - c).norm() < tol, "{f:?}");
             assert!((f.radius - r).abs() < tol);
         }
         let g = fit_geometric(&pts, fit_hyper(&pts).unwrap(), &LmParams::default()).unwrap();
-        assert!(real::norm(&(g.circle.centre - c)) < tol);
+        assert!((g.circle.centre - c).norm() < tol);
         assert!((g.circle.radius - r).abs() < tol);
         assert!(g.rms_residual < tol);
         let mut scratch = [0.0; 40];
@@ -1125,7 +1125,7 @@ pub(crate) mod tests {
         );
         // Three points on a circle: the circumcircle exactly.
         let g = fit_geometric(&tri, c, &LmParams::default()).unwrap();
-        assert!(real::norm(&(g.circle.centre - Vec2::new(0.5, 0.5))) < 100.0 * Real::EPSILON);
+        assert!((g.circle.centre - Vec2::new(0.5, 0.5)).norm() < 100.0 * Real::EPSILON);
     }
 
     #[test]
@@ -1152,8 +1152,8 @@ pub(crate) mod tests {
         let n = trials as f64;
         let (mk, mh) = (sk / n, sh / n);
         // Standard errors of the means from the samples themselves.
-        let se_h = sqrt(sh2 / n - (mh - 1.0) * (mh - 1.0)) / sqrt(n);
-        let se_d = sqrt(sd2 / n - (mh - mk) * (mh - mk)) / sqrt(n);
+        let se_h = (sh2 / n - (mh - 1.0) * (mh - 1.0)).sqrt() / n.sqrt();
+        let se_d = (sd2 / n - (mh - mk) * (mh - mk)).sqrt() / n.sqrt();
         assert!(mh - mk > 5.0 * se_d, "kasa {mk} hyper {mh} se {se_d}");
         assert!(mk < 1.0 - 5.0 * se_d);
         // Hyper: unbiased to the statistical resolution (4 standard errors).
@@ -1181,7 +1181,7 @@ pub(crate) mod tests {
             pred += f.std_dev.z as f64;
         }
         let n = trials as f64;
-        let sd = sqrt(s2 / n - (s / n).powi(2));
+        let sd = (s2 / n - (s / n).powi(2)).sqrt();
         let p = pred / n;
         assert!((sd / p - 1.0).abs() < 0.2, "observed {sd} predicted {p}");
     }

@@ -150,7 +150,7 @@ pub fn three_tangent(
         if !(q.x.is_finite() && q.y.is_finite()) {
             return Err(SolveError::NonFinite);
         }
-        let n = norm(&q);
+        let n = norm(q);
         if !(n > 0.0) {
             return Err(SolveError::Degenerate);
         }
@@ -1620,7 +1620,7 @@ mod tests {
     /// The lit arc of a circle seen from the origin, sampled uniformly in the angle at the
     /// centre between the two analytic tangent points (inclusive).
     fn lit_arc(c: Vec2, r: Real, n: usize, out: &mut [Vec2]) {
-        let l = norm(&c);
+        let l = c.norm();
         let beta = (r / l).acos(); // angle at the centre between −c and a tangent point
         let base = (-c.y).atan2(-c.x);
         for (i, o) in out.iter_mut().take(n).enumerate() {
@@ -1658,10 +1658,10 @@ mod tests {
             // Exact geometry: only rounding. ψ and the parabola carry ~ε relative errors on
             // O(L) quantities, amplified by ∂r/∂α ≈ D/(1−sin α)² ≤ 4L here and by the
             // window fit's conditioning (≲ 10): 100·ε·L.
-            let tol = 100.0 * EPS * norm(&c);
+            let tol = 100.0 * EPS * c.norm();
             assert!((t.radius - r).abs() < tol, "{t:?} r={r}");
-            assert!(norm(&(t.centre - c)) < 10.0 * tol);
-            assert!((t.nearest_distance - (norm(&c) - r)).abs() < tol);
+            assert!((t.centre - c).norm() < 10.0 * tol);
+            assert!((t.nearest_distance - (c.norm() - r)).abs() < tol);
         }
     }
 
@@ -1716,8 +1716,8 @@ mod tests {
             let u = tilted_axis(th, ph).unwrap();
             let big = 1.0 / u.z;
             let proj = Vec2::new(u.x, u.y);
-            let (em, en) = if norm(&proj) > 0.0 {
-                let e = proj / norm(&proj);
+            let (em, en) = if proj.norm() > 0.0 {
+                let e = proj / proj.norm();
                 (e, Vec2::new(-e.y, e.x))
             } else {
                 (Vec2::new(1.0, 0.0), Vec2::new(0.0, 1.0))
@@ -1802,7 +1802,7 @@ mod tests {
             let fit = fit_cylinder(&curves, init, &LmParams::default()).unwrap();
             let tol = 1e4 * EPS * 1.5;
             assert!((fit.cylinder.radius - 0.15).abs() < tol, "{fit:?}");
-            assert!(norm(&fit.cylinder.axis.cross(&truth.axis)) < tol * 10.0);
+            assert!(fit.cylinder.axis.cross(&truth.axis).norm() < tol * 10.0);
         }
         // Lit but not necessarily visible: the grazing rays' ends (the camera, 10 cm
         // above the source, sees a slightly different limb of a tilted stem — a second-
@@ -1826,7 +1826,7 @@ mod tests {
             (fit.cylinder.radius - 0.15).abs() < 4.0 * fit.sigma_radius,
             "{fit:?}"
         );
-        let ang = norm(&fit.cylinder.axis.cross(&truth.axis)).asin();
+        let ang = fit.cylinder.axis.cross(&truth.axis).norm().asin();
         assert!(
             ang < 4.0 * fit.sigma_axis * Real::sqrt(2.0),
             "{ang} {}",
@@ -2034,7 +2034,7 @@ mod tests {
         let (c, r) = (Vec2::new(0.05, 2.0), 0.15);
         let mut pts = std::vec![Vec2::zeros(); 400];
         lit_arc(c, r, 400, &mut pts);
-        let l = norm(&c);
+        let l = c.norm();
         let alpha_true = (r / l).asin();
         // Drop the outer points until the aperture has lost about 1 % of α on each side.
         let keep: std::vec::Vec<Vec2> = pts
