@@ -702,6 +702,30 @@ fn ellipse_accumulate(
     Some((jtj, jtd, meat, cost, n))
 }
 
+/// The ellipse model at `circle` (`B = C = 0`, in the points' normalised coordinates) and its
+/// normal equations over the points within `cutoff` of the circle: the start of
+/// [`fit_ellipse`] and the whole of [`ellipse_score_f`]. At least 8 points must be kept.
+#[allow(clippy::type_complexity)]
+fn ellipse_at_circle(
+    points: &[Vec2],
+    circle: &Circle,
+    cutoff: Real,
+) -> Result<(Normalisation, V5, (M5, V5, M5, Real, usize)), SolveError> {
+    if !(cutoff > 0.0 && circle.radius > 0.0 && circle.radius.is_finite()) {
+        return Err(SolveError::InvalidParameter);
+    }
+    let keep = |q: Vec2| circle.distance(q).abs() <= cutoff;
+    let norm = Normalisation::of(points, 8)?;
+    let c0 = norm.apply(circle.centre);
+    let r0 = circle.radius / norm.scale;
+    let p = V5::new(c0.x, c0.y, 1.0 / (r0 * r0), 0.0, 0.0);
+    let sums = ellipse_accumulate(points, keep, &norm, &p).ok_or(SolveError::Degenerate)?;
+    if sums.4 < 8 {
+        return Err(SolveError::TooFewPoints);
+    }
+    Ok((norm, p, sums))
+}
+
 /// Score-test (Lagrange-multiplier) form of [`EllipseFit::f_statistic`] at the circle, without
 /// fitting the ellipse (`docs/cylinder.md`, "Screening"): the cost decrease one Gauss–Newton
 /// step of the ellipse model predicts from `circle`, `Δ = gᵀ(JᵀJ)⁻¹g` (`g = Jᵀd` over the
@@ -713,19 +737,7 @@ fn ellipse_accumulate(
 /// Errors: as [`fit_ellipse`] for the data (fewer than 8 points kept, non-finite values,
 /// singular normal matrix).
 pub fn ellipse_score_f(points: &[Vec2], circle: &Circle, cutoff: Real) -> Result<Real, SolveError> {
-    if !(cutoff > 0.0 && circle.radius > 0.0 && circle.radius.is_finite()) {
-        return Err(SolveError::InvalidParameter);
-    }
-    let keep = |q: Vec2| circle.distance(q).abs() <= cutoff;
-    let norm = Normalisation::of(points, 8)?;
-    let c0 = norm.apply(circle.centre);
-    let r0 = circle.radius / norm.scale;
-    let p = V5::new(c0.x, c0.y, 1.0 / (r0 * r0), 0.0, 0.0);
-    let (jtj, jtd, _, cost, n) =
-        ellipse_accumulate(points, keep, &norm, &p).ok_or(SolveError::Degenerate)?;
-    if n < 8 {
-        return Err(SolveError::TooFewPoints);
-    }
+    let (_, _, (jtj, jtd, _, cost, n)) = ellipse_at_circle(points, circle, cutoff)?;
     let inv = jtj.try_inverse().ok_or(SolveError::Degenerate)?;
     let decrease = (jtd.transpose() * inv * jtd)[(0, 0)].clamp(0.0, cost);
     let rest = cost - decrease;
@@ -759,19 +771,9 @@ pub fn fit_ellipse(
     params: &LmParams,
 ) -> Result<EllipseFit, SolveError> {
     params.validate()?;
-    if !(cutoff > 0.0 && circle.radius > 0.0 && circle.radius.is_finite()) {
-        return Err(SolveError::InvalidParameter);
-    }
     let keep = |q: Vec2| circle.distance(q).abs() <= cutoff;
-    let norm = Normalisation::of(points, 8)?;
-    let c0 = norm.apply(circle.centre);
-    let r0 = circle.radius / norm.scale;
-    let mut p = V5::new(c0.x, c0.y, 1.0 / (r0 * r0), 0.0, 0.0);
-    let (mut jtj, mut jtd, mut meat, mut cost, n) =
-        ellipse_accumulate(points, keep, &norm, &p).ok_or(SolveError::Degenerate)?;
-    if n < 8 {
-        return Err(SolveError::TooFewPoints);
-    }
+    let (norm, mut p, (mut jtj, mut jtd, mut meat, mut cost, n)) =
+        ellipse_at_circle(points, circle, cutoff)?;
     let ssr_circle = cost * norm.scale * norm.scale;
     let mut lambda = params.initial_lambda;
     let mut iterations = 0;
