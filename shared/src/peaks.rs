@@ -22,7 +22,7 @@
 
 use core::fmt;
 
-use crate::real::{Float, Real};
+use crate::real::{sqrt, Float, Real};
 
 /// Largest half window any estimator reads (samples on each side of the peak): bounds the
 /// work per peak and the stack profile buffer of [`crate::curve`].
@@ -277,7 +277,7 @@ pub fn locate_with_saturation(
             Ok(Peak {
                 position: p + delta,
                 amplitude: Float::exp(vertex),
-                sigma: Some(Float::sqrt(-1.0 / den)),
+                sigma: Some(sqrt(-1.0 / den)),
                 saturated,
                 samples: n,
             })
@@ -514,7 +514,7 @@ fn gaussian_fit(profile: &[Real], peak: usize, saturation: Real) -> Result<Peak,
     }
     // Vertex form: μ = -b/2c, s² = -1/2c, A = x0·exp(a - b²/4c).
     let mut mu = -b / (2.0 * c);
-    let mut sig = Float::sqrt(-0.5 / c);
+    let mut sig = sqrt(-0.5 / c);
     let mut amp = x0 * Float::exp(a - b * b / (4.0 * c));
     let mut samples = used;
     if saturated {

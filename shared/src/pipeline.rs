@@ -455,7 +455,7 @@ pub fn difference_noise(histogram: &[u32]) -> Real {
         return 0.0;
     }
     let two_pi: Real = 2.0 * crate::real::PI;
-    <Real as crate::real::Float>::sqrt(two_pi) * (sum as Real / n as Real)
+    crate::real::sqrt(two_pi) * (sum as Real / n as Real)
 }
 
 /// Runs the image part of the chain and triangulates the curves: `off` and `on` are the

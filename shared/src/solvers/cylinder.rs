@@ -969,7 +969,7 @@ fn solve_plane(
     let tt = match three_tangent(pts, &params.three_tangent) {
         Ok(t) => {
             let (dr_da, dr_dd) = t.partials();
-            let s_alpha = params.noise.edge_angle_sigma(params.focal_px) / Real::sqrt(2.0);
+            let s_alpha = params.noise.edge_angle_sigma(params.focal_px) / sqrt(2.0);
             let near = t.bisector * t.nearest_distance;
             let s_point = noise_vector(plane, near, params).dot(&t.bisector).abs();
             let s_d = sqrt(t.nearest_variance_factor) * s_point.max(t.window_rms);
@@ -1392,7 +1392,7 @@ fn solve_tilted(
             scratch.points,
         ) {
             let (dr_da, dr_dd) = t.partials();
-            let s_alpha = params.noise.edge_angle_sigma(params.focal_px) / Real::sqrt(2.0);
+            let s_alpha = params.noise.edge_angle_sigma(params.focal_px) / sqrt(2.0);
             let s_point = one_point_sigma(plane, params, t.nearest_distance);
             let s_d = sqrt(t.nearest_variance_factor) * t.window_rms.max(s_point);
             // Fade-out of the projected edges, judged against the projected fit.
