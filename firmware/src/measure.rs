@@ -155,10 +155,10 @@ pub struct PipelineMeasurer<'w> {
     pub config: PipelineConfig,
     /// Cylinder-solver parameters.
     pub params: CylinderParams,
-    /// A free-running clock (µs) to time the two halves of the pipeline with, or `None`.
+    /// A free-running clock (µs) to time the pipeline's stages with, or `None`.
     pub stage_clock: Option<fn() -> u64>,
-    /// Durations of the last measurement's image part and solver (µs of `stage_clock`;
-    /// zero without a clock or when the image part failed).
+    /// Durations of the last measurement's stages (µs of `stage_clock`; zero without a clock
+    /// and for the stages a failure kept from running).
     pub last_stages: StageTimes,
 }
 
