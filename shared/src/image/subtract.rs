@@ -40,8 +40,23 @@ pub fn subtract<P: Pixel>(
 ) -> Result<SubtractStats, FrameError> {
     on.check_same_size(off)?;
     on.check_same_size(&out.as_frame())?;
-    let mut max_difference = 0u32;
-    let mut off_sum = 0u64;
+    let (max_difference, off_sum) = subtract_pixels(on, off, out, |_| {});
+    Ok(SubtractStats {
+        max_difference,
+        off_mean: mean(off_sum, on),
+    })
+}
+
+/// The per-pixel loop of [`subtract`] (and of [`subtract_with_histogram`] for other than
+/// 8-bit frames): writes `out`, calls `each` with every difference, returns the largest
+/// difference and the laser-off sum. Sizes are checked by the callers.
+fn subtract_pixels<P: Pixel>(
+    on: &Frame<'_, P>,
+    off: &Frame<'_, P>,
+    out: &mut FrameMut<'_, P>,
+    mut each: impl FnMut(u32),
+) -> (u32, u64) {
+    let (mut max_difference, mut off_sum) = (0u32, 0u64);
     for y in 0..on.height() {
         let (a_row, b_row, o_row) = (on.row(y), off.row(y), out.row_mut(y));
         for ((o, &a), &b) in o_row.iter_mut().zip(a_row).zip(b_row) {
@@ -50,12 +65,10 @@ pub fn subtract<P: Pixel>(
             *o = P::saturate_from(d);
             max_difference = max_difference.max(d);
             off_sum += b as u64;
+            each(d);
         }
     }
-    Ok(SubtractStats {
-        max_difference,
-        off_mean: mean(off_sum, on),
-    })
+    (max_difference, off_sum)
 }
 
 /// `sum / (width · height)` of `frame` (a Frame is never empty).
@@ -208,21 +221,13 @@ pub fn subtract_with_histogram<P: Pixel>(
         // No difference exceeds 255 = top, so the highest non-empty bin is the maximum.
         max_difference = bins.iter().rposition(|&c| c != 0).unwrap_or(0) as u32;
     } else {
-        let mut max_d = 0u32;
-        for y in 0..on.height() {
-            let (a_row, b_row, o_row) = (on.row(y), off.row(y), out.row_mut(y));
-            for ((o, &a), &b) in o_row.iter_mut().zip(a_row).zip(b_row) {
-                let (a, b): (u32, u32) = (a.into(), b.into());
-                let d = a.saturating_sub(b);
-                *o = P::saturate_from(d);
-                max_d = max_d.max(d);
-                off_sum += b as u64;
-                if let Some(c) = bins.get_mut((d as usize).min(top)) {
-                    *c += 1;
-                }
+        let (max_d, sum) = subtract_pixels(on, off, out, |d| {
+            if let Some(c) = bins.get_mut((d as usize).min(top)) {
+                *c += 1;
             }
-        }
+        });
         max_difference = max_d;
+        off_sum = sum;
     }
     Ok(SubtractStats {
         max_difference,
