@@ -17,6 +17,7 @@
 //! | laser-curve extraction and smoothing | [`curve`] | `docs/subpixel.md` §8 |
 //! | solvers per object kind | [`solvers`] | `docs/cylinder.md`, … |
 //! | predicted uncertainty of a reading | [`error_model`] | `docs/error-model.md` |
+//! | one reading of any instrument | [`measurement`] | `docs/architecture.md` |
 //! | device ↔ host wire protocol | [`protocol`] | `docs/protocol.md` |
 //! | the whole chain, frame pair → result | [`pipeline`] | `docs/pipeline.md` |
 #![no_std]
@@ -38,6 +39,7 @@ pub mod curve;
 pub mod error_model;
 pub mod image;
 pub mod laser_plane;
+pub mod measurement;
 pub mod peaks;
 pub mod pipeline;
 pub mod protocol;

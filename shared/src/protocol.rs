@@ -272,30 +272,8 @@ pub struct RunningStats {
     pub spread_m: f32,
 }
 
-/// Which solver produced a reading (mirrors `solvers::cylinder::Method`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-pub enum Method {
-    /// Three-tangent method in one plane (transversal stem assumed).
-    ThreeTangent,
-    /// Robust geometric circle fit in one plane (transversal stem assumed).
-    CircleFit,
-    /// Cylinder fit to two or more planes' curves (tilt measured).
-    CylinderFit,
-    /// Three-tangent method on the curves projected along the fitted axis (tilt measured).
-    GeneralisedThreeTangent,
-}
-
-impl From<crate::solvers::cylinder::Method> for Method {
-    fn from(m: crate::solvers::cylinder::Method) -> Self {
-        use crate::solvers::cylinder::Method as M;
-        match m {
-            M::ThreeTangent => Method::ThreeTangent,
-            M::CircleFit => Method::CircleFit,
-            M::CylinderFit => Method::CylinderFit,
-            M::GeneralisedThreeTangent => Method::GeneralisedThreeTangent,
-        }
-    }
-}
+/// Which solver produced a reading: the solvers' own type, serialised as it is.
+pub use crate::solvers::result::Method;
 
 /// An error reported by the device.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

@@ -19,6 +19,7 @@ use crate::real::Real;
 
 pub mod circle;
 pub mod cylinder;
+pub mod result;
 
 /// Why a solver could not produce a trustworthy answer.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

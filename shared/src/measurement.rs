@@ -1,0 +1,167 @@
+//! One reading of any of Tangent's instruments: what the pipeline returns, the wire protocol
+//! sends, the host prints and the field log keeps (`docs/architecture.md`, "Measurement").
+//!
+//! Each instrument (stem today; sphere, wall and road next) is one [`Mode`] of the same head
+//! and one variant of [`Measurement`]. The values are SI (metres, radians) and computed in
+//! [`Real`]; on the wire every scalar travels as `f32`, whatever the build's precision, so
+//! that the device (f32) and the host (f64) speak the same bytes.
+
+use serde::{Deserialize, Serialize};
+
+use crate::real::Real;
+use crate::solvers::result::{Flags, Method};
+
+/// The instrument a capture was taken for, or the device is set to: the capture file's
+/// `mode` key.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Mode {
+    /// A stem: a cylinder, possibly tilted or elliptic (thesis chapter 9).
+    Cylinder,
+    /// A sphere (thesis chapter 10).
+    Sphere,
+    /// One or more walls: planes (thesis chapter 11).
+    Wall,
+    /// A road-surface profile (thesis chapter 12).
+    Road,
+}
+
+impl Mode {
+    /// The name used in capture files, on the command line and in logs.
+    pub fn name(self) -> &'static str {
+        match self {
+            Mode::Cylinder => "cylinder",
+            Mode::Sphere => "sphere",
+            Mode::Wall => "wall",
+            Mode::Road => "road",
+        }
+    }
+}
+
+/// One reading of one instrument.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub enum Measurement {
+    /// A stem diameter ([`Mode::Cylinder`]).
+    Stem(StemReading),
+}
+
+impl Measurement {
+    /// The instrument that made the reading.
+    pub fn mode(&self) -> Mode {
+        match self {
+            Measurement::Stem(_) => Mode::Cylinder,
+        }
+    }
+
+    /// Quality flags of the reading (solver and image flags).
+    pub fn flags(&self) -> Flags {
+        match self {
+            Measurement::Stem(s) => s.flags,
+        }
+    }
+
+    /// The method that produced the reading's value.
+    pub fn method(&self) -> Method {
+        match self {
+            Measurement::Stem(s) => s.method,
+        }
+    }
+}
+
+/// A stem's diameter and what qualifies it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct StemReading {
+    /// Diameter (metres).
+    #[serde(with = "wire_real")]
+    pub diameter: Real,
+    /// Predicted 1σ uncertainty of the diameter (metres).
+    #[serde(with = "wire_real")]
+    pub uncertainty: Real,
+    /// The computation the diameter comes from.
+    pub method: Method,
+    /// Distance from the source of plane 0 to the stem's nearest point (metres).
+    #[serde(with = "wire_real")]
+    pub distance: Real,
+    /// The stem's lean, when two planes measured it.
+    pub tilt: Option<TiltAngles>,
+    /// Major and minor diameters (metres) of a section found elliptic ([`Flags::ELLIPTIC`]).
+    pub axes: Option<Axes>,
+    /// Quality flags (solver and image).
+    pub flags: Flags,
+}
+
+/// A stem's lean relative to plane 0 (`docs/cylinder.md`, "Tilt angles"), radians.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TiltAngles {
+    /// Total angle between the stem axis and the plane normal.
+    #[serde(with = "wire_real")]
+    pub total: Real,
+    /// Lean towards (+) or away from the instrument.
+    #[serde(with = "wire_real")]
+    pub theta: Real,
+    /// Sideways lean.
+    #[serde(with = "wire_real")]
+    pub phi: Real,
+}
+
+/// The two diameters of an elliptic section (metres).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Axes {
+    /// Major diameter.
+    #[serde(with = "wire_real")]
+    pub major: Real,
+    /// Minor diameter.
+    #[serde(with = "wire_real")]
+    pub minor: Real,
+}
+
+/// Serialises a [`Real`] as `f32` so the wire format does not depend on the build's
+/// precision (the device computes in f32, the host in f64).
+mod wire_real {
+    use super::Real;
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(value: &Real, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_f32(*value as f32)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(deserializer: D) -> Result<Real, D::Error> {
+        Ok(f32::deserialize(deserializer)? as Real)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn stem() -> Measurement {
+        Measurement::Stem(StemReading {
+            diameter: 0.3001,
+            uncertainty: 0.0012,
+            method: Method::CircleFit,
+            distance: 1.5,
+            tilt: Some(TiltAngles {
+                total: 0.2,
+                theta: 0.1,
+                phi: -0.17,
+            }),
+            axes: None,
+            flags: Flags::TILT_IGNORED,
+        })
+    }
+
+    #[test]
+    fn scalars_travel_as_f32() {
+        let mut buf = [0u8; 64];
+        let bytes = postcard::to_slice(&stem(), &mut buf).expect("fits");
+        // Variant (1) + 3 f32 + method (1) + Some (1) + 3 f32 + None (1) + flags varint (1):
+        // 4 bytes per scalar whatever `Real` is.
+        assert_eq!(bytes.len(), 1 + 12 + 1 + 1 + 12 + 1 + 1);
+        let back: Measurement = postcard::from_bytes(bytes).expect("decodes");
+        let Measurement::Stem(b) = back;
+        assert_eq!(b.diameter, 0.3001f32 as Real);
+        assert_eq!(b.method, Method::CircleFit);
+        assert_eq!(back.mode(), Mode::Cylinder);
+        assert_eq!(back.flags(), Flags::TILT_IGNORED);
+    }
+}
