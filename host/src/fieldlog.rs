@@ -19,8 +19,15 @@
 //! disk). On [`FieldLog::open`], trailing lines that are incomplete or fail their CRC are
 //! cut off (the cut bytes are saved next to the log as `<log>.torn`, never destroyed),
 //! so every record that `append` confirmed is kept and the log stays appendable. A bad line
-//! *followed by good ones* cannot come from an append that was cut short; it is skipped and
-//! counted in [`FieldLog::skipped`] (storage damage), and the rest is read.
+//! *followed by good ones* cannot come from an append that was cut short; it is storage
+//! damage: counted in [`FieldLog::skipped`], its raw bytes appended to `<log>.damaged`,
+//! and the rest is read.
+//!
+//! **Damage.** [`scan`] reads whatever can be read — records on lines that lost their
+//! newline, after a byte-order mark, in CR LF lines, after a damaged magic line — and names
+//! every byte it cannot read as a record by line number and byte range ([`Scan`]);
+//! `tangent log check` prints that account, `tangent log export` exports every recovered
+//! record once and saves the unreadable bytes to `<log>.damaged` (`docs/reliability.md`).
 //!
 //! Why hand-written rather than a database crate: the format must be readable with a text
 //! editor in the field and by any language, a single append + fsync is all the durability
@@ -31,6 +38,14 @@ use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
+
+mod export;
+mod scan;
+
+pub use export::{export, plots, ExportFormat, ExportPlot, TREE_COLUMNS};
+pub use scan::{
+    scan, DamageKind, DamagedSpan, Duplicate, HeaderlessPlot, Located, Scan, Tolerated,
+};
 use tangent_core::protocol::calibration_record::CRC32;
 use tangent_core::solvers::cylinder::Flags;
 
@@ -148,8 +163,8 @@ pub struct FieldLog {
     path: PathBuf,
     file: File,
     records: Vec<Record>,
+    scan: Scan,
     torn_bytes: usize,
-    skipped: usize,
 }
 
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> FieldLogError + '_ {
@@ -215,15 +230,13 @@ impl FieldLog {
                 sync_parent(path)?;
             }
             bytes = magic.to_vec();
-        } else if !bytes.starts_with(magic) {
-            return Err(FieldLogError::NotAFieldLog(path.to_path_buf()));
         }
-        let (records, good_len, skipped) = parse_body(&bytes, magic.len());
+        let scan = scan_bytes(path, &bytes)?;
+        save_damaged(path, &bytes, scan.damaged_inside())?;
+        let good_len = scan.good_len;
         let torn_bytes = bytes.len() - good_len;
         if torn_bytes > 0 {
-            let mut torn_path = path.as_os_str().to_owned();
-            torn_path.push(".torn");
-            let torn_path = PathBuf::from(torn_path);
+            let torn_path = side_path(path, "torn");
             let mut saved = OpenOptions::new()
                 .append(true)
                 .create(true)
@@ -234,24 +247,40 @@ impl FieldLog {
                 .and_then(|()| saved.sync_all())
                 .map_err(io(&torn_path))?;
             file.set_len(good_len as u64).map_err(io(path))?;
+        }
+        if good_len > 0 && bytes[good_len - 1] != b'\n' {
+            // The last record lost its newline (or a record was recovered from the middle
+            // of a line): the next record must start a line of its own.
+            file.write_all(b"\n").map_err(io(path))?;
+        }
+        if torn_bytes > 0 || bytes[..good_len].last() != Some(&b'\n') {
             file.sync_all().map_err(io(path))?;
         }
         Ok(FieldLog {
             path: path.to_path_buf(),
             file,
-            records,
+            records: scan.records(),
+            scan,
             torn_bytes,
-            skipped,
         })
     }
 
-    /// Reads a log without modifying or locking it (for export); a torn tail is ignored.
+    /// Reads a log without modifying or locking it (for export): every recoverable
+    /// record, each reading once; damage is ignored (see [`FieldLog::scan_file`]).
     pub fn read(path: &Path) -> Result<Vec<Record>, FieldLogError> {
+        Ok(FieldLog::scan_file(path)?.records())
+    }
+
+    /// Reads a log without modifying or locking it and accounts for every byte: the
+    /// records and where they are, damaged lines, duplicates, a torn tail.
+    pub fn scan_file(path: &Path) -> Result<Scan, FieldLogError> {
         let bytes = std::fs::read(path).map_err(io(path))?;
-        if !bytes.starts_with(MAGIC_LINE.as_bytes()) {
-            return Err(FieldLogError::NotAFieldLog(path.to_path_buf()));
-        }
-        Ok(parse_body(&bytes, MAGIC_LINE.len()).0)
+        scan_bytes(path, &bytes)
+    }
+
+    /// [`FieldLog::scan_file`] on bytes already read from `path` (named in errors).
+    pub fn scan_bytes(path: &Path, bytes: &[u8]) -> Result<Scan, FieldLogError> {
+        scan_bytes(path, bytes)
     }
 
     /// The log's path.
@@ -269,9 +298,17 @@ impl FieldLog {
         self.torn_bytes
     }
 
-    /// Damaged lines in the middle of the log that were skipped.
+    /// Damaged lines in the middle of the log that were skipped (their bytes are in
+    /// `<log>.damaged`).
     pub fn skipped(&self) -> usize {
-        self.skipped
+        let mut lines: Vec<usize> = self.scan.damaged_inside().iter().map(|d| d.line).collect();
+        lines.dedup();
+        lines.len()
+    }
+
+    /// What opening found in the log (damage, duplicates, tolerated format changes).
+    pub fn scan(&self) -> &Scan {
+        &self.scan
     }
 
     /// The current plot (the last header), if any.
@@ -317,32 +354,77 @@ impl FieldLog {
     }
 }
 
-/// Parses the records after the magic line: returns them, the length of the good prefix of
-/// the file (up to the end of the last good record) and the number of damaged lines that
-/// good lines follow.
-fn parse_body(bytes: &[u8], start: usize) -> (Vec<Record>, usize, usize) {
-    let mut records = Vec::new();
-    let mut good_len = start;
-    let mut bad_since_good = 0;
-    let mut skipped = 0;
-    let mut pos = start;
-    while pos < bytes.len() {
-        let Some(nl) = bytes[pos..].iter().position(|&b| b == b'\n') else {
-            break; // incomplete last line: torn
-        };
-        let line = &bytes[pos..pos + nl];
-        pos += nl + 1;
-        match decode_line(line) {
-            Some(r) => {
-                records.push(r);
-                skipped += bad_since_good;
-                bad_since_good = 0;
-                good_len = pos;
-            }
-            None => bad_since_good += 1,
-        }
+/// Scans `bytes` read from `path`, refusing a file that is not a field log.
+fn scan_bytes(path: &Path, bytes: &[u8]) -> Result<Scan, FieldLogError> {
+    let found = scan(bytes);
+    if scan::is_foreign(bytes, &found) {
+        return Err(FieldLogError::NotAFieldLog(path.to_path_buf()));
     }
-    (records, good_len, skipped)
+    Ok(found)
+}
+
+/// `<log>.<suffix>`, next to the log.
+pub fn side_path(log: &Path, suffix: &str) -> PathBuf {
+    let mut p = log.as_os_str().to_owned();
+    p.push(".");
+    p.push(suffix);
+    PathBuf::from(p)
+}
+
+/// Appends the raw bytes of `spans` of the log `path` (whose content is `bytes`) to
+/// `<log>.damaged`, each after a line naming where it came from; a span already saved
+/// (same line, range and CRC) is not saved again, so the file only grows with new damage
+/// and is never overwritten. Returns how many spans were newly saved.
+pub fn save_damaged(
+    path: &Path,
+    bytes: &[u8],
+    spans: &[DamagedSpan],
+) -> Result<usize, FieldLogError> {
+    if spans.is_empty() {
+        return Ok(0);
+    }
+    let side = side_path(path, "damaged");
+    let existing = match std::fs::read(&side) {
+        Ok(b) => b,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
+        Err(e) => return Err(io(&side)(e)),
+    };
+    let mut out = Vec::new();
+    let mut saved = 0;
+    for d in spans {
+        let raw = &bytes[d.start..d.end];
+        let key = format!(
+            "line {}, bytes {}..{}, crc32 {:08x}",
+            d.line,
+            d.start,
+            d.end,
+            CRC32.checksum(raw)
+        );
+        if existing.windows(key.len()).any(|w| w == key.as_bytes()) {
+            continue;
+        }
+        let name = path
+            .file_name()
+            .unwrap_or(path.as_os_str())
+            .to_string_lossy();
+        out.extend_from_slice(
+            format!("--- {name} {key}: {}; saved {}\n", d.kind, now_rfc3339()).as_bytes(),
+        );
+        out.extend_from_slice(raw);
+        out.push(b'\n');
+        saved += 1;
+    }
+    if saved > 0 {
+        let mut file = OpenOptions::new()
+            .append(true)
+            .create(true)
+            .open(&side)
+            .map_err(io(&side))?;
+        file.write_all(&out)
+            .and_then(|()| file.sync_all())
+            .map_err(io(&side))?;
+    }
+    Ok(saved)
 }
 
 fn sync_parent(path: &Path) -> Result<(), FieldLogError> {
@@ -354,174 +436,6 @@ fn sync_parent(path: &Path) -> Result<(), FieldLogError> {
     File::open(parent)
         .and_then(|d| d.sync_all())
         .map_err(io(parent))
-}
-
-/// Export formats.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum ExportFormat {
-    /// Comma-separated.
-    Csv,
-    /// Tab-separated (Field-Map and Haglöf imports).
-    Tsv,
-    /// JSON: plots with their trees.
-    Json,
-}
-
-/// The tree-level columns of the CSV/TSV exports, in order.
-pub const TREE_COLUMNS: [&str; 11] = [
-    "tree_id",
-    "species",
-    "dbh_mm",
-    "uncertainty_mm",
-    "tilt_deg",
-    "flags",
-    "time",
-    "device_id",
-    "calib_id",
-    "seq",
-    "plot_id",
-];
-
-/// A plot with its trees, as exported.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct ExportPlot<'a> {
-    /// Plot id.
-    pub plot_id: &'a str,
-    /// When it was started.
-    pub started: &'a str,
-    /// Note.
-    pub note: &'a str,
-    /// The trees, in recording order.
-    pub trees: Vec<&'a TreeRecord>,
-}
-
-/// Groups records into plots (a plot id that appears in several headers is one plot, at
-/// its first header), in order of first appearance.
-pub fn plots(records: &[Record]) -> Vec<ExportPlot<'_>> {
-    let mut out: Vec<ExportPlot> = Vec::new();
-    for r in records {
-        match r {
-            Record::Plot(p) => {
-                if !out.iter().any(|e| e.plot_id == p.plot_id) {
-                    out.push(ExportPlot {
-                        plot_id: &p.plot_id,
-                        started: &p.started,
-                        note: &p.note,
-                        trees: Vec::new(),
-                    });
-                }
-            }
-            Record::Tree(t) => {
-                if let Some(e) = out.iter_mut().find(|e| e.plot_id == t.plot_id) {
-                    e.trees.push(t);
-                }
-            }
-        }
-    }
-    out
-}
-
-fn field(value: &str, sep: char) -> String {
-    // RFC 4180 quoting for CSV; TSV fields cannot hold tabs or newlines, so they become
-    // spaces there.
-    if sep == '\t' {
-        return value.replace(['\t', '\n', '\r'], " ");
-    }
-    if value.contains([',', '"', '\n', '\r']) {
-        format!("\"{}\"", value.replace('"', "\"\""))
-    } else {
-        value.to_string()
-    }
-}
-
-/// Exports the log.
-///
-/// CSV/TSV follow the two-level layout of caliper software (Haglöf Versio "header" and
-/// "data" levels; Field-Map's "lines to skip" before the tree columns): for each plot, a
-/// header block of `key<sep>value` lines (`plot_id`, `started`, `note`, `trees`), a blank
-/// line, the tree column names ([`TREE_COLUMNS`]) and one row per tree; plots are separated
-/// by a blank line. Diameters and uncertainties in mm to 0.1 mm, tilt in degrees to 0.1°,
-/// flags as names joined by `+`. JSON is `{"format":"tangent-field-log","version":1,
-/// "plots":[{plot_id, started, note, trees:[{...TreeRecord, flag_names}]}]}`.
-pub fn export(records: &[Record], format: ExportFormat) -> String {
-    let plots = plots(records);
-    match format {
-        ExportFormat::Json => export_json(&plots),
-        ExportFormat::Csv => export_table(&plots, ','),
-        ExportFormat::Tsv => export_table(&plots, '\t'),
-    }
-}
-
-fn export_table(plots: &[ExportPlot], sep: char) -> String {
-    let mut out = String::new();
-    for (i, p) in plots.iter().enumerate() {
-        if i > 0 {
-            out.push('\n');
-        }
-        let s = sep;
-        out += &format!("plot_id{s}{}\n", field(p.plot_id, s));
-        out += &format!("started{s}{}\n", field(p.started, s));
-        out += &format!("note{s}{}\n", field(p.note, s));
-        out += &format!("trees{s}{}\n\n", p.trees.len());
-        out += &TREE_COLUMNS.join(&sep.to_string());
-        out.push('\n');
-        for t in &p.trees {
-            let row = [
-                t.tree_id.to_string(),
-                field(&t.species, s),
-                format!("{:.1}", t.diameter_mm),
-                format!("{:.1}", t.uncertainty_mm),
-                format!("{:.1}", t.tilt_deg),
-                flag_names(t.flags),
-                field(&t.time, s),
-                field(&t.device_id, s),
-                t.calib_id.to_string(),
-                t.seq.to_string(),
-                field(&t.plot_id, s),
-            ];
-            out += &row.join(&sep.to_string());
-            out.push('\n');
-        }
-    }
-    out
-}
-
-fn export_json(plots: &[ExportPlot]) -> String {
-    let plots: Vec<serde_json::Value> = plots
-        .iter()
-        .map(|p| {
-            let trees: Vec<serde_json::Value> = p
-                .trees
-                .iter()
-                .map(|t| {
-                    let mut v = serde_json::to_value(t).unwrap_or_default();
-                    if let Some(obj) = v.as_object_mut() {
-                        let names: Vec<&str> = FLAG_NAMES
-                            .iter()
-                            .filter(|(f, _)| t.flags & f.0 != 0)
-                            .map(|(_, n)| *n)
-                            .collect();
-                        obj.insert("flag_names".into(), names.into());
-                    }
-                    v
-                })
-                .collect();
-            serde_json::json!({
-                "plot_id": p.plot_id,
-                "started": p.started,
-                "note": p.note,
-                "trees": trees,
-            })
-        })
-        .collect();
-    let doc = serde_json::json!({
-        "format": "tangent-field-log",
-        "version": 1,
-        "plots": plots,
-    });
-    let mut s = serde_json::to_string_pretty(&doc).unwrap_or_default();
-    s.push('\n');
-    s
 }
 
 /// Now, as RFC 3339 UTC with seconds (`2025-06-01T10:00:00Z`).

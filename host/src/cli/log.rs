@@ -1,10 +1,23 @@
-//! `tangent log export`: the field log as inventory software imports it.
+//! `tangent log export`: the field log as inventory software imports it; `tangent log
+//! check`: what a log holds, damage included, without changing it.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{Context, Result};
-use tangent_host::fieldlog::{self, ExportFormat, FieldLog, Record};
+use tangent_host::fieldlog::{self, ExportFormat, FieldLog, Record, Scan};
+
+/// The exit status of `log export` and `log check` (also in their `--help`).
+const EXIT_STATUS: &str = "Exit status: 0 the log is intact; 1 it could not be read; 2 bad \
+arguments; 3 some bytes are not readable records — each is named by line and byte range (export \
+also appends them to <log>.damaged) and every readable record is exported; 4 every record was \
+read, but the log needed care: a reading found twice (exported once), a plot header lost (its \
+trees are kept), CR LF line ends, a byte-order mark, a damaged first line or a lost newline.";
+
+/// The log could not all be read as records.
+const EXIT_DAMAGED: u8 = 3;
+/// Every record was read, with findings.
+const EXIT_TOLERATED: u8 = 4;
 
 /// Arguments of `tangent log`.
 #[derive(clap::Args, Debug)]
@@ -19,7 +32,20 @@ enum Command {
     /// row per tree (tree_id, species, dbh_mm, uncertainty_mm, tilt_deg, flags, time,
     /// device_id, calib_id, seq, plot_id). TSV suits Field-Map's calliper import and Haglöf
     /// software (set "lines to skip" to 5); JSON nests trees in plots.
+    #[command(after_help = EXIT_STATUS)]
     Export(ExportArgs),
+    /// Say what is in a log without changing it: plots, trees, damaged lines (line numbers
+    /// and byte ranges), readings found twice, a torn tail.
+    #[command(after_help = EXIT_STATUS)]
+    Check(CheckArgs),
+}
+
+/// Arguments of `tangent log check`.
+#[derive(clap::Args, Debug)]
+struct CheckArgs {
+    /// The field log.
+    #[arg(long, default_value = "tangent-field.log")]
+    log: PathBuf,
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
@@ -50,12 +76,63 @@ struct ExportArgs {
 pub fn run(args: Args) -> Result<ExitCode> {
     match args.command {
         Command::Export(a) => export(a),
+        Command::Check(a) => check(a),
     }
 }
 
-fn export(a: ExportArgs) -> Result<ExitCode> {
-    let mut records = FieldLog::read(&a.log)
+/// The exit status for what a scan found.
+fn exit_code(scan: &Scan) -> ExitCode {
+    if !scan.damaged.is_empty() {
+        ExitCode::from(EXIT_DAMAGED)
+    } else if !scan.is_clean() {
+        ExitCode::from(EXIT_TOLERATED)
+    } else {
+        ExitCode::SUCCESS
+    }
+}
+
+fn check(a: CheckArgs) -> Result<ExitCode> {
+    let scan = FieldLog::scan_file(&a.log)
         .with_context(|| format!("cannot read the field log {}", a.log.display()))?;
+    let records = scan.records();
+    let plots = fieldlog::plots(&records);
+    let trees: usize = plots.iter().map(|p| p.trees.len()).sum();
+    println!(
+        "{}: {} plot(s), {trees} tree(s)",
+        a.log.display(),
+        plots.len()
+    );
+    for p in &plots {
+        let started = if p.header_lost {
+            "header lost".to_string()
+        } else {
+            format!("started {}", p.started)
+        };
+        println!("  plot {}: {} tree(s), {started}", p.plot_id, p.trees.len());
+    }
+    let torn: usize = scan.torn_tail().iter().map(|d| d.end - d.start).sum();
+    let mut lines: Vec<usize> = scan.damaged_inside().iter().map(|d| d.line).collect();
+    lines.dedup();
+    println!(
+        "damaged lines: {}; readings found twice: {}; torn tail: {torn} byte(s)",
+        lines.len(),
+        scan.duplicates.len()
+    );
+    for finding in scan.findings() {
+        println!("  {finding}");
+    }
+    if scan.is_clean() {
+        println!("the log is intact");
+    }
+    Ok(exit_code(&scan))
+}
+
+fn export(a: ExportArgs) -> Result<ExitCode> {
+    let bytes = std::fs::read(&a.log)
+        .with_context(|| format!("cannot read the field log {}", a.log.display()))?;
+    let scan = FieldLog::scan_bytes(&a.log, &bytes)?;
+    report_damage(&a.log, &bytes, &scan);
+    let mut records = scan.records();
     if let Some(id) = &a.plot_id {
         records.retain(|r| match r {
             Record::Plot(p) => &p.plot_id == id,
@@ -76,5 +153,26 @@ fn export(a: ExportArgs) -> Result<ExitCode> {
             .with_context(|| format!("cannot write {}", path.display()))?,
         None => print!("{text}"),
     }
-    Ok(ExitCode::SUCCESS)
+    Ok(exit_code(&scan))
+}
+
+/// Names every finding on standard error and saves the unreadable bytes next to the log.
+fn report_damage(log: &std::path::Path, bytes: &[u8], scan: &Scan) {
+    for finding in scan.findings() {
+        eprintln!("warning: {}: {finding}", log.display());
+    }
+    if scan.damaged.is_empty() {
+        return;
+    }
+    let side = fieldlog::side_path(log, "damaged");
+    match fieldlog::save_damaged(log, bytes, &scan.damaged) {
+        Ok(n) => eprintln!(
+            "warning: {} unreadable span(s) in {}; their raw bytes are in {} ({n} newly saved); \
+             every readable record is exported",
+            scan.damaged.len(),
+            log.display(),
+            side.display()
+        ),
+        Err(e) => eprintln!("warning: could not save the unreadable bytes: {e}"),
+    }
 }
