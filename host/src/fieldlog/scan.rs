@@ -280,9 +280,9 @@ pub fn scan(bytes: &[u8]) -> Scan {
         };
         let has_newline = next > content_end;
         let mut end = content_end;
-        if has_newline && end > pos && bytes[end - 1] == b'\r' {
+        if end > pos && bytes[end - 1] == b'\r' {
             end -= 1;
-            crlf += 1;
+            crlf += usize::from(has_newline);
         }
         let line = &bytes[pos..end];
         if line_no == 1 && line == magic {
