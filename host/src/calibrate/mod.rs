@@ -12,7 +12,9 @@
 //!    and every pose, with per-view reprojection errors and parameter standard deviations;
 //! 4. [`laser`]: board pose per capture, stripe points back-projected onto the board plane,
 //!    robust plane fit, repeatability (leave-one-pose-out spread of baseline, tilt, roll);
-//! 5. [`report`]: the text report and the PNG figures.
+//! 5. [`report`]: the text report and the PNG figures;
+//! 6. [`sanity`]: what is refused — views that cannot determine the calibration,
+//!    parameters whose σ is beyond a sane bound, loaded values outside physical ranges.
 //!
 //! The camera model is the core's ([`tangent_core::camera::Camera`]): whatever is
 //! calibrated here is exactly what the instrument evaluates.
@@ -21,6 +23,7 @@ pub mod corners;
 pub mod laser;
 pub mod refine;
 pub mod report;
+pub mod sanity;
 pub mod zhang;
 
 use nalgebra::{Rotation3, Vector3};
@@ -170,6 +173,25 @@ pub enum CalibrateError {
     /// The refinement did not produce a valid camera.
     #[error("refinement failed: {0}")]
     Refinement(String),
+    /// The views cannot determine the calibration (repeated views, too little tilt between
+    /// them, a laser plane seen at a single depth); see [`sanity`].
+    #[error("the views cannot determine the calibration: {0}")]
+    Undetermined(String),
+    /// A parameter's standard deviation exceeds its bound ([`sanity`]).
+    #[error(
+        "{name} is not determined by these views: σ = {sigma:.4e} {unit}, the bound is \
+         {bound:.4e} {unit}; add views with the board tilted differently"
+    )]
+    TooUncertain {
+        /// The parameter.
+        name: &'static str,
+        /// Its standard deviation.
+        sigma: f64,
+        /// The bound it exceeds.
+        bound: f64,
+        /// Unit of both.
+        unit: &'static str,
+    },
     /// Too few stripe points to fit a laser plane.
     #[error("{found} laser-stripe point(s) on the board, at least {needed} needed")]
     TooFewStripePoints {

@@ -268,6 +268,7 @@ pub fn calibrate_camera(
             needed: 3,
         });
     }
+    super::sanity::distinct_views(&used)?;
     let (width, height) = (used[0].width, used[0].height);
     let (initial, poses) = initial_estimate(&used, board, width, height)?;
 
@@ -344,7 +345,7 @@ pub fn calibrate_camera(
         .map(|v| pose_from(&p[N_INTRINSICS + 6 * v..N_INTRINSICS + 6 * v + 6]))
         .collect();
 
-    Ok(CameraCalibration {
+    let calibration = CameraCalibration {
         camera,
         initial,
         view_names: used.iter().map(|v| v.name.clone()).collect(),
@@ -356,7 +357,9 @@ pub fn calibrate_camera(
         sigma,
         outlier_views,
         iterations,
-    })
+    };
+    super::sanity::camera_determined(&calibration)?;
+    Ok(calibration)
 }
 
 /// Levenberg–Marquardt with Marquardt's diagonal scaling (`docs/calibration.md`, "LM").

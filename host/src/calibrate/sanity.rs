@@ -1,0 +1,315 @@
+//! What a calibration refuses (`docs/calibration.md`, "When calibration refuses"): views
+//! that cannot determine it (repeated views, too little tilt between them, a laser plane
+//! seen at a single depth), parameters whose standard deviation exceeds a sane bound, and
+//! loaded values outside physical ranges.
+
+use nalgebra::Vector3;
+use tangent_core::camera::Camera;
+use tangent_core::real::Vec3;
+
+use super::laser::{PlaneFit, Repeatability};
+use super::refine::{CameraCalibration, INTRINSIC_NAMES};
+use super::{CalibrateError, View};
+
+/// Two views whose common corners differ by less than this RMS (pixels) are the same view:
+/// corner noise is ~0.1–0.3 px, so a board that has not moved agrees to well under 1 px,
+/// and a board that has moved enough to add information differs by many pixels.
+pub const SAME_VIEW_PX: f64 = 1.0;
+
+/// Distinct views needed (Zhang's closed form: three for a free principal point).
+pub const MIN_DISTINCT_VIEWS: usize = 3;
+
+/// Least angle (degrees) between the board orientations of two views. Each view gives
+/// Zhang's two constraints through its rotation only; views at the same orientation give
+/// the same constraints, and the focal length follows from the difference between them.
+/// Zhang (2000, §5.1) shows the error growing steeply below ~10° between planes; 5° is half
+/// of that, a margin below which no calibration should be trusted.
+pub const MIN_ORIENTATION_SPREAD_DEG: f64 = 5.0;
+
+/// Largest relative standard deviation of fx and fy: a diameter scales with `1/f`, so 1 %
+/// of `f` is 1 % of every reading — ten times the reference device's calibration budget
+/// (`NoiseModel::reference`: σ_f = 1 px), beyond which the focal length is not determined.
+pub const MAX_FOCAL_SIGMA_RELATIVE: f64 = 0.01;
+
+/// Largest standard deviation of cx and cy as a fraction of the image's larger side: 2 %
+/// (≈ 15 px on 752 px) tilts every ray by ~1° — not a calibration.
+pub const MAX_PRINCIPAL_SIGMA_FRACTION: f64 = 0.02;
+
+/// Largest displacement, as a fraction of the radius at the farthest image corner, that
+/// one distortion coefficient's standard deviation may cause there (`σ(k_i)·r^(2i)` for the
+/// radial, `3·σ(p)·r²` for the tangential terms): 5 % (≈ 20 px at a 400 px radius). The
+/// marginal σ of k2, k3 are large because they are correlated with each other (the
+/// OpenCV sample: ≈ 1.5 %); an unconstrained one is orders of magnitude beyond.
+pub const MAX_DISTORTION_SIGMA_EFFECT: f64 = 0.05;
+
+/// Least spread (metres) of the stripe lines of different poses across the laser plane.
+/// One pose shows one line of the plane; its rotation about that line is fixed only by a
+/// second line away from it. The board pose from ~50 corners at 0.2 px puts the board —
+/// and so the stripe line on it — to `0.2 px·Z/(f·√50)` ≈ 15–30 µm at 0.5 m; over a lever
+/// `L` that is a tilt error of `σ·√2/L`, under 2 mrad (ten times the budget σ_δ = 0.2 mrad)
+/// for `L ≥ 20 mm`.
+pub const MIN_PLANE_SPREAD_M: f64 = 0.02;
+
+/// Largest jackknife standard errors of a laser plane's baseline (metres) and its tilt and
+/// roll (radians): ten times the reference calibration budget (σ_e = 0.2 mm, σ_δ = 0.2
+/// mrad, `NoiseModel::reference`).
+pub const MAX_PLANE_STD_ERROR: (f64, f64, f64) = (2e-3, 2e-3, 2e-3);
+
+/// Refuses repeated views: a view whose corners agree with an earlier one's to within
+/// [`SAME_VIEW_PX`] adds nothing, and fewer than [`MIN_DISTINCT_VIEWS`] distinct views
+/// cannot determine the camera.
+pub fn distinct_views(views: &[&View]) -> Result<(), CalibrateError> {
+    let mut distinct: Vec<&View> = Vec::new();
+    let mut repeats = Vec::new();
+    for v in views {
+        match distinct.iter().find_map(|d| {
+            let rms = common_corner_rms(d, v)?;
+            (rms < SAME_VIEW_PX).then_some((d, rms))
+        }) {
+            Some((d, rms)) => repeats.push(format!(
+                "{} repeats {} (corners within {rms:.2} px)",
+                v.name, d.name
+            )),
+            None => distinct.push(v),
+        }
+    }
+    if distinct.len() < MIN_DISTINCT_VIEWS {
+        return Err(CalibrateError::Undetermined(format!(
+            "{} distinct view(s), at least {MIN_DISTINCT_VIEWS} needed: {}; photograph the \
+             board at different tilts",
+            distinct.len(),
+            repeats.join("; ")
+        )));
+    }
+    Ok(())
+}
+
+/// RMS distance (pixels) between the corners two views share, `None` with fewer than 6.
+fn common_corner_rms(a: &View, b: &View) -> Option<f64> {
+    let (mut ss, mut n) = (0.0, 0usize);
+    for ca in &a.corners {
+        if let Some(cb) = b.corners.iter().find(|c| (c.i, c.j) == (ca.i, ca.j)) {
+            ss += (ca.pixel - cb.pixel).norm_squared();
+            n += 1;
+        }
+    }
+    (n >= 6).then(|| (ss / n as f64).sqrt())
+}
+
+/// Refuses a camera calibration the views do not determine: board orientations within
+/// [`MIN_ORIENTATION_SPREAD_DEG`] of each other, or a parameter's σ beyond its bound.
+pub fn camera_determined(cal: &CameraCalibration) -> Result<(), CalibrateError> {
+    let normals: Vec<Vector3<f64>> = cal.poses.iter().map(|p| p.rotation * Vec3::z()).collect();
+    let mut spread: f64 = 0.0;
+    for (i, a) in normals.iter().enumerate() {
+        for b in &normals[i + 1..] {
+            // A relabelled board (rotated by 180°) flips its normal: compare as lines.
+            let angle = a.angle(b).to_degrees();
+            spread = spread.max(angle.min(180.0 - angle));
+        }
+    }
+    if spread < MIN_ORIENTATION_SPREAD_DEG {
+        return Err(CalibrateError::Undetermined(format!(
+            "the board orientations differ by at most {spread:.1}°, at least \
+             {MIN_ORIENTATION_SPREAD_DEG}° needed; tilt the board differently between views"
+        )));
+    }
+    let c = &cal.camera;
+    let r = corner_radius(c);
+    for (k, (&name, &sigma)) in INTRINSIC_NAMES.iter().zip(&cal.std_dev).enumerate() {
+        let (bound, unit) = match name {
+            "fx" => (MAX_FOCAL_SIGMA_RELATIVE * c.fx, "px"),
+            "fy" => (MAX_FOCAL_SIGMA_RELATIVE * c.fy, "px"),
+            "cx" | "cy" => (
+                MAX_PRINCIPAL_SIGMA_FRACTION * c.width.max(c.height) as f64,
+                "px",
+            ),
+            "k1" => (MAX_DISTORTION_SIGMA_EFFECT / r.powi(2), ""),
+            "k2" => (MAX_DISTORTION_SIGMA_EFFECT / r.powi(4), ""),
+            "k3" => (MAX_DISTORTION_SIGMA_EFFECT / r.powi(6), ""),
+            _ => (MAX_DISTORTION_SIGMA_EFFECT / (3.0 * r * r), ""),
+        };
+        // A NaN σ (singular normal matrix) is undetermined too.
+        if !(sigma <= bound) {
+            return Err(CalibrateError::TooUncertain {
+                name: INTRINSIC_NAMES[k],
+                sigma,
+                bound,
+                unit,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Normalised radius of the image corner farthest from the principal point (at least a
+/// small positive value, so the bounds stay finite).
+fn corner_radius(c: &Camera) -> f64 {
+    let dx = c.cx.abs().max((c.width as f64 - c.cx).abs()) / c.fx;
+    let dy = c.cy.abs().max((c.height as f64 - c.cy).abs()) / c.fy;
+    dx.hypot(dy).max(1e-3)
+}
+
+/// Refuses a laser plane whose leave-one-pose-out standard errors exceed
+/// [`MAX_PLANE_STD_ERROR`].
+pub fn plane_repeatable(rep: &Repeatability) -> Result<(), CalibrateError> {
+    let (se, st, sr) = rep.std_error;
+    let (be, bt, br) = MAX_PLANE_STD_ERROR;
+    for (name, sigma, bound, scale, unit) in [
+        ("the laser baseline", se, be, 1e3, "mm"),
+        ("the laser tilt", st, bt, 1e3, "mrad"),
+        ("the laser roll", sr, br, 1e3, "mrad"),
+    ] {
+        if !(sigma <= bound) {
+            return Err(CalibrateError::TooUncertain {
+                name,
+                sigma: sigma * scale,
+                bound: bound * scale,
+                unit,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Refuses a laser plane the poses do not determine: its stripe lines must be spread across
+/// the plane by at least [`MIN_PLANE_SPREAD_M`] (two or more distinct depths).
+pub fn plane_determined(per_pose: &[Vec<Vec3>], fit: &PlaneFit) -> Result<(), CalibrateError> {
+    let all: Vec<&Vec3> = per_pose.iter().flatten().collect();
+    let n = all.len().max(1) as f64;
+    let mean = all.iter().fold(Vec3::zeros(), |a, p| a + *p) / n;
+    // The stripe direction is the main axis of the points within the plane; the spread is
+    // measured along the in-plane direction across it.
+    let mut scatter = nalgebra::Matrix3::zeros();
+    for p in &all {
+        let d = *p - mean;
+        let d = d - fit.normal * fit.normal.dot(&d);
+        scatter += d * d.transpose();
+    }
+    let eig = scatter.symmetric_eigen();
+    let (imax, _) = eig
+        .eigenvalues
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(b.1))
+        .unwrap_or((0, &0.0));
+    let along: Vec3 = eig.eigenvectors.column(imax).into_owned();
+    let across = fit.normal.cross(&along);
+    let centres: Vec<f64> = per_pose
+        .iter()
+        .filter(|p| !p.is_empty())
+        .map(|p| p.iter().map(|x| across.dot(&(x - mean))).sum::<f64>() / p.len() as f64)
+        .collect();
+    let lo = centres.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = centres.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let spread = hi - lo;
+    if !(spread >= MIN_PLANE_SPREAD_M) {
+        return Err(CalibrateError::Undetermined(format!(
+            "the laser stripes of the {} pose(s) lie within {:.1} mm of each other across the \
+             plane, at least {:.0} mm needed: place the board at two or more distinct depths",
+            centres.len(),
+            spread.max(0.0) * 1e3,
+            MIN_PLANE_SPREAD_M * 1e3
+        )));
+    }
+    Ok(())
+}
+
+/// A loaded calibration value outside its physical range.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("calibration.{key} = {value:e} is outside {range}")]
+pub struct OutOfRange {
+    /// The key, as in the file (`camera.fx_px`, `planes[0].offset_m`).
+    pub key: String,
+    /// Its value.
+    pub value: f64,
+    /// The range, with unit and reason.
+    pub range: String,
+}
+
+/// Focal lengths a camera of this instrument can have (pixels): a 100 px focal length on
+/// a 752 px sensor is a 150° field, 100 000 px a 0.4° one.
+pub const FOCAL_RANGE_PX: (f64, f64) = (100.0, 100_000.0);
+
+/// Largest plane offset and source distance from the camera (metres): the instrument is
+/// handheld, its lasers are centimetres from the lens.
+pub const MAX_PLANE_DISTANCE_M: f64 = 2.0;
+
+/// Checks a loaded camera against physical ranges, naming the first key outside.
+pub fn check_camera(c: &Camera) -> Result<(), OutOfRange> {
+    let out = |key: &str, value: f64, range: String| {
+        Err(OutOfRange {
+            key: format!("camera.{key}"),
+            value,
+            range,
+        })
+    };
+    let (lo, hi) = FOCAL_RANGE_PX;
+    for (key, v) in [("fx_px", c.fx), ("fy_px", c.fy)] {
+        if !(lo..=hi).contains(&v) {
+            return out(key, v, format!("{lo}..{hi} px"));
+        }
+    }
+    let (w, h) = (c.width as f64, c.height as f64);
+    if !(0.0..=w).contains(&c.cx) {
+        return out("cx_px", c.cx, format!("0..{w} px (inside the image)"));
+    }
+    if !(0.0..=h).contains(&c.cy) {
+        return out("cy_px", c.cy, format!("0..{h} px (inside the image)"));
+    }
+    // No lens moves a point at the image corner by more than its own radius: |k_i|·r^(2i)
+    // ≤ 1 and 3|p|·r² ≤ 1 (r the normalised radius of the farthest corner).
+    let r = corner_radius(c);
+    let d = c.distortion;
+    for (key, v, bound) in [
+        ("k1", d.k1, 1.0 / r.powi(2)),
+        ("k2", d.k2, 1.0 / r.powi(4)),
+        ("k3", d.k3, 1.0 / r.powi(6)),
+        ("p1", d.p1, 1.0 / (3.0 * r * r)),
+        ("p2", d.p2, 1.0 / (3.0 * r * r)),
+    ] {
+        if !(v.abs() <= bound) {
+            return out(
+                &format!("distortion.{key}"),
+                v,
+                format!("±{bound:.3e} (its term may not exceed the radius at the image corner, r = {r:.2})"),
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Checks loaded plane `index` (`normal`, `offset_m`, `source_m` as in the file) against
+/// physical ranges, naming the first key outside (the core then validates the plane
+/// itself: the source on the plane, the camera off it).
+pub fn check_plane(
+    index: usize,
+    normal: Vec3,
+    offset: f64,
+    source: Vec3,
+) -> Result<(), OutOfRange> {
+    let out = |key: &str, value: f64, range: String| {
+        Err(OutOfRange {
+            key: format!("planes[{index}].{key}"),
+            value,
+            range,
+        })
+    };
+    // Written with 5 or more digits a unit normal is within 1e-4 of 1; 1 % is a typo.
+    let len = normal.norm();
+    if !((len - 1.0).abs() <= 0.01) {
+        return out("normal", len, "length 0.99..1.01 (a unit normal)".into());
+    }
+    let d = MAX_PLANE_DISTANCE_M;
+    if !(offset.abs() <= d && offset.abs() >= 1e-3) {
+        return out("offset_m", offset, format!("±(0.001..{d}) m"));
+    }
+    if !(source.norm() <= d) {
+        return out(
+            "source_m",
+            source.norm(),
+            format!("0..{d} m from the camera (distance given)"),
+        );
+    }
+    Ok(())
+}
