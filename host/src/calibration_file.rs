@@ -72,6 +72,9 @@ pub enum CalibrationFileError {
         /// 1-based line, when known.
         line: Option<usize>,
     },
+    /// A value outside its physical range (the message names the key).
+    #[error(transparent)]
+    OutOfRange(#[from] crate::calibrate::sanity::OutOfRange),
     /// The values parse but do not form a valid calibration (e.g. a normal of zero length).
     #[error("invalid calibration: {0}")]
     Invalid(CalibrationError),
@@ -237,8 +240,15 @@ impl CalibrationToml {
                 p2: d.p2 as Real,
             },
         };
+        crate::calibrate::sanity::check_camera(&camera)?;
         let mut planes = Vec::with_capacity(self.planes.len());
         for (index, p) in self.planes.iter().enumerate() {
+            crate::calibrate::sanity::check_plane(
+                index,
+                v3(p.normal),
+                p.offset_m as f64,
+                v3(p.source_m),
+            )?;
             let plane = LaserPlane::new(v3(p.normal), p.offset_m as Real, v3(p.source_m)).map_err(
                 |error| CalibrationFileError::Invalid(CalibrationError::Plane { index, error }),
             )?;
@@ -268,6 +278,7 @@ impl CameraToml {
                 p2: d.p2 as Real,
             },
         };
+        crate::calibrate::sanity::check_camera(&camera)?;
         camera
             .validate()
             .map_err(|e| CalibrationFileError::Invalid(CalibrationError::Camera(e)))?;

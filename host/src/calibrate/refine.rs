@@ -298,11 +298,10 @@ pub fn calibrate_camera(
     let r = problem.residuals(&p);
     let (jtj, _) = problem.normal_equations(&p, &r);
     let camera = camera_from(&p, width, height);
-    if camera.validate().is_err() {
-        return Err(CalibrateError::Refinement(format!(
-            "the refined camera is not valid: {camera:?}"
-        )));
-    }
+    let poses: Vec<Pose> = (0..used.len())
+        .map(|v| pose_from(&p[N_INTRINSICS + 6 * v..N_INTRINSICS + 6 * v + 6]))
+        .collect();
+    super::sanity::orientations_spread(&poses)?;
 
     let dof = m.saturating_sub(n).max(1);
     let sigma = (r.norm_squared() / dof as f64).sqrt();
@@ -312,6 +311,15 @@ pub fn calibrate_camera(
         for (k, s) in std_dev.iter_mut().enumerate() {
             *s = sigma * cov[(k, k)].max(0.0).sqrt();
         }
+    }
+
+    // What the views cannot determine is refused by name before the camera's validity
+    // (an undetermined camera is often also an invalid one).
+    super::sanity::parameters_determined(&camera, &std_dev)?;
+    if camera.validate().is_err() {
+        return Err(CalibrateError::Refinement(format!(
+            "the refined camera is not valid: {camera:?}"
+        )));
     }
 
     let mut residuals = Vec::with_capacity(used.len());
@@ -341,9 +349,6 @@ pub fn calibrate_camera(
         .filter(|(_, &e)| e > OUTLIER_VIEW_FACTOR * median)
         .map(|(i, _)| i)
         .collect();
-    let poses = (0..used.len())
-        .map(|v| pose_from(&p[N_INTRINSICS + 6 * v..N_INTRINSICS + 6 * v + 6]))
-        .collect();
 
     let calibration = CameraCalibration {
         camera,
@@ -358,7 +363,6 @@ pub fn calibrate_camera(
         outlier_views,
         iterations,
     };
-    super::sanity::camera_determined(&calibration)?;
     Ok(calibration)
 }
 

@@ -8,8 +8,8 @@ use tangent_core::camera::Camera;
 use tangent_core::real::Vec3;
 
 use super::laser::{PlaneFit, Repeatability};
-use super::refine::{CameraCalibration, INTRINSIC_NAMES};
-use super::{CalibrateError, View};
+use super::refine::{INTRINSIC_NAMES, N_INTRINSICS};
+use super::{CalibrateError, Pose, View};
 
 /// Two views whose common corners differ by less than this RMS (pixels) are the same view:
 /// corner noise is ~0.1–0.3 px, so a board that has not moved agrees to well under 1 px,
@@ -96,10 +96,11 @@ fn common_corner_rms(a: &View, b: &View) -> Option<f64> {
     (n >= 6).then(|| (ss / n as f64).sqrt())
 }
 
-/// Refuses a camera calibration the views do not determine: board orientations within
-/// [`MIN_ORIENTATION_SPREAD_DEG`] of each other, or a parameter's σ beyond its bound.
-pub fn camera_determined(cal: &CameraCalibration) -> Result<(), CalibrateError> {
-    let normals: Vec<Vector3<f64>> = cal.poses.iter().map(|p| p.rotation * Vec3::z()).collect();
+/// Refuses board poses whose orientations all lie within [`MIN_ORIENTATION_SPREAD_DEG`] of
+/// each other: Zhang's constraints come from the rotations alone, so such views do not
+/// determine the focal length, whatever their distances.
+pub fn orientations_spread(poses: &[Pose]) -> Result<(), CalibrateError> {
+    let normals: Vec<Vector3<f64>> = poses.iter().map(|p| p.rotation * Vec3::z()).collect();
     let mut spread: f64 = 0.0;
     for (i, a) in normals.iter().enumerate() {
         for b in &normals[i + 1..] {
@@ -108,15 +109,23 @@ pub fn camera_determined(cal: &CameraCalibration) -> Result<(), CalibrateError> 
             spread = spread.max(angle.min(180.0 - angle));
         }
     }
-    if spread < MIN_ORIENTATION_SPREAD_DEG {
+    if !(spread >= MIN_ORIENTATION_SPREAD_DEG) {
         return Err(CalibrateError::Undetermined(format!(
             "the board orientations differ by at most {spread:.1}°, at least \
              {MIN_ORIENTATION_SPREAD_DEG}° needed; tilt the board differently between views"
         )));
     }
-    let c = &cal.camera;
+    Ok(())
+}
+
+/// Refuses a camera calibration with a parameter whose σ is beyond its bound (the
+/// `MAX_*_SIGMA_*` constants), naming the parameter and its σ.
+pub fn parameters_determined(
+    c: &Camera,
+    std_dev: &[f64; N_INTRINSICS],
+) -> Result<(), CalibrateError> {
     let r = corner_radius(c);
-    for (k, (&name, &sigma)) in INTRINSIC_NAMES.iter().zip(&cal.std_dev).enumerate() {
+    for (k, (&name, &sigma)) in INTRINSIC_NAMES.iter().zip(std_dev).enumerate() {
         let (bound, unit) = match name {
             "fx" => (MAX_FOCAL_SIGMA_RELATIVE * c.fx, "px"),
             "fy" => (MAX_FOCAL_SIGMA_RELATIVE * c.fy, "px"),
@@ -217,7 +226,7 @@ pub fn plane_determined(per_pose: &[Vec<Vec3>], fit: &PlaneFit) -> Result<(), Ca
 
 /// A loaded calibration value outside its physical range.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("calibration.{key} = {value:e} is outside {range}")]
+#[error("calibration.{key} = {} is outside {range}", readable(*.value))]
 pub struct OutOfRange {
     /// The key, as in the file (`camera.fx_px`, `planes[0].offset_m`).
     pub key: String,
@@ -225,6 +234,15 @@ pub struct OutOfRange {
     pub value: f64,
     /// The range, with unit and reason.
     pub range: String,
+}
+
+/// `value` as people write it: plain between 0.001 and 1e6, else in exponent form.
+fn readable(value: f64) -> String {
+    if value == 0.0 || (1e-3..1e6).contains(&value.abs()) {
+        format!("{value}")
+    } else {
+        format!("{value:e}")
+    }
 }
 
 /// Focal lengths a camera of this instrument can have (pixels): a 100 px focal length on

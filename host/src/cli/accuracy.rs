@@ -27,7 +27,12 @@ pub struct Args {
     #[arg(long, default_value = "accuracy.png")]
     out: PathBuf,
     /// Diameters to plot (millimetres).
-    #[arg(long, value_delimiter = ',', default_values_t = vec![50.0, 100.0, 200.0, 400.0, 800.0])]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        value_parser = parse_diameter_mm,
+        default_values_t = vec![50.0, 100.0, 200.0, 400.0, 800.0]
+    )]
     diameters_mm: Vec<f64>,
 }
 
@@ -52,6 +57,24 @@ fn predict(cal: &Calibration, d: f64, z: f64, scratch: &mut [Vec2]) -> (Option<f
         ),
         Err(_) => (None, None),
     }
+}
+
+/// Diameters a stem can have (mm): the error model is meaningful from a sapling to the
+/// largest trees measured with a caliper.
+const DIAMETER_RANGE_MM: (f64, f64) = (1.0, 10_000.0);
+
+/// A diameter in millimetres, finite and within [`DIAMETER_RANGE_MM`] (`NaN`, `0` or
+/// `1e300` would plot nothing meaningful, or nothing at all).
+fn parse_diameter_mm(text: &str) -> Result<f64, String> {
+    let (lo, hi) = DIAMETER_RANGE_MM;
+    let value: f64 = text
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{text}` is not a number"))?;
+    if !(lo..=hi).contains(&value) {
+        return Err(format!("{value} mm is outside {lo}..{hi} mm"));
+    }
+    Ok(value)
 }
 
 /// Runs `tangent accuracy`.
