@@ -24,8 +24,9 @@ const MAGIC_MAX_EDITS: usize = 3;
 
 /// Records are searched inside a damaged line only up to this length (the longest record
 /// `listen` writes is well under 1 KiB; an intact line of any length still reads). The
-/// bound keeps the search linear in the size of the damage.
-const MAX_RECOVERED_RECORD: usize = 16 * 1024;
+/// bound keeps the search linear in the size of the damage (a 1 MB line made of nothing
+/// but record starts takes about a second).
+const MAX_RECOVERED_RECORD: usize = 4 * 1024;
 
 static CRC: Crc<u32> = tangent_core::protocol::calibration_record::CRC32;
 
@@ -301,7 +302,7 @@ pub fn scan(bytes: &[u8]) -> Scan {
                 s.tolerated.push(Tolerated::NoFinalNewline);
             }
         } else {
-            let found = recover(line);
+            let (found, unknown) = recover(line);
             if found.len() > 1 {
                 joined.push(Tolerated::JoinedRecords {
                     line: line_no,
@@ -316,7 +317,7 @@ pub fn scan(bytes: &[u8]) -> Scan {
                     s.magic_line = true;
                     s.tolerated.push(magic_damaged(gap));
                 } else {
-                    damage(&mut s, line_no, pos + covered, gap);
+                    damage(&mut s, line_no, pos, covered..start, line, &unknown);
                 }
                 s.records.push(Located {
                     line: line_no,
@@ -332,7 +333,7 @@ pub fn scan(bytes: &[u8]) -> Scan {
                 s.tolerated.push(magic_damaged(rest));
                 s.good_len = next;
             } else {
-                damage(&mut s, line_no, pos + covered, rest);
+                damage(&mut s, line_no, pos, covered..line.len(), line, &unknown);
             }
         }
         pos = next;
@@ -365,14 +366,23 @@ fn magic_damaged(found: &[u8]) -> Tolerated {
     }
 }
 
-/// Records `bytes` (at `offset`, on line `line`) as damaged unless empty.
-fn damage(s: &mut Scan, line: usize, offset: usize, bytes: &[u8]) {
+/// Records `range` of `line` (which starts at file offset `offset`) as damaged unless
+/// empty; `unknown` are the starts of CRC-valid records of an unknown kind in the line.
+fn damage(
+    s: &mut Scan,
+    line_no: usize,
+    offset: usize,
+    range: std::ops::Range<usize>,
+    line: &[u8],
+    unknown: &[usize],
+) {
+    let bytes = &line[range.clone()];
     if bytes.is_empty() {
         return;
     }
     let kind = if bytes.iter().all(|&b| b == 0) {
         DamageKind::Zeroed
-    } else if (0..bytes.len()).any(|i| crc_valid_end(bytes, i).is_some()) {
+    } else if unknown.iter().any(|u| range.contains(u)) {
         DamageKind::UnknownRecord
     } else if (0..bytes.len()).any(|i| record_shape(bytes, i)) {
         DamageKind::CrcMismatch
@@ -380,9 +390,9 @@ fn damage(s: &mut Scan, line: usize, offset: usize, bytes: &[u8]) {
         DamageKind::NotARecord
     };
     s.damaged.push(DamagedSpan {
-        line,
-        start: offset,
-        end: offset + bytes.len(),
+        line: line_no,
+        start: offset + range.start,
+        end: offset + range.end,
         kind,
     });
 }
@@ -393,12 +403,6 @@ fn record_shape(line: &[u8], i: usize) -> bool {
         && line[i..i + 8].iter().all(u8::is_ascii_hexdigit)
         && line[i + 8] == b' '
         && line[i + 9] == b'{'
-}
-
-/// If a record shape starts at `line[i]`, the end of the first `}` after it at which the
-/// JSON's CRC matches the record's CRC field.
-fn crc_valid_end(line: &[u8], i: usize) -> Option<usize> {
-    crc_valid_ends(line, i).next()
 }
 
 /// Every end (one past a `}`) at which the JSON starting at `line[i + 9]` has the CRC
@@ -422,15 +426,28 @@ fn crc_valid_ends(line: &[u8], i: usize) -> impl Iterator<Item = usize> + '_ {
     })
 }
 
-/// The records inside a damaged line: `(start, end, record)` in order, not overlapping.
-fn recover(line: &[u8]) -> Vec<(usize, usize, Record)> {
+/// The records inside a damaged line: `(start, end, record)` in order, not overlapping;
+/// and the starts of CRC-valid JSON that is not a record (of an unknown kind).
+type Recovered = (Vec<(usize, usize, Record)>, Vec<usize>);
+
+fn recover(line: &[u8]) -> Recovered {
     let mut found = Vec::new();
+    let mut unknown = Vec::new();
     let mut i = 0;
     while i < line.len() {
-        let record = crc_valid_ends(line, i).find_map(|end| {
-            let json = std::str::from_utf8(&line[i + 9..end]).ok()?;
-            serde_json::from_str::<Record>(json).ok().map(|r| (end, r))
-        });
+        let mut record = None;
+        for end in crc_valid_ends(line, i) {
+            let parsed = std::str::from_utf8(&line[i + 9..end])
+                .ok()
+                .and_then(|json| serde_json::from_str::<Record>(json).ok());
+            match parsed {
+                Some(r) => {
+                    record = Some((end, r));
+                    break;
+                }
+                None => unknown.push(i),
+            }
+        }
         match record {
             Some((end, r)) => {
                 found.push((i, end, r));
@@ -439,7 +456,7 @@ fn recover(line: &[u8]) -> Vec<(usize, usize, Record)> {
             None => i += 1,
         }
     }
-    found
+    (found, unknown)
 }
 
 /// Keeps the first of every reading found twice: same device, sequence number and device
