@@ -109,7 +109,7 @@ pub fn orientations_spread(poses: &[Pose]) -> Result<(), CalibrateError> {
             spread = spread.max(angle.min(180.0 - angle));
         }
     }
-    if !(spread >= MIN_ORIENTATION_SPREAD_DEG) {
+    if spread.is_nan() || spread < MIN_ORIENTATION_SPREAD_DEG {
         return Err(CalibrateError::Undetermined(format!(
             "the board orientations differ by at most {spread:.1}°, at least \
              {MIN_ORIENTATION_SPREAD_DEG}° needed; tilt the board differently between views"
@@ -139,7 +139,7 @@ pub fn parameters_determined(
             _ => (MAX_DISTORTION_SIGMA_EFFECT / (3.0 * r * r), ""),
         };
         // A NaN σ (singular normal matrix) is undetermined too.
-        if !(sigma <= bound) {
+        if sigma.is_nan() || sigma > bound {
             return Err(CalibrateError::TooUncertain {
                 name: INTRINSIC_NAMES[k],
                 sigma,
@@ -169,7 +169,7 @@ pub fn plane_repeatable(rep: &Repeatability) -> Result<(), CalibrateError> {
         ("the laser tilt", st, bt, 1e3, "mrad"),
         ("the laser roll", sr, br, 1e3, "mrad"),
     ] {
-        if !(sigma <= bound) {
+        if sigma.is_nan() || sigma > bound {
             return Err(CalibrateError::TooUncertain {
                 name,
                 sigma: sigma * scale,
@@ -212,7 +212,7 @@ pub fn plane_determined(per_pose: &[Vec<Vec3>], fit: &PlaneFit) -> Result<(), Ca
     let lo = centres.iter().copied().fold(f64::INFINITY, f64::min);
     let hi = centres.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     let spread = hi - lo;
-    if !(spread >= MIN_PLANE_SPREAD_M) {
+    if spread.is_nan() || spread < MIN_PLANE_SPREAD_M {
         return Err(CalibrateError::Undetermined(format!(
             "the laser stripes of the {} pose(s) lie within {:.1} mm of each other across the \
              plane, at least {:.0} mm needed: place the board at two or more distinct depths",
@@ -286,7 +286,7 @@ pub fn check_camera(c: &Camera) -> Result<(), OutOfRange> {
         ("p1", d.p1, 1.0 / (3.0 * r * r)),
         ("p2", d.p2, 1.0 / (3.0 * r * r)),
     ] {
-        if !(v.abs() <= bound) {
+        if !(0.0..=bound).contains(&v.abs()) {
             return out(
                 &format!("distortion.{key}"),
                 v,
@@ -315,14 +315,14 @@ pub fn check_plane(
     };
     // Written with 5 or more digits a unit normal is within 1e-4 of 1; 1 % is a typo.
     let len = normal.norm();
-    if !((len - 1.0).abs() <= 0.01) {
+    if !(0.99..=1.01).contains(&len) {
         return out("normal", len, "length 0.99..1.01 (a unit normal)".into());
     }
     let d = MAX_PLANE_DISTANCE_M;
-    if !(offset.abs() <= d && offset.abs() >= 1e-3) {
+    if !(1e-3..=d).contains(&offset.abs()) {
         return out("offset_m", offset, format!("±(0.001..{d}) m"));
     }
-    if !(source.norm() <= d) {
+    if !(0.0..=d).contains(&source.norm()) {
         return out(
             "source_m",
             source.norm(),
