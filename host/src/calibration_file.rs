@@ -240,21 +240,24 @@ impl CalibrationToml {
                 p2: d.p2 as Real,
             },
         };
-        crate::calibrate::sanity::check_camera(&camera)?;
         let mut planes = Vec::with_capacity(self.planes.len());
         for (index, p) in self.planes.iter().enumerate() {
+            let plane = LaserPlane::new(v3(p.normal), p.offset_m as Real, v3(p.source_m)).map_err(
+                |error| CalibrationFileError::Invalid(CalibrationError::Plane { index, error }),
+            )?;
+            // What the core accepts is then held to physical ranges (the key named).
             crate::calibrate::sanity::check_plane(
                 index,
                 v3(p.normal),
                 p.offset_m as f64,
                 v3(p.source_m),
             )?;
-            let plane = LaserPlane::new(v3(p.normal), p.offset_m as Real, v3(p.source_m)).map_err(
-                |error| CalibrationFileError::Invalid(CalibrationError::Plane { index, error }),
-            )?;
             planes.push(plane);
         }
-        Calibration::new(self.id, camera, &planes).map_err(CalibrationFileError::Invalid)
+        let calibration =
+            Calibration::new(self.id, camera, &planes).map_err(CalibrationFileError::Invalid)?;
+        crate::calibrate::sanity::check_camera(&calibration.camera)?;
+        Ok(calibration)
     }
 }
 
@@ -278,10 +281,10 @@ impl CameraToml {
                 p2: d.p2 as Real,
             },
         };
-        crate::calibrate::sanity::check_camera(&camera)?;
         camera
             .validate()
             .map_err(|e| CalibrationFileError::Invalid(CalibrationError::Camera(e)))?;
+        crate::calibrate::sanity::check_camera(&camera)?;
         Ok(camera)
     }
 }
