@@ -12,7 +12,8 @@
 
 use std::path::{Path, PathBuf};
 
-use tangent_core::error_model::{predict_diameter_sigma, NoiseModel, StemGeometry};
+use tangent_core::error_model::{predict_diameter_sigma, StemGeometry};
+use tangent_core::noise::NoiseModel;
 use tangent_core::pipeline::PipelineConfig;
 use tangent_core::real::Vec2;
 use tangent_core::solvers::cylinder::CylinderParams;

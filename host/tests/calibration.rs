@@ -591,7 +591,8 @@ fn stripe_pixels_on_gaussian_stripe() {
 // (`docs/calibration.md`, §10).
 
 use tangent_core::calibration::Calibration;
-use tangent_core::error_model::{predict_diameter_sigma, NoiseModel, StemGeometry};
+use tangent_core::error_model::{predict_diameter_sigma, StemGeometry};
+use tangent_core::noise::NoiseModel;
 use tangent_core::pipeline::PipelineConfig;
 use tangent_core::solvers::cylinder::CylinderParams;
 use tangent_host::calibrate::laser::{board_capture, calibrate_lasers, BoardCapture};

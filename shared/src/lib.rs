@@ -15,6 +15,7 @@
 //! | frames, subtraction, thresholds, segmentation, speckle filter | [`image`] | `docs/image-processing.md` |
 //! | subpixel peak estimators | [`peaks`] | `docs/subpixel.md` |
 //! | laser-curve extraction and smoothing | [`curve`] | `docs/subpixel.md` §8 |
+//! | noise of one point (stripe, speckle, calibration) | [`noise`] | `docs/error-model.md` |
 //! | solvers per object kind | [`solvers`] | `docs/cylinder.md`, … |
 //! | predicted uncertainty of a reading | [`error_model`] | `docs/error-model.md` |
 //! | one reading of any instrument | [`measurement`] | `docs/architecture.md` |
@@ -40,6 +41,7 @@ pub mod error_model;
 pub mod image;
 pub mod laser_plane;
 pub mod measurement;
+pub mod noise;
 pub mod peaks;
 pub mod pipeline;
 pub mod protocol;

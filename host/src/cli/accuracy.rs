@@ -7,7 +7,8 @@ use std::process::ExitCode;
 use anyhow::{anyhow, Context};
 use plotters::prelude::*;
 use tangent_core::calibration::Calibration;
-use tangent_core::error_model::{predict_diameter_sigma, NoiseModel, StemGeometry};
+use tangent_core::error_model::{predict_diameter_sigma, StemGeometry};
+use tangent_core::noise::NoiseModel;
 use tangent_core::real::Vec2;
 use tangent_host::{calibration_file, plot};
 

@@ -29,8 +29,9 @@ use nalgebra::{SMatrix, SVector};
 use super::circle::{self, LmParams, RobustParams};
 pub use super::result::{Flags, Method, Tilt};
 use super::{levenberg_step, SolveError};
-use crate::error_model::{self, NoiseModel};
+use crate::error_model;
 use crate::laser_plane::LaserPlane;
+use crate::noise::{self, NoiseModel};
 
 // ---------------------------------------------------------------------------------------
 // Three-tangent method
@@ -823,8 +824,8 @@ fn arc_angle(points: &[Vec2], centre: Vec2) -> Real {
 /// Point noise (1σ, in-plane vector, metres) of the in-plane point `q` of `plane`.
 fn noise_vector(plane: &LaserPlane, q: Vec2, params: &CylinderParams) -> Vec2 {
     let x = plane.from_plane_coords(q);
-    let g = error_model::displacement_per_pixel(plane, params.focal_px, x)
-        .unwrap_or_else(|_| Vec3::zeros());
+    let g =
+        noise::displacement_per_pixel(plane, params.focal_px, x).unwrap_or_else(|_| Vec3::zeros());
     let (a, b) = plane.plane_axes();
     Vec2::new(g.dot(&a), g.dot(&b)) * params.noise.image_px()
 }
@@ -847,7 +848,7 @@ fn solve_plane(
     let pts = to_plane(curve, plane, scratch.points)?;
     let mut flags = Flags::default();
     let cal = |r: Real, centre: Vec2| {
-        error_model::calibration_relative_sigma(
+        noise::calibration_relative_sigma(
             plane,
             plane.from_plane_coords(centre),
             &params.noise,
@@ -1162,7 +1163,7 @@ fn finish_plane(
     params: &CylinderParams,
 ) -> Result<CylinderSolution, SolveError> {
     if let (Some(e), Some((f, _, _))) = (one.ellipse, one.fit) {
-        let cal_rel = error_model::calibration_relative_sigma(
+        let cal_rel = noise::calibration_relative_sigma(
             plane,
             plane.from_plane_coords(e.centre),
             &params.noise,
@@ -1299,8 +1300,7 @@ fn solve_tilted(
     } else {
         return Err(SolveError::Degenerate);
     };
-    let cal_rel =
-        error_model::calibration_relative_sigma(plane0, centre, &params.noise, params.focal_px);
+    let cal_rel = noise::calibration_relative_sigma(plane0, centre, &params.noise, params.focal_px);
     // The cylinder fit's own σ assumes independent, equal point noise; the dim ends of a far
     // curve and coherent bending break that as in one plane. σ of the mean of the per-curve
     // data-driven terms (independent curves) is the floor, as `max` in `solve_plane`.
@@ -1457,7 +1457,7 @@ fn projected_data_sigma(
     let noise = |q: Vec2| {
         let w = e1 * q.x + e2 * q.y;
         let x = source + w - u * (plane.normal.dot(&w) / nu);
-        let g = error_model::displacement_per_pixel(plane, params.focal_px, x)
+        let g = noise::displacement_per_pixel(plane, params.focal_px, x)
             .unwrap_or_else(|_| Vec3::zeros());
         Vec2::new(g.dot(&e1), g.dot(&e2)) * params.noise.image_px()
     };
@@ -1755,7 +1755,7 @@ mod tests {
         out.clear();
         for q in &buf[..n] {
             let x = plane.from_plane_coords(*q);
-            let g = error_model::displacement_per_pixel(plane, cam.fy, x).unwrap();
+            let g = noise::displacement_per_pixel(plane, cam.fy, x).unwrap();
             out.push(x + g * (sigma_px * rng.gauss() as Real));
         }
     }
