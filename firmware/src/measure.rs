@@ -78,6 +78,8 @@ pub struct SmallBuffers<const POINTS: usize> {
     pub curve: [CurvePoint; POINTS],
     /// 3-D points.
     pub points: [Vec3; POINTS],
+    /// 1σ of each 3-D point.
+    pub sigmas: [Real; POINTS],
     /// Solver scratch (2-D).
     pub scratch_points: [Vec2; POINTS],
     /// Solver scratch (values).
@@ -92,6 +94,7 @@ impl<const POINTS: usize> SmallBuffers<POINTS> {
             label_table: [0; LABEL_TABLE],
             curve: [CurvePoint::ZERO; POINTS],
             points: [Vec3::new(0.0, 0.0, 0.0); POINTS],
+            sigmas: [0.0; POINTS],
             scratch_points: [Vec2::new(0.0, 0.0); POINTS],
             scratch_values: [0.0; POINTS],
         }
@@ -143,6 +146,7 @@ pub fn workspace<'w, const POINTS: usize>(
         objects,
         curve: &mut small.curve,
         points: &mut small.points,
+        sigmas: &mut small.sigmas,
         scratch_points: &mut small.scratch_points,
         scratch_values: &mut small.scratch_values,
     }

@@ -222,6 +222,7 @@ pub struct HostWorkspace<P: Pixel> {
     objects: Vec<ObjectFeatures>,
     curve: Vec<CurvePoint>,
     points: Vec<Vec3>,
+    sigmas: Vec<Real>,
     scratch_points: Vec<Vec2>,
     scratch_values: Vec<Real>,
 }
@@ -238,6 +239,7 @@ impl<P: Pixel> HostWorkspace<P> {
             objects: vec![ObjectFeatures::empty(0); s.objects],
             curve: vec![CurvePoint::ZERO; s.points],
             points: vec![Vec3::zeros(); s.points],
+            sigmas: vec![0.0; s.points],
             scratch_points: vec![Vec2::zeros(); s.points],
             scratch_values: vec![0.0; s.points],
         }
@@ -253,6 +255,7 @@ impl<P: Pixel> HostWorkspace<P> {
             objects: &mut self.objects,
             curve: &mut self.curve,
             points: &mut self.points,
+            sigmas: &mut self.sigmas,
             scratch_points: &mut self.scratch_points,
             scratch_values: &mut self.scratch_values,
         }

@@ -295,6 +295,7 @@ fn extract(cap: &Capture) -> Vec<(u16, f64)> {
     let mut objects = vec![tangent_core::image::segment::ObjectFeatures::empty(0); sizes.objects];
     let mut curve = vec![CurvePoint::ZERO; sizes.points];
     let mut points = vec![Vec3::zeros(); sizes.points];
+    let mut sigmas = vec![0.0; sizes.points];
     let mut scratch_points = vec![Vec2::zeros(); sizes.points];
     let mut scratch_values = vec![0.0; sizes.points];
     let mut ws = Workspace {
@@ -305,6 +306,7 @@ fn extract(cap: &Capture) -> Vec<(u16, f64)> {
         objects: &mut objects,
         curve: &mut curve,
         points: &mut points,
+        sigmas: &mut sigmas,
         scratch_points: &mut scratch_points,
         scratch_values: &mut scratch_values,
     };

@@ -22,6 +22,7 @@ use crate::image::subtract::{self, SubtractStats};
 use crate::image::threshold::{self, ThresholdError, ThresholdMethod};
 use crate::image::{Frame, FrameError, FrameMut, Pixel};
 use crate::laser_plane::{triangulate, TriangulationError};
+use crate::noise::{self, NoiseModel};
 use crate::real::{Real, Vec2, Vec3};
 use crate::solvers::cylinder::{self, CylinderInput, CylinderParams, CylinderSolution, Flags};
 use crate::solvers::SolveError;
@@ -248,6 +249,9 @@ pub struct Workspace<'a, P: Pixel> {
     pub curve: &'a mut [CurvePoint],
     /// 3-D points, grouped by plane in [`Profile::plane_points`] order (same length as `curve`).
     pub points: &'a mut [Vec3],
+    /// 1σ of each 3-D point (metres, along its noise direction; same indexing as `points`),
+    /// from [`point_sigmas`]: what the solvers weigh the points by.
+    pub sigmas: &'a mut [Real],
     /// Solver scratch: 2-D points (same length as `curve`).
     pub scratch_points: &'a mut [Vec2],
     /// Solver scratch: residuals (same length as `curve`).
@@ -265,7 +269,7 @@ pub struct WorkspaceSizes {
     pub label_table: usize,
     /// Object-feature entries.
     pub objects: usize,
-    /// Curve, 3-D point and solver-scratch entries.
+    /// Curve, 3-D point, point-σ and solver-scratch entries.
     pub points: usize,
 }
 
@@ -315,8 +319,9 @@ pub struct Profile {
 }
 
 impl Profile {
-    /// The 3-D points of plane `plane` (camera frame, metres), ordered by image column.
-    pub fn points<'w>(&self, points: &'w [Vec3], plane: usize) -> &'w [Vec3] {
+    /// The entries of plane `plane` in a per-point buffer of the workspace (`points`: its 3-D
+    /// points, camera frame, metres, ordered by image column; `sigmas`: their 1σ).
+    pub fn points<'w, T>(&self, points: &'w [T], plane: usize) -> &'w [T] {
         match self.plane_points.get(plane) {
             Some(&(s, e)) if s <= e && e <= points.len() => &points[s..e],
             _ => &[],
@@ -406,12 +411,21 @@ pub fn solve_stem<P: Pixel>(
         return Err(PipelineError::OutsideFrame);
     }
     let n_planes = profile.planes.min(MAX_PLANES).min(calibration.planes.len());
+    point_sigmas(profile, calibration, &params.noise, params.focal_px, ws)?;
     let mut curves: [&[Vec3]; MAX_PLANES] = [&[]; MAX_PLANES];
-    for (k, c) in curves.iter_mut().enumerate().take(n_planes) {
+    let mut sigmas: [&[Real]; MAX_PLANES] = [&[]; MAX_PLANES];
+    for (k, (c, s)) in curves
+        .iter_mut()
+        .zip(&mut sigmas)
+        .enumerate()
+        .take(n_planes)
+    {
         *c = profile.points(ws.points, k);
+        *s = profile.points(ws.sigmas, k);
     }
     let input = CylinderInput {
         curves: &curves[..n_planes],
+        sigmas: &sigmas[..n_planes],
         planes: &calibration.planes[..n_planes],
     };
     let scratch = cylinder::Scratch {
@@ -424,6 +438,34 @@ pub fn solve_stem<P: Pixel>(
         solution,
         profile: *profile,
     })
+}
+
+/// Writes each triangulated point's 1σ (metres) into `ws.sigmas`, beside `ws.points`: the
+/// stripe-centre noise `noise.image_px()` mapped through `∂X/∂v` of its plane
+/// ([`noise::displacement_sigma`], `docs/error-model.md`, "One point"); 0 where the geometry
+/// gives none. `focal_px` is the focal length of the noise model ([`CylinderParams::focal_px`]).
+pub fn point_sigmas<P: Pixel>(
+    profile: &Profile,
+    calibration: &Calibration,
+    noise: &NoiseModel,
+    focal_px: Real,
+    ws: &mut Workspace<'_, P>,
+) -> Result<(), PipelineError> {
+    let sigma_px = noise.image_px();
+    for (plane, &(s, e)) in profile.plane_points.iter().enumerate().take(profile.planes) {
+        need("sigmas", e, ws.sigmas.len())?;
+        let model = calibration
+            .plane(plane)
+            .map_err(|_| PipelineError::Calibration)?;
+        let points = profile.points(ws.points, plane);
+        let Some(sigmas) = ws.sigmas.get_mut(s..e) else {
+            continue;
+        };
+        for (sigma, x) in sigmas.iter_mut().zip(points) {
+            *sigma = noise::displacement_sigma(model, focal_px, *x, sigma_px).unwrap_or(0.0);
+        }
+    }
+    Ok(())
 }
 
 /// One selected object and what the plane assignment needs of it.
@@ -879,6 +921,7 @@ mod tests {
         objects: Vec<ObjectFeatures>,
         curve: Vec<CurvePoint>,
         points: Vec<Vec3>,
+        sigmas: Vec<Real>,
         scratch_points: Vec<Vec2>,
         scratch_values: Vec<Real>,
     }
@@ -894,6 +937,7 @@ mod tests {
                 objects: vec![ObjectFeatures::empty(0); s.objects],
                 curve: vec![CurvePoint::ZERO; s.points],
                 points: vec![Vec3::zeros(); s.points],
+                sigmas: vec![0.0; s.points],
                 scratch_points: vec![Vec2::zeros(); s.points],
                 scratch_values: vec![0.0; s.points],
             }
@@ -907,6 +951,7 @@ mod tests {
                 objects: &mut self.objects,
                 curve: &mut self.curve,
                 points: &mut self.points,
+                sigmas: &mut self.sigmas,
                 scratch_points: &mut self.scratch_points,
                 scratch_values: &mut self.scratch_values,
             }

@@ -677,6 +677,10 @@ pub fn generalised_three_tangent(
 pub struct CylinderInput<'a> {
     /// Per plane, the triangulated points (metres, camera frame), in image-column order.
     pub curves: &'a [&'a [Vec3]],
+    /// Per plane, each point's 1σ (metres, along its noise direction
+    /// [`noise::DisplacementField`]), same indexing as `curves` (the pipeline writes them
+    /// beside the points: [`crate::pipeline::point_sigmas`]).
+    pub sigmas: &'a [&'a [Real]],
     /// The laser planes, same order as `curves`.
     pub planes: &'a [LaserPlane],
 }
@@ -841,6 +845,7 @@ struct PlaneResult {
 
 fn solve_plane(
     curve: &[Vec3],
+    sigmas: &[Real],
     plane: &LaserPlane,
     params: &CylinderParams,
     scratch: &mut Scratch<'_>,
@@ -882,16 +887,19 @@ fn solve_plane(
             rp.min_scale = rp.min_scale.max(s_point);
             match circle::fit_robust(pts, init, &rp, scratch.values) {
                 Ok(f) => {
+                    // Each point's noise vector: its stored σ along the field's direction.
+                    let field = noise::DisplacementField::of(plane);
+                    let noise_of = |i: usize| field.direction_in_plane(pts[i]) * sigmas[i];
                     let model = error_model::circle_radius_sigma(
                         &f.circle,
-                        pts.iter().map(|q| (*q, noise_vector(plane, *q, params))),
+                        (0..pts.len()).map(|i| (pts[i], noise_of(i))),
                     );
                     // Data-driven sandwich: the dim ends of a far curve are several times
                     // noisier than the model's per-point σ (docs/error-model.md).
                     let cutoff = rp.tuning * f.rms_residual.max(rp.min_scale);
                     let data = error_model::circle_radius_sigma_residuals(&f.circle, pts, cutoff);
                     let data = if data.is_finite() { data } else { 0.0 };
-                    let bend = bending_sigma(&f, pts, |q| noise_vector(plane, q, params), params);
+                    let bend = bending_sigma(&f, pts, noise_of);
                     let random = f.std_dev.z.max(model).max(data).hypot(bend);
                     let s = sqrt(random * random + cal(f.circle.radius, f.circle.centre).powi(2));
                     let arc = arc_angle(pts, f.circle.centre);
@@ -989,16 +997,12 @@ fn elliptic_diameter(e: &circle::EllipseFit, cal_rel: Real) -> Result<(Real, Rea
 pub const BENDING_FRACTION: Real = 0.5;
 
 /// 1σ of the fit radius from a coherent bending of the curve: every point displaced along its
-/// noise direction `g(q)` (per pixel) by `s·P₂(τ)`, `τ ∈ [−1, 1]` its position along the curve,
-/// `P₂ = (3τ² − 1)/2` (ends against middle), `s` = [`BENDING_FRACTION`] × the fit's residual
-/// RMS in pixels. Propagated through the linearised geometric fit
+/// noise vector `gᵢ` (1σ, `noise(i)` for point `i`) by `s·P₂(τ)/ḡ`, `τ ∈ [−1, 1]` its position
+/// along the curve, `P₂ = (3τ² − 1)/2` (ends against middle), `ḡ` the mean `|gᵢ|`, `s` =
+/// [`BENDING_FRACTION`] × the fit's residual RMS (a bend of that many RMS in units of the mean
+/// point noise). Propagated through the linearised geometric fit
 /// (`Δθ = A⁻¹ Σ Jᵢ (nᵢ·gᵢ) δᵢ`, `docs/error-model.md`).
-fn bending_sigma(
-    fit: &circle::CircleFit,
-    pts: &[Vec2],
-    noise_dir: impl Fn(Vec2) -> Vec2,
-    params: &CylinderParams,
-) -> Real {
+fn bending_sigma(fit: &circle::CircleFit, pts: &[Vec2], noise: impl Fn(usize) -> Vec2) -> Real {
     let n = pts.len();
     if n < 4 {
         return 0.0;
@@ -1006,11 +1010,7 @@ fn bending_sigma(
     let c = fit.circle;
     let mut a = crate::real::Mat3::zeros();
     let mut b = Vec3::zeros();
-    let mut px_sum = 0.0;
-    let per_px = params.noise.image_px();
-    if !(per_px > 0.0) {
-        return 0.0;
-    }
+    let mut sigma_sum = 0.0;
     for (i, q) in pts.iter().enumerate() {
         let d = q - c.centre;
         let len = norm(&d);
@@ -1019,19 +1019,18 @@ fn bending_sigma(
         }
         let nn = d / len;
         let j = Vec3::new(-nn.x, -nn.y, -1.0);
-        // `noise_dir` is the 1σ vector for `image_px` pixels: per pixel, divide.
-        let g = noise_dir(*q) / per_px;
-        px_sum += norm(&g);
+        let g = noise(i);
+        sigma_sum += norm(&g);
         let tau = 2.0 * i as Real / (n - 1) as Real - 1.0;
         let p2 = 0.5 * (3.0 * tau * tau - 1.0);
         a += j * j.transpose();
         b += j * (nn.dot(&g) * p2);
     }
-    let mean_px = px_sum / n as Real;
-    if !(mean_px > 0.0) {
+    let mean_sigma = sigma_sum / n as Real;
+    if !(mean_sigma > 0.0) {
         return 0.0;
     }
-    let s = BENDING_FRACTION * fit.rms_residual / mean_px;
+    let s = BENDING_FRACTION * fit.rms_residual / mean_sigma;
     match a.try_inverse() {
         Some(inv) => {
             let out = ((inv * b)[2] * s).abs();
@@ -1116,8 +1115,19 @@ pub fn solve(
     params: &CylinderParams,
     mut scratch: Scratch<'_>,
 ) -> Result<CylinderSolution, SolveError> {
-    if input.curves.is_empty() || input.curves.len() != input.planes.len() {
+    if input.curves.is_empty()
+        || input.curves.len() != input.planes.len()
+        || input.sigmas.len() != input.curves.len()
+    {
         return Err(SolveError::PlaneCount);
+    }
+    if input
+        .curves
+        .iter()
+        .zip(input.sigmas)
+        .any(|(c, s)| c.len() != s.len())
+    {
+        return Err(SolveError::InvalidParameter);
     }
     if !(params.min_radius > 0.0
         && params.max_radius > params.min_radius
@@ -1131,7 +1141,13 @@ pub fn solve(
         return Err(SolveError::ScratchTooSmall);
     }
     let plane0 = &input.planes[0];
-    let one = solve_plane(input.curves[0], plane0, params, &mut scratch)?;
+    let one = solve_plane(
+        input.curves[0],
+        input.sigmas[0],
+        plane0,
+        params,
+        &mut scratch,
+    )?;
     let mut sol = if input.curves.len() >= 2 {
         match solve_tilted(input, params, &mut scratch, &one) {
             Ok(s) => s,
@@ -1266,10 +1282,10 @@ fn solve_tilted(
     // Σ of the per-curve edge-fade bias σ's: a bias, common to the curves, so it is
     // averaged, not reduced as independent noise.
     let mut edge_sum = 0.0;
-    for (curve, plane) in input.curves.iter().zip(input.planes) {
+    for ((curve, sigmas), plane) in input.curves.iter().zip(input.sigmas).zip(input.planes) {
         // The data-driven terms of the one-plane path on the projected curve
         // (docs/cylinder.md, "Data-driven σ of the two-plane result").
-        let extra = projected_data_sigma(curve, plane, cyl.axis, params, scratch);
+        let extra = projected_data_sigma(curve, sigmas, plane, cyl.axis, params, scratch);
         if let Some((_, sf, _)) = extra {
             fit_s2sum += sf * sf;
             kf += 1;
@@ -1430,6 +1446,7 @@ fn projected_non_round(
 /// circle, that σ and the fit's RMS residual; `None` when the projection or fit fails.
 fn projected_data_sigma(
     curve: &[Vec3],
+    sigmas: &[Real],
     plane: &LaserPlane,
     axis: Vec3,
     params: &CylinderParams,
@@ -1454,12 +1471,18 @@ fn projected_data_sigma(
     if !(nu.abs() > 1e-6) {
         return None;
     }
-    let noise = |q: Vec2| {
+    let noise_at = |q: Vec2| {
         let w = e1 * q.x + e2 * q.y;
         let x = source + w - u * (plane.normal.dot(&w) / nu);
         let g = noise::displacement_per_pixel(plane, params.focal_px, x)
             .unwrap_or_else(|_| Vec3::zeros());
         Vec2::new(g.dot(&e1), g.dot(&e2)) * params.noise.image_px()
+    };
+    // A data point's noise vector: its stored σ along the field's direction, projected.
+    let field = noise::DisplacementField::of(plane);
+    let noise_of = |i: usize| {
+        let g = field.direction(curve[i]) * sigmas[i];
+        Vec2::new(g.dot(&e1), g.dot(&e2))
     };
     let init = circle::fit_hyper(pts).ok()?;
     let cn = norm(&init.centre);
@@ -1468,12 +1491,12 @@ fn projected_data_sigma(
     }
     let near = init.centre - init.centre / cn * init.radius;
     let mut rp = params.robust;
-    rp.min_scale = rp.min_scale.max(norm(&noise(near)));
+    rp.min_scale = rp.min_scale.max(norm(&noise_at(near)));
     let f = circle::fit_robust(pts, init, &rp, scratch.values).ok()?;
     let cutoff = rp.tuning * f.rms_residual.max(rp.min_scale);
     let data = error_model::circle_radius_sigma_residuals(&f.circle, pts, cutoff);
     let data = if data.is_finite() { data } else { 0.0 };
-    let bend = bending_sigma(&f, pts, noise, params);
+    let bend = bending_sigma(&f, pts, noise_of);
     let s = f.std_dev.z.max(data).hypot(bend);
     s.is_finite().then_some((f.circle, s, f.rms_residual))
 }
@@ -1760,6 +1783,19 @@ mod tests {
         }
     }
 
+    /// Each point's 1σ, as the pipeline writes it ([`crate::pipeline::point_sigmas`]).
+    fn sigmas_of(
+        curve: &[Vec3],
+        plane: &LaserPlane,
+        params: &CylinderParams,
+    ) -> std::vec::Vec<Real> {
+        let px = params.noise.image_px();
+        curve
+            .iter()
+            .map(|x| noise::displacement_sigma(plane, params.focal_px, *x, px).unwrap_or(0.0))
+            .collect()
+    }
+
     #[test]
     fn solve_transversal_stem() {
         let (p0, _) = planes();
@@ -1775,6 +1811,7 @@ mod tests {
             let sol = solve(
                 &CylinderInput {
                     curves: &[&curve],
+                    sigmas: &[&sigmas_of(&curve, &p0, &params)],
                     planes: &[p0],
                 },
                 &params,
@@ -1825,6 +1862,7 @@ mod tests {
         let sol = solve(
             &CylinderInput {
                 curves: &[&c0, &c1],
+                sigmas: &[&sigmas_of(&c0, &p0, &params), &sigmas_of(&c1, &p1, &params)],
                 planes: &[p0, p1],
             },
             &params,
@@ -1846,6 +1884,7 @@ mod tests {
         let one = solve(
             &CylinderInput {
                 curves: &[&c0],
+                sigmas: &[&sigmas_of(&c0, &p0, &params)],
                 planes: &[p0],
             },
             &params,
@@ -1868,6 +1907,7 @@ mod tests {
         let r = solve(
             &CylinderInput {
                 curves: &[&curve],
+                sigmas: &[&sigmas_of(&curve, &p0, &params)],
                 planes: &[p0, p1],
             },
             &params,
@@ -1880,6 +1920,7 @@ mod tests {
         let r = solve(
             &CylinderInput {
                 curves: &[&curve],
+                sigmas: &[&sigmas_of(&curve, &p0, &params)],
                 planes: &[p0],
             },
             &params,
@@ -1904,6 +1945,7 @@ mod tests {
         let r = solve(
             &CylinderInput {
                 curves: &[&big],
+                sigmas: &[&sigmas_of(&big, &p0, &params)],
                 planes: &[p0],
             },
             &params,
