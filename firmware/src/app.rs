@@ -25,7 +25,7 @@ use tangent_core::protocol::{
 };
 
 use crate::exposure::{self, Exposure};
-use crate::hal::{
+use crate::ports::{
     Board, CalibrationStore, Camera, CameraError, Clock, Devices, Laser, Link, Strobe, Trigger,
     Watchdog,
 };

@@ -1,7 +1,7 @@
 //! Tangent firmware: the portable application and its two boards.
 //!
-//! * [`hal`] — the hardware traits (camera, laser, trigger, link, clock, calibration
-//!   store, watchdog);
+//! * [`ports`] — the application's ports: one trait per device it uses (camera, laser,
+//!   trigger, link, clock, calibration store, watchdog);
 //! * [`app`] — the state machine over them (trigger → exposures → pipeline → report,
 //!   protocol commands);
 //! * [`measure`] — the seam to the shared pipeline; [`exposure`], [`stats`], [`pgm`] — small pure pieces, unit-tested on the host
@@ -14,7 +14,7 @@
 
 pub mod app;
 pub mod exposure;
-pub mod hal;
+pub mod ports;
 pub mod measure;
 pub mod pgm;
 pub mod stats;

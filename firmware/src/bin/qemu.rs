@@ -14,7 +14,7 @@ use core::panic::PanicInfo;
 use cortex_m_rt::{entry, exception};
 use tangent_firmware::app::{App, Buffers};
 use tangent_firmware::board::qemu::{self, FileCamera, Qemu, QemuClock, QemuLaser, RamStore, Uart};
-use tangent_firmware::hal::Devices;
+use tangent_firmware::ports::Devices;
 use tangent_firmware::measure::{self, PipelineMeasurer, SmallBuffers};
 
 /// Largest frame the emulated board accepts (752 × 480 8-bit).
@@ -113,7 +113,7 @@ fn main() -> ! {
     };
     let n_scenes = camera.scene_count();
     // The workspace covers the camera's frame size (at most MAX_FRAME pixels).
-    let pixels = tangent_firmware::hal::Camera::geometry(&camera)
+    let pixels = tangent_firmware::ports::Camera::geometry(&camera)
         .frame_len()
         .min(MAX_FRAME);
     let calibration = match calib_path {

@@ -26,7 +26,7 @@ use embassy_usb::class::cdc_acm::CdcAcmClass;
 use embassy_usb::driver::EndpointError;
 use tangent_core::protocol::{self, calibration_record, WireCalibration};
 
-use crate::hal::{self, CameraError, Geometry, LinkError, Strobe};
+use crate::ports::{self, CameraError, Geometry, LinkError, Strobe};
 
 /// Rows read out per frame. The DMA limit alone allows 348 rows of 752 bytes; RAM decides:
 /// two frames, the pipeline's difference frame (1 B/px) and labels (2 B/px) are
@@ -53,7 +53,7 @@ pub const HBLANK: u16 = 94;
 /// embassy-time clock.
 pub struct EmbassyClock;
 
-impl hal::Clock for EmbassyClock {
+impl ports::Clock for EmbassyClock {
     fn now_us(&self) -> u64 {
         Instant::now().as_micros()
     }
@@ -77,7 +77,7 @@ impl GpioLasers {
     }
 }
 
-impl hal::Laser for GpioLasers {
+impl ports::Laser for GpioLasers {
     fn count(&self) -> u8 {
         self.pins.len() as u8
     }
@@ -104,7 +104,7 @@ impl Button {
     }
 }
 
-impl hal::Trigger for Button {
+impl ports::Trigger for Button {
     fn is_pressed(&mut self) -> bool {
         self.input.is_high()
     }
@@ -136,7 +136,7 @@ fn link_err(_: EndpointError) -> LinkError {
     LinkError::Disconnected
 }
 
-impl hal::Link for UsbLink {
+impl ports::Link for UsbLink {
     async fn read(&mut self, buf: &mut [u8]) -> Result<usize, LinkError> {
         self.class.wait_connection().await;
         let max = self.class.max_packet_size() as usize;
@@ -174,7 +174,7 @@ impl Iwdg {
     }
 }
 
-impl hal::Watchdog for Iwdg {
+impl ports::Watchdog for Iwdg {
     fn feed(&mut self) {
         self.wdg.pet();
     }
@@ -199,7 +199,7 @@ impl FlashStore {
     }
 }
 
-impl hal::CalibrationStore for FlashStore {
+impl ports::CalibrationStore for FlashStore {
     fn load(&mut self) -> Option<WireCalibration> {
         let mut buf = [0u8; calibration_record::MAX_RECORD];
         self.flash.blocking_read(CALIB_OFFSET, &mut buf).ok()?;
@@ -344,7 +344,7 @@ impl Mt9v034 {
     }
 }
 
-impl hal::Camera for Mt9v034 {
+impl ports::Camera for Mt9v034 {
     fn geometry(&self) -> Geometry {
         Geometry {
             width: WIDTH,
@@ -353,7 +353,7 @@ impl hal::Camera for Mt9v034 {
         }
     }
 
-    async fn capture<L: hal::Laser, C: hal::Clock>(
+    async fn capture<L: ports::Laser, C: ports::Clock>(
         &mut self,
         exposure_us: u32,
         strobe: &Strobe<'_, L, C>,
@@ -392,7 +392,7 @@ impl hal::Camera for Mt9v034 {
 /// The instrument board.
 pub struct H743;
 
-impl hal::Board for H743 {
+impl ports::Board for H743 {
     type Camera = Mt9v034;
     type Laser = GpioLasers;
     type Trigger = Button;

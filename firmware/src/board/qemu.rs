@@ -25,7 +25,7 @@ use cortex_m::peripheral::SYST;
 use cortex_m_semihosting::{nr, syscall};
 use tangent_core::protocol::{self, calibration_record, WireCalibration};
 
-use crate::hal::{self, CameraError, Geometry, LinkError, Strobe};
+use crate::ports::{self, CameraError, Geometry, LinkError, Strobe};
 use crate::pgm;
 
 /// SysTick input clock of mps2-an500 (Hz).
@@ -64,7 +64,7 @@ pub fn ticks() -> u64 {
 /// SysTick-based clock.
 pub struct QemuClock;
 
-impl hal::Clock for QemuClock {
+impl ports::Clock for QemuClock {
     fn now_us(&self) -> u64 {
         ticks() * 1_000_000 / SYSCLK_HZ
     }
@@ -123,7 +123,7 @@ impl Uart {
     }
 }
 
-impl hal::Link for Uart {
+impl ports::Link for Uart {
     async fn read(&mut self, buf: &mut [u8]) -> Result<usize, LinkError> {
         poll_fn(|cx| {
             let mut n = 0;
@@ -173,7 +173,7 @@ impl Default for QemuLaser {
     }
 }
 
-impl hal::Laser for QemuLaser {
+impl ports::Laser for QemuLaser {
     fn count(&self) -> u8 {
         2
     }
@@ -185,7 +185,7 @@ impl hal::Laser for QemuLaser {
 /// No trigger on the emulated board: measurements come from the link.
 pub struct NoTrigger;
 
-impl hal::Trigger for NoTrigger {
+impl ports::Trigger for NoTrigger {
     fn is_pressed(&mut self) -> bool {
         false
     }
@@ -197,7 +197,7 @@ impl hal::Trigger for NoTrigger {
 /// No watchdog on the emulated board.
 pub struct NoWatchdog;
 
-impl hal::Watchdog for NoWatchdog {
+impl ports::Watchdog for NoWatchdog {
     fn feed(&mut self) {}
 }
 
@@ -213,7 +213,7 @@ impl RamStore {
     }
 }
 
-impl hal::CalibrationStore for RamStore {
+impl ports::CalibrationStore for RamStore {
     fn load(&mut self) -> Option<WireCalibration> {
         self.cal.clone()
     }
@@ -263,12 +263,12 @@ impl<'c> FileCamera<'c> {
     }
 }
 
-impl hal::Camera for FileCamera<'_> {
+impl ports::Camera for FileCamera<'_> {
     fn geometry(&self) -> Geometry {
         self.geometry
     }
 
-    async fn capture<L: hal::Laser, C: hal::Clock>(
+    async fn capture<L: ports::Laser, C: ports::Clock>(
         &mut self,
         _exposure_us: u32,
         strobe: &Strobe<'_, L, C>,
@@ -453,7 +453,7 @@ pub fn exit(success: bool) -> ! {
 /// The emulated board.
 pub struct Qemu<'c>(core::marker::PhantomData<&'c ()>);
 
-impl<'c> hal::Board for Qemu<'c> {
+impl<'c> ports::Board for Qemu<'c> {
     type Camera = FileCamera<'c>;
     type Laser = QemuLaser;
     type Trigger = NoTrigger;
