@@ -12,11 +12,14 @@
 #![cfg_attr(not(test), no_std)]
 #![deny(missing_docs)]
 
+/// The firmware's version (`DeviceInfo::fw_version`).
+pub const VERSION: &str = env!("CARGO_PKG_VERSION");
+
 pub mod app;
 pub mod exposure;
-pub mod ports;
 pub mod measure;
 pub mod pgm;
+pub mod ports;
 pub mod stats;
 
 /// The boards (only on the Cortex-M target).

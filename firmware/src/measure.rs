@@ -259,7 +259,7 @@ impl Measurer for PipelineMeasurer<'_> {
             diameter_m: s.diameter as f32,
             uncertainty_m: s.uncertainty as f32,
             distance_m: s.distance as f32,
-            tilt_rad: s.tilt.map(|t| t.total).unwrap_or(0.0),
+            tilt_rad: s.tilt.map(|t| t.total as f32).unwrap_or(0.0),
             flags: s.flags.0,
         })
     }

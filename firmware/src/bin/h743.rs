@@ -21,8 +21,8 @@ use tangent_firmware::app::{App, Buffers};
 use tangent_firmware::board::h743::{
     Button, EmbassyClock, FlashStore, GpioLasers, Iwdg, Mt9v034, UsbLink, FRAME_BYTES, H743,
 };
-use tangent_firmware::ports::Devices;
 use tangent_firmware::measure::{self, PipelineMeasurer, SmallBuffers};
+use tangent_firmware::ports::Devices;
 
 bind_interrupts!(struct Irqs {
     OTG_FS => usb::InterruptHandler<peripherals::USB_OTG_FS>;

@@ -14,8 +14,8 @@ use core::panic::PanicInfo;
 use cortex_m_rt::{entry, exception};
 use tangent_firmware::app::{App, Buffers};
 use tangent_firmware::board::qemu::{self, FileCamera, Qemu, QemuClock, QemuLaser, RamStore, Uart};
-use tangent_firmware::ports::Devices;
 use tangent_firmware::measure::{self, PipelineMeasurer, SmallBuffers};
+use tangent_firmware::ports::Devices;
 
 /// Largest frame the emulated board accepts (752 × 480 8-bit).
 const MAX_FRAME: usize = 752 * 480;

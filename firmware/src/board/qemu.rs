@@ -25,8 +25,8 @@ use cortex_m::peripheral::SYST;
 use cortex_m_semihosting::{nr, syscall};
 use tangent_core::protocol::{self, calibration_record, WireCalibration};
 
-use crate::ports::{self, CameraError, Geometry, LinkError, Strobe};
 use crate::pgm;
+use crate::ports::{self, CameraError, Geometry, LinkError, Strobe};
 
 /// SysTick input clock of mps2-an500 (Hz).
 pub const SYSCLK_HZ: u64 = 25_000_000;
