@@ -1,15 +1,4 @@
-//! The instrument: STM32H743ZI + MT9V034 on embassy-stm32 (wiring in `docs/hardware.md`).
-//!
-//! * lasers: push-pull GPIOs, low (off) from the first instructions of `main`;
-//! * trigger: EXTI input, debounced by re-reading the level after [`DEBOUNCE_US`];
-//! * camera: MT9V034 set up over I²C (register table in `docs/hardware.md`), snapshot mode
-//!   started by a pulse on its EXPOSURE pin, frames received by DCMI + DMA into AXI SRAM.
-//!   One DMA transfer moves at most 65,535 words (262,140 bytes), and RAM holds two frames
-//!   plus the pipeline's per-pixel buffers, so the sensor reads out a window of
-//!   [`WINDOW_ROWS`] rows (752 × 160 = 120,320 bytes);
-//! * link: USB CDC-ACM (embassy-usb);
-//! * calibration: a record in the last flash sector (`protocol::calibration_record`);
-//! * watchdog: IWDG1, fed by the application's main loop.
+//! The H743 board's drivers: its implementations of the application's ports.
 
 use embassy_stm32::dcmi::{self, Dcmi};
 use embassy_stm32::exti::ExtiInput;
@@ -26,29 +15,11 @@ use embassy_usb::class::cdc_acm::CdcAcmClass;
 use embassy_usb::driver::EndpointError;
 use tangent_core::protocol::{self, calibration_record, WireCalibration};
 
-use crate::ports::{self, CameraError, Geometry, LinkError, Strobe};
+use embassy_embedded_hal::adapter::BlockingAsync;
 
-/// Rows read out per frame. The DMA limit alone allows 348 rows of 752 bytes; RAM decides:
-/// two frames, the pipeline's difference frame (1 B/px) and labels (2 B/px) are
-/// 5 B/px = 601,600 B for 160 rows, in AXI SRAM (frames, difference) and SRAM1–3 (labels).
-/// See `docs/hardware.md` for the working range this window covers.
-pub const WINDOW_ROWS: u16 = 160;
-/// First sensor row of the window: centred on the 480-row sensor.
-pub const WINDOW_ROW_OFFSET: u16 = (480 - WINDOW_ROWS) / 2;
-/// Sensor width.
-pub const WIDTH: u16 = 752;
-/// Bytes of one frame.
-pub const FRAME_BYTES: usize = WIDTH as usize * WINDOW_ROWS as usize;
-/// Trigger debounce time (µs): mechanical bounce of a tactile switch lasts < 5 ms.
-pub const DEBOUNCE_US: u64 = 10_000;
-/// MT9V034 7-bit I²C address with S_CTRL_ADR0/1 tied low (0x90/0x91 on the bus).
-pub const MT9V034_ADDR: u8 = 0x48;
-/// MT9V034 chip version (register 0x00).
-pub const MT9V034_CHIP_ID: u16 = 0x1324;
-/// Pixel clock of the sensor module (its own 26.66 MHz oscillator).
-pub const PIXCLK_HZ: u64 = 26_660_000;
-/// Horizontal blanking written to the sensor (pixel clocks; default 94, minimum 61).
-pub const HBLANK: u16 = 94;
+use super::{CALIB_OFFSET, CALIB_SECTOR, DEBOUNCE_US, FRAME_BYTES, PIXCLK_HZ, WIDTH, WINDOW};
+use crate::mt9v034::Mt9v034;
+use crate::ports::{self, CameraError, Geometry, LinkError, Strobe};
 
 /// embassy-time clock.
 pub struct EmbassyClock;
@@ -180,10 +151,6 @@ impl ports::Watchdog for Iwdg {
     }
 }
 
-/// Offset of the calibration sector from the start of flash (bank 2, sector 7).
-pub const CALIB_OFFSET: u32 = 0x1E_0000;
-/// Size of the calibration sector.
-pub const CALIB_SECTOR: u32 = 128 * 1024;
 /// Flash programming granularity of the H7 (a 256-bit flash word).
 const FLASH_WORD: usize = 32;
 
@@ -225,131 +192,44 @@ impl ports::CalibrationStore for FlashStore {
     }
 }
 
-/// MT9V034 registers used (datasheet register map; context A).
-pub mod reg {
-    /// Chip version (reads 0x1324).
-    pub const CHIP_VERSION: u8 = 0x00;
-    /// Column start (min 1).
-    pub const COL_START: u8 = 0x01;
-    /// Row start (min 4).
-    pub const ROW_START: u8 = 0x02;
-    /// Window height (rows).
-    pub const WINDOW_HEIGHT: u8 = 0x03;
-    /// Window width (columns).
-    pub const WINDOW_WIDTH: u8 = 0x04;
-    /// Horizontal blanking (pixel clocks).
-    pub const HBLANK: u8 = 0x05;
-    /// Vertical blanking (rows).
-    pub const VBLANK: u8 = 0x06;
-    /// Chip control: operating mode bits 4:3 (01 master, 11 snapshot), bit 7 parallel
-    /// output enable, bit 8 sequential, bit 9 reserved (clear on MT9V034).
-    pub const CHIP_CONTROL: u8 = 0x07;
-    /// Coarse shutter width total (integration time in rows).
-    pub const TOTAL_SHUTTER_WIDTH: u8 = 0x0B;
-    /// Reset: bit 0 soft reset.
-    pub const RESET: u8 = 0x0C;
-    /// Read mode (binning, flips).
-    pub const READ_MODE: u8 = 0x0D;
-    /// LED_OUT control: bit 0 disables LED_OUT, bit 1 inverts it.
-    pub const LED_OUT_CONTROL: u8 = 0x1B;
-    /// ADC companding: 2 = linear 10-bit.
-    pub const ADC_COMPANDING: u8 = 0x1C;
-    /// Analog gain (16 = 1×, up to 64 = 4×).
-    pub const ANALOG_GAIN: u8 = 0x35;
-    /// AEC/AGC enable: bit 0 AEC, bit 1 AGC (context A).
-    pub const AEC_AGC_ENABLE: u8 = 0xAF;
-}
+/// The sensor's I²C bus: I2C1 in blocking mode behind embassy's blocking-to-async adapter (a
+/// register write is 3 bytes, ≈ 80 µs at 400 kHz; the DMA-driven `I2c::new` would need two
+/// more DMA streams and the I2C1 interrupts for no gain).
+pub type SensorBus = BlockingAsync<I2c<'static, BlockingMode, Master>>;
 
-/// The MT9V034 on I²C + DCMI.
-pub struct Mt9v034 {
-    i2c: I2c<'static, BlockingMode, Master>,
+/// The camera: the MT9V034 (set up over I²C) with its EXPOSURE pin, frames by DCMI + DMA.
+pub struct Mt9v034Dcmi {
+    sensor: Mt9v034<SensorBus>,
     dcmi: Dcmi<'static, DCMI>,
     exposure_pin: Output<'static>,
-    shutter_rows: u16,
-    ready: bool,
 }
 
-impl Mt9v034 {
-    /// Takes the sensor's buses and sets it up ([`Mt9v034::init`]); a sensor that does not
-    /// answer now is set up again before the next capture.
-    pub fn new(
+impl Mt9v034Dcmi {
+    /// Takes the sensor's buses and sets it up; a sensor that does not answer now is set up
+    /// again before the next capture.
+    pub async fn new(
         i2c: I2c<'static, BlockingMode, Master>,
         dcmi: Dcmi<'static, DCMI>,
         exposure_pin: Output<'static>,
     ) -> Self {
-        let mut cam = Mt9v034 {
-            i2c,
-            dcmi,
-            exposure_pin,
-            shutter_rows: 0,
-            ready: false,
-        };
-        if let Err(e) = cam.init() {
+        let mut sensor = Mt9v034::new(BlockingAsync::new(i2c), WINDOW, PIXCLK_HZ);
+        if let Err(e) = sensor.init().await {
             defmt::warn!("MT9V034 set-up failed: {}", e.code());
         }
-        cam
-    }
-
-    /// Checks the chip id and writes the set-up of `docs/hardware.md`.
-    pub fn init(&mut self) -> Result<(), CameraError> {
-        self.ready = false;
-        if self.read(reg::CHIP_VERSION)? != MT9V034_CHIP_ID {
-            return Err(CameraError::Bus);
+        Mt9v034Dcmi {
+            sensor,
+            dcmi,
+            exposure_pin,
         }
-        self.write(reg::RESET, 1)?;
-        self.write(reg::RESET, 0)?;
-        let setup: [(u8, u16); 12] = [
-            (reg::COL_START, 1),
-            (reg::ROW_START, 4 + WINDOW_ROW_OFFSET),
-            (reg::WINDOW_HEIGHT, WINDOW_ROWS),
-            (reg::WINDOW_WIDTH, WIDTH),
-            (reg::HBLANK, HBLANK),
-            (reg::VBLANK, 45),
-            (reg::READ_MODE, 0x0300), // no binning, no flip (bits 9:8 reserved = 11)
-            (reg::AEC_AGC_ENABLE, 0), // exposure and gain are ours: AEC/AGC off
-            (reg::ANALOG_GAIN, 16),   // 1x: lowest noise; exposure does the work
-            (reg::ADC_COMPANDING, 2), // linear 10-bit; DCMI takes D9..D2
-            (reg::LED_OUT_CONTROL, 0), // LED_OUT high during integration (gates the lasers)
-            // Snapshot mode (11 in bits 4:3), parallel output on, sequential, bit 9 clear.
-            (reg::CHIP_CONTROL, (3 << 3) | (1 << 7) | (1 << 8)),
-        ];
-        for (r, v) in setup {
-            self.write(r, v)?;
-        }
-        self.shutter_rows = 0;
-        self.ready = true;
-        Ok(())
-    }
-
-    fn write(&mut self, r: u8, v: u16) -> Result<(), CameraError> {
-        let [hi, lo] = v.to_be_bytes();
-        self.i2c
-            .blocking_write(MT9V034_ADDR, &[r, hi, lo])
-            .map_err(|_| CameraError::Bus)
-    }
-
-    fn read(&mut self, r: u8) -> Result<u16, CameraError> {
-        let mut b = [0u8; 2];
-        self.i2c
-            .blocking_write_read(MT9V034_ADDR, &[r], &mut b)
-            .map_err(|_| CameraError::Bus)?;
-        Ok(u16::from_be_bytes(b))
-    }
-
-    /// Integration time in rows: one row lasts (width + hblank) pixel clocks.
-    fn rows_for(exposure_us: u32) -> u16 {
-        let row_ns = (WIDTH as u64 + HBLANK as u64) * 1_000_000_000 / PIXCLK_HZ;
-        let rows = (exposure_us as u64 * 1000).div_ceil(row_ns.max(1));
-        rows.clamp(1, 32_767) as u16
     }
 }
 
-impl ports::Camera for Mt9v034 {
+impl ports::Camera for Mt9v034Dcmi {
     fn geometry(&self) -> Geometry {
         Geometry {
             width: WIDTH,
-            height: WINDOW_ROWS,
-            row_offset: WINDOW_ROW_OFFSET,
+            height: WINDOW.rows,
+            row_offset: WINDOW.first_row,
         }
     }
 
@@ -359,14 +239,7 @@ impl ports::Camera for Mt9v034 {
         strobe: &Strobe<'_, L, C>,
         buf: &mut [u8],
     ) -> Result<(), CameraError> {
-        if !self.ready {
-            self.init()?;
-        }
-        let rows = Self::rows_for(exposure_us);
-        if rows != self.shutter_rows {
-            self.write(reg::TOTAL_SHUTTER_WIDTH, rows)?;
-            self.shutter_rows = rows;
-        }
+        self.sensor.prepare(exposure_us).await?;
         let words: &mut [u32] = bytemuck::try_cast_slice_mut(
             buf.get_mut(..FRAME_BYTES).ok_or(CameraError::BufferSize)?,
         )
@@ -393,7 +266,7 @@ impl ports::Camera for Mt9v034 {
 pub struct H743;
 
 impl ports::Board for H743 {
-    type Camera = Mt9v034;
+    type Camera = Mt9v034Dcmi;
     type Laser = GpioLasers;
     type Trigger = Button;
     type Link = UsbLink;
