@@ -110,6 +110,8 @@ struct Control {
     faults: Faults,
     cut_until: Option<Instant>,
     reboot: bool,
+    /// Boots so far (the first one included).
+    boots: u32,
     stop: bool,
     /// Readings the measurer produced since the last boot (= the firmware's last `seq`).
     issued: u32,
@@ -184,10 +186,19 @@ impl TestDevice {
         self.control.lock().unwrap().cut_until = Some(Instant::now() + d);
     }
 
-    /// Reboots the device (the firmware starts afresh: sequence numbers restart, history
-    /// emptied; the stored calibration stays).
+    /// Reboots the device and waits until it is up again (the firmware starts afresh:
+    /// sequence numbers restart, history emptied; the stored calibration stays).
     pub fn reboot(&self) {
-        self.control.lock().unwrap().reboot = true;
+        let booted = {
+            let mut c = self.control.lock().unwrap();
+            c.reboot = true;
+            c.boots
+        };
+        let end = Instant::now() + Duration::from_secs(5);
+        while self.control.lock().unwrap().boots == booted {
+            assert!(Instant::now() < end, "the test device did not reboot");
+            std::thread::sleep(Duration::from_millis(1));
+        }
     }
 
     /// Readings made since the last boot (the last sequence number).
@@ -230,7 +241,6 @@ impl Drop for TestDevice {
 /// Runs the firmware from a (re)boot until the test stops it (`None`) or reboots it (the
 /// link and store survive a reboot, as the USB cable and the flash do).
 fn boot(link: PtyLink, store: RamStore, control: &Shared) -> Option<(PtyLink, RamStore)> {
-    control.lock().unwrap().issued = 0;
     let mut off = vec![0u8; FRAME.frame_len()];
     let mut on = vec![0u8; FRAME.frame_len()];
     let mut rx = vec![0u8; MAX_FRAME_LEN];
@@ -254,6 +264,11 @@ fn boot(link: PtyLink, store: RamStore, control: &Shared) -> Option<(PtyLink, Ra
     };
     let mut app = App::new(devices, measurer, buffers);
     block_on(app.announce());
+    {
+        let mut c = control.lock().unwrap();
+        c.issued = 0;
+        c.boots += 1;
+    }
     loop {
         {
             let mut c = control.lock().unwrap();
