@@ -120,7 +120,7 @@ struct RelayControl {
 
 /// A man in the middle between the host and a real serial peer (the emulated firmware's
 /// pty): the host opens [`Relay::path`]; bytes are copied both ways with [`Faults`], and
-/// [`Relay::cut`] unplugs the host side for a while, as [`TestDevice::cut`] does.
+/// [`Relay::cut`] unplugs the host side for a while, as [`super::TestDevice::cut`] does.
 pub struct Relay {
     path: PathBuf,
     control: Arc<Mutex<RelayControl>>,
