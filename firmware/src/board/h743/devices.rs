@@ -1,5 +1,6 @@
 //! The H743 board's drivers: its implementations of the application's ports.
 
+use embassy_embedded_hal::adapter::BlockingAsync;
 use embassy_stm32::dcmi::{self, Dcmi};
 use embassy_stm32::exti::ExtiInput;
 use embassy_stm32::flash::{Blocking, Flash};
@@ -14,8 +15,6 @@ use embassy_time::{Duration, Instant, Timer};
 use embassy_usb::class::cdc_acm::CdcAcmClass;
 use embassy_usb::driver::EndpointError;
 use tangent_core::protocol::{self, calibration_record, WireCalibration};
-
-use embassy_embedded_hal::adapter::BlockingAsync;
 
 use super::{CALIB_OFFSET, CALIB_SECTOR, DEBOUNCE_US, FRAME_BYTES, PIXCLK_HZ, WIDTH, WINDOW};
 use crate::mt9v034::Mt9v034;
