@@ -25,11 +25,11 @@ use tangent_core::protocol::{
 };
 
 use crate::exposure::{self, Exposure};
-use crate::hal::{
+use crate::measure::{FramePair, Measurer};
+use crate::ports::{
     Board, CalibrationStore, Camera, CameraError, Clock, Devices, Laser, Link, Strobe, Trigger,
     Watchdog,
 };
-use crate::measure::{FramePair, Measurer};
 use crate::stats::Welford;
 
 /// Hard limit of the laser on-time of one exposure (µs): the longest exposure plus
@@ -135,15 +135,22 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
 
     /// Runs forever: announces the device, then serves the trigger and the link.
     pub async fn run(&mut self) -> ! {
-        B::log(format_args!(
-            "tangent firmware {} up, calibration {:?}",
-            env!("CARGO_PKG_VERSION"),
-            self.calibration.as_ref().map(|c| c.id)
-        ));
-        self.send_info(UNSOLICITED).await;
+        self.announce().await;
         loop {
             self.step().await;
         }
+    }
+
+    /// Logs the start and sends the unsolicited `Info` banner (what a boot looks like to
+    /// the host). [`App::run`] calls it once; a test board that runs [`App::step`] itself
+    /// calls it after each (simulated) boot.
+    pub async fn announce(&mut self) {
+        B::log(format_args!(
+            "tangent firmware {} up, calibration {:?}",
+            crate::VERSION,
+            self.calibration.as_ref().map(|c| c.id)
+        ));
+        self.send_info(UNSOLICITED).await;
     }
 
     /// One turn of the main loop: waits for an event (or does one stream measurement) and
@@ -360,7 +367,7 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
         let g = self.dev.camera.geometry();
         let info = DeviceInfo {
             protocol_version: PROTOCOL_VERSION,
-            fw_version: env!("CARGO_PKG_VERSION"),
+            fw_version: crate::VERSION,
             board: B::KIND,
             calib_id: self.calibration.as_ref().map(|c| c.id),
             frame_width: g.width,

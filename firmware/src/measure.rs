@@ -258,12 +258,13 @@ impl Measurer for PipelineMeasurer<'_> {
             pipeline::solve_stem(&profile, on.max_value(), cal, &self.params, &mut self.ws);
         self.last_stages.solver_us = now().saturating_sub(t);
         let s = solved.map_err(|e| error_code(&e))?.solution;
+        let tilt: Real = s.tilt.map(|t| t.total).unwrap_or(0.0);
         Ok(Outcome {
             method: s.method.into(),
             diameter_m: s.diameter as f32,
             uncertainty_m: s.uncertainty as f32,
             distance_m: s.distance as f32,
-            tilt_rad: s.tilt.map(|t| t.total).unwrap_or(0.0),
+            tilt_rad: tilt as f32,
             flags: s.flags.0,
         })
     }

@@ -16,11 +16,11 @@
 use std::path::{Path, PathBuf};
 
 use tangent_core::protocol::{calibration_record, WireCalibration};
+use tangent_firmware::board::h743;
 use tangent_host::simulate::{corpus, simulate};
 
-/// The H743 board's read-out window (firmware/src/board/h743.rs: `WINDOW_ROWS`,
-/// `WINDOW_ROW_OFFSET`).
-const WINDOW: (usize, usize) = (160, 160);
+/// The H743 board's read-out window: (first sensor row, rows).
+const WINDOW: (usize, usize) = (h743::WINDOW.first_row as usize, h743::WINDOW.rows as usize);
 
 const STAGES: [&str; 7] = [
     "subtraction + histogram",

@@ -2,18 +2,18 @@
 //! every possible cut, and the real `tangent listen` killed mid-session (SIGKILL) then
 //! restarted — every reading it printed is in the log, none twice, none missing.
 
-mod fake_device;
+mod test_device;
 
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use fake_device::{diameter_of, FakeDevice, Persona};
 use tangent_host::fieldlog::{
     self, encode_line, ExportFormat, FieldLog, FieldLogError, PlotHeader, Record, TreeRecord,
     MAGIC_LINE,
 };
+use test_device::{diameter_of, TestDevice};
 
 fn plot(id: &str) -> Record {
     Record::Plot(PlotHeader {
@@ -229,7 +229,7 @@ fn tree_seqs(path: &Path) -> Vec<u32> {
 /// so the final log holds readings 1..=N once each.
 #[test]
 fn killed_listener_loses_and_duplicates_nothing() {
-    let dev = FakeDevice::start(Persona::Tangent);
+    let dev = TestDevice::start();
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("field.log");
     let n = 50u32; // within the device's 64-reading history
