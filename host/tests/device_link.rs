@@ -11,6 +11,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use fake_device::{diameter_of, FakeDevice, Faults, Persona, HISTORY};
+use tangent_core::measurement::Measurement;
 use tangent_core::protocol::FrameSel;
 use tangent_host::link::{Link, LinkConfig, LinkError, LinkEvent};
 
@@ -33,9 +34,10 @@ fn collect(link: &mut Link, n: u32, timeout: Duration) -> Vec<u32> {
     let mut seqs = Vec::new();
     while (seqs.len() as u32) < n && Instant::now() < end {
         if let Some(r) = link.next_reading(Duration::from_millis(100)).unwrap() {
+            let Measurement::Stem(stem) = r.measurement;
             assert_eq!(
-                r.diameter_m,
-                diameter_of(r.seq),
+                stem.diameter,
+                f64::from(diameter_of(r.seq)),
                 "content of reading {}",
                 r.seq
             );

@@ -13,6 +13,8 @@ use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
 use tangent_core::calibration::Calibration;
+use tangent_core::measurement::Measurement;
+use tangent_core::protocol::codes::Failure;
 use tangent_core::protocol::{
     self, calibration_record, DeviceError, ErrorCode, FrameSel, FromDevice, Request, Response,
     ToDevice, WireCalibration, FRAME_CHUNK_MAX, PROTOCOL_VERSION,
@@ -506,24 +508,31 @@ fn on_device_measurements_equal_the_hosts() {
             assert_eq!(r, Response::Ack, "{name}")
         });
         dev.request(Request::Measure, |r| match (host, r) {
-            (Ok(h), Response::Reading(d)) => {
+            (Ok(h), Response::Reading(reading)) => {
                 let hs = &h.solution;
-                let rel = (d.diameter_m as f64 - hs.diameter).abs() / hs.diameter;
+                let Measurement::Stem(d) = reading.measurement;
+                let rel = (d.diameter - hs.diameter).abs() / hs.diameter;
                 eprintln!(
                     "{name}: host {:.4} mm {:?}, device {:.4} mm {:?}, relative difference {rel:.2e}",
                     hs.diameter * 1e3,
                     hs.method,
-                    d.diameter_m as f64 * 1e3,
+                    d.diameter * 1e3,
                     d.method
                 );
-                assert_eq!(d.method, protocol::Method::from(hs.method), "{name}: method");
-                assert!(rel <= 1e-4, "{name}: device {} m vs host {} m", d.diameter_m, hs.diameter);
-                assert_eq!(d.flags, hs.flags.0, "{name}: flags");
+                assert_eq!(d.method, hs.method, "{name}: method");
+                assert!(rel <= 1e-4, "{name}: device {} m vs host {} m", d.diameter, hs.diameter);
+                assert_eq!(d.flags, hs.flags, "{name}: flags");
                 compared += 1;
             }
-            (Err(e), Response::Error(DeviceError { code, .. })) => {
+            (Err(e), Response::Error(DeviceError { code, detail })) => {
                 eprintln!("{name}: host and device both fail ({e})");
                 assert_eq!(code, ErrorCode::MeasurementFailed, "{name}");
+                // The forester reads the same sentence from the caliper as from the file.
+                assert_eq!(
+                    Failure::from_detail(detail).to_string(),
+                    Failure::of(e).to_string(),
+                    "{name}"
+                );
             }
             (h, r) => panic!("{name}: host {h:?}, device {r:?}"),
         });

@@ -17,6 +17,7 @@ use embassy_usb::class::cdc_acm::{CdcAcmClass, State};
 use embassy_usb::Builder;
 use panic_probe as _;
 use static_cell::StaticCell;
+use tangent_core::protocol::codes;
 use tangent_firmware::app::{App, Buffers};
 use tangent_firmware::board::h743::{
     Button, EmbassyClock, FlashStore, GpioLasers, Iwdg, Mt9v034, UsbLink, FRAME_BYTES, H743,
@@ -31,11 +32,6 @@ bind_interrupts!(struct Irqs {
     EXTI15_10 => exti::InterruptHandler<interrupt::typelevel::EXTI15_10>;
 });
 
-/// USB vendor/product id of the Tangent (pid.codes test range until one is allocated;
-/// `tangent devices` looks for it).
-pub const USB_VID: u16 = 0x1209;
-/// USB product id.
-pub const USB_PID: u16 = 0x7A6E;
 /// Watchdog timeout: the main loop feeds it at least every 100 ms when idle and between
 /// measurements (one measurement takes < 100 ms).
 const WATCHDOG_US: u32 = 2_000_000;
@@ -147,7 +143,7 @@ async fn main(_spawner: Spawner) {
         EP_OUT.init([0; 256]),
         usb_config,
     );
-    let mut dev_config = embassy_usb::Config::new(USB_VID, USB_PID);
+    let mut dev_config = embassy_usb::Config::new(codes::USB_VID, codes::USB_PID);
     dev_config.manufacturer = Some("Tangent");
     dev_config.product = Some("Tangent caliper");
     dev_config.serial_number = Some("H743-0001");

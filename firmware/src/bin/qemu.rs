@@ -12,6 +12,7 @@
 use core::panic::PanicInfo;
 
 use cortex_m_rt::{entry, exception};
+use tangent_core::measurement::Measurement;
 use tangent_firmware::app::{App, Buffers};
 use tangent_firmware::board::qemu::{self, FileCamera, Qemu, QemuClock, QemuLaser, RamStore, Uart};
 use tangent_firmware::hal::Devices;
@@ -166,17 +167,19 @@ fn main() -> ! {
             let mut ok = true;
             for i in 0..n_scenes {
                 match app.measure_once().await {
-                    Ok(r) => qemu::log(format_args!(
+                    Ok(r) => match r.measurement {
+                        Measurement::Stem(stem) => qemu::log(format_args!(
                         "bench scene={} pipeline_us={} stages_us={:?} solver_us={} diameter_m={} uncertainty_m={} method={:?} flags={:#x}",
                         i,
                         app.last_pipeline_us,
                         app.measurer().last_stages.image_us,
                         app.measurer().last_stages.solver_us,
-                        r.diameter_m,
-                        r.uncertainty_m,
-                        r.method,
-                        r.flags
+                        stem.diameter,
+                        stem.uncertainty,
+                        stem.method,
+                        stem.flags.0
                     )),
+                    },
                     Err(e) => {
                         ok = false;
                         qemu::log(format_args!(

@@ -26,14 +26,15 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+use tangent_core::measurement::{Measurement, StemReading, TiltAngles};
 use tangent_core::protocol::{
-    self, Board, DeviceInfo, FrameEncoder, FrameSel, FrameSetInfo, FromDevice, LinkStats, Method,
+    self, codes, Board, DeviceInfo, FrameEncoder, FrameSel, FrameSetInfo, FromDevice, LinkStats, Method,
     Reading, Request, Response, RunningStats, ToDevice, WireCalibration, FRAME_CHUNK_MAX,
     UNSOLICITED,
 };
 
 /// Readings kept for `History` (as the firmware).
-pub const HISTORY: usize = 64;
+pub const HISTORY: usize = codes::HISTORY_LEN;
 
 /// The diameter the fake reports for reading `seq` (metres, as sent in `f32`).
 pub fn diameter_of(seq: u32) -> f32 {
@@ -384,13 +385,20 @@ impl Device {
             seq: self.seq,
             timestamp_ms: self.boot.elapsed().as_millis() as u64,
             calib_id: self.calibration.as_ref().map(|c| c.id).unwrap_or(77),
-            method: Method::CircleFit,
-            diameter_m: diameter_of(self.seq),
-            uncertainty_m: 0.0015,
-            distance_m: 1.2,
-            tilt_rad: 0.05,
-            flags: 0x0004,
             exposure_us: 900,
+            measurement: Measurement::Stem(StemReading {
+                diameter: diameter_of(self.seq).into(),
+                uncertainty: 0.0015f32.into(),
+                method: Method::CircleFit,
+                distance: 1.2f32.into(),
+                tilt: Some(TiltAngles {
+                    total: 0.05f32.into(),
+                    theta: 0.0,
+                    phi: 0.05f32.into(),
+                }),
+                axes: None,
+                flags: tangent_core::solvers::result::Flags::TILT_IGNORED,
+            }),
             stats,
         };
         if self.history.len() == HISTORY {
