@@ -98,7 +98,9 @@ impl TreeRecord {
             // precision the host computes in.
             diameter_mm: stem.diameter as f32 as f64 * 1e3,
             uncertainty_mm: stem.uncertainty as f32 as f64 * 1e3,
-            tilt_deg: stem.tilt.map_or(0.0, |t| (t.total as f32 as f64).to_degrees()),
+            tilt_deg: stem
+                .tilt
+                .map_or(0.0, |t| (t.total as f32 as f64).to_degrees()),
             flags: stem.flags.0,
             time: now_rfc3339(),
             device_id: device_id.to_string(),

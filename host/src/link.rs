@@ -31,9 +31,8 @@ use std::time::{Duration, Instant};
 
 use tangent_core::protocol::{
     self, codes, Board, Decoder, DeviceError, ErrorCode, Feed, FrameEncoder, FrameSel,
-    FrameSetInfo, FromDevice, LinkStats, ProtocolError, Reading, Request, Response,
-    SelfTestReport, ToDevice, WireCalibration, FRAME_CHUNK_MAX, MAX_FRAME_LEN, PROTOCOL_VERSION,
-    UNSOLICITED,
+    FrameSetInfo, FromDevice, LinkStats, ProtocolError, Reading, Request, Response, SelfTestReport,
+    ToDevice, WireCalibration, FRAME_CHUNK_MAX, MAX_FRAME_LEN, PROTOCOL_VERSION, UNSOLICITED,
 };
 
 /// Line rate set on the port. USB CDC-ACM and ptys ignore it; a USB–UART adapter wired to

@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 
 use fake_device::{diameter_of, FakeDevice, Faults, Persona, HISTORY};
 use tangent_core::measurement::Measurement;
-use tangent_core::protocol::FrameSel;
+use tangent_core::protocol::{FrameSel, PROTOCOL_VERSION};
 use tangent_host::link::{Link, LinkConfig, LinkError, LinkEvent};
 
 fn cfg() -> LinkConfig {
@@ -223,7 +223,7 @@ fn frame_dump_and_calibration_over_a_faulty_link() {
 
 #[test]
 fn another_protocol_version_is_named() {
-    let dev = FakeDevice::start(Persona::OtherVersion(2));
+    let dev = FakeDevice::start(Persona::OtherVersion(PROTOCOL_VERSION + 1));
     let err = Link::open(dev.path().to_str().unwrap(), cfg())
         .err()
         .expect("must fail");
@@ -231,16 +231,17 @@ fn another_protocol_version_is_named() {
         matches!(
             err,
             LinkError::VersionMismatch {
-                device: 2,
-                host: 1,
+                device,
+                host: PROTOCOL_VERSION,
                 ..
-            }
+            } if device == PROTOCOL_VERSION + 1
         ),
         "{err:?}"
     );
     let text = err.to_string();
     assert!(
-        text.contains("version 2") && text.contains("version 1"),
+        text.contains(&format!("version {}", PROTOCOL_VERSION + 1))
+            && text.contains(&format!("version {PROTOCOL_VERSION}")),
         "{text}"
     );
 }

@@ -374,14 +374,14 @@ fn garbage_corruption_oversize_and_other_versions_are_counted_not_fatal() {
     // 3. An oversize frame (no delimiter for 5000 bytes).
     dev.send_raw(&vec![0x5Au8; 5000]);
     dev.send_raw(&[0x00]);
-    // 4. A frame of protocol version 2: answered with UnsupportedVersion.
+    // 4. A frame of another protocol version: answered with UnsupportedVersion.
     let mut scratch = [0u8; protocol::MAX_RAW_LEN];
     let raw = protocol::encode_raw(
         &ToDevice {
             tag: 7,
             request: Request::DeviceInfo,
         },
-        2,
+        PROTOCOL_VERSION + 1,
         &mut scratch,
     )
     .unwrap();
@@ -391,7 +391,7 @@ fn garbage_corruption_oversize_and_other_versions_are_counted_not_fatal() {
     dev.expect(protocol::UNSOLICITED, |r| match r {
         Response::Error(DeviceError { code, detail }) => {
             assert_eq!(code, ErrorCode::UnsupportedVersion);
-            assert_eq!(detail, 2);
+            assert_eq!(detail, u32::from(PROTOCOL_VERSION + 1));
         }
         other => panic!("{other:?}"),
     });

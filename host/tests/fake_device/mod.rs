@@ -28,8 +28,8 @@ use std::time::{Duration, Instant};
 
 use tangent_core::measurement::{Measurement, StemReading, TiltAngles};
 use tangent_core::protocol::{
-    self, codes, Board, DeviceInfo, FrameEncoder, FrameSel, FrameSetInfo, FromDevice, LinkStats, Method,
-    Reading, Request, Response, RunningStats, ToDevice, WireCalibration, FRAME_CHUNK_MAX,
+    self, codes, Board, DeviceInfo, FrameEncoder, FrameSel, FrameSetInfo, FromDevice, LinkStats,
+    Method, Reading, Request, Response, RunningStats, ToDevice, WireCalibration, FRAME_CHUNK_MAX,
     UNSOLICITED,
 };
 
