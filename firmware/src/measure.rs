@@ -8,10 +8,11 @@ use tangent_core::calibration::Calibration;
 use tangent_core::curve::CurvePoint;
 use tangent_core::image::segment::ObjectFeatures;
 use tangent_core::image::Frame;
+use tangent_core::measurement::{Axes, Measurement, StemReading, TiltAngles};
 use tangent_core::pipeline::{self, PipelineConfig, PipelineError, Stage, Workspace};
-use tangent_core::protocol::Method;
+use tangent_core::protocol::codes::Failure;
 use tangent_core::real::{Real, Vec2, Vec3};
-use tangent_core::solvers::cylinder::CylinderParams;
+use tangent_core::solvers::cylinder::{CylinderParams, CylinderSolution};
 
 /// A captured frame pair, 8-bit, row-major, `width` bytes per row.
 #[derive(Debug, Clone, Copy)]
@@ -30,28 +31,15 @@ pub struct FramePair<'a> {
     pub laser_mask: u8,
 }
 
-/// What a measurement found.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Outcome {
-    /// The solver used.
-    pub method: Method,
-    /// Diameter (metres).
-    pub diameter_m: f32,
-    /// Predicted standard uncertainty (metres).
-    pub uncertainty_m: f32,
-    /// Distance to the stem axis (metres).
-    pub distance_m: f32,
-    /// Tilt (radians).
-    pub tilt_rad: f32,
-    /// [`tangent_core::protocol::flags`].
-    pub flags: u16,
-}
-
 /// Runs the measurement on a frame pair.
 pub trait Measurer {
-    /// Measures; the error is a code sent as the detail of
-    /// [`tangent_core::protocol::ErrorCode::MeasurementFailed`].
-    fn measure(&mut self, pair: &FramePair<'_>, calibration: &Calibration) -> Result<Outcome, u32>;
+    /// Measures; a failure is sent as [`Failure::device_error`] (the code map and the
+    /// sentence the host prints are in `tangent_core::protocol::codes`).
+    fn measure(
+        &mut self,
+        pair: &FramePair<'_>,
+        calibration: &Calibration,
+    ) -> Result<Measurement, Failure>;
 }
 
 /// Label-table entries of the workspace (`pipeline::WorkspaceSizes::new`).
@@ -200,30 +188,33 @@ pub fn window_calibration(cal: &Calibration, row_offset: usize, height: usize) -
     c
 }
 
-/// Detail code of a [`PipelineError`] for [`tangent_core::protocol::ErrorCode::MeasurementFailed`]
-/// (the variant's position in the enum, `docs/protocol.md`).
-pub fn error_code(e: &PipelineError) -> u32 {
-    match e {
-        PipelineError::Frame(_) => 1,
-        PipelineError::FrameSizeMismatch { .. } => 2,
-        PipelineError::WorkspaceTooSmall { .. } => 3,
-        PipelineError::NoLaserLight { .. } => 4,
-        PipelineError::AmbientSaturated { .. } => 5,
-        PipelineError::Threshold(_) => 6,
-        PipelineError::Segment(_) => 7,
-        PipelineError::NoCurve => 8,
-        PipelineError::CurveTooShort { .. } => 9,
-        PipelineError::Curve(_) => 10,
-        PipelineError::Calibration => 11,
-        PipelineError::Triangulation(_) => 12,
-        PipelineError::OutsideFrame => 13,
-        PipelineError::Solve(_) => 14,
-    }
+/// The reading of a stem solution, as the wire and the host know it.
+pub fn stem_reading(s: &CylinderSolution) -> Measurement {
+    Measurement::Stem(StemReading {
+        diameter: s.diameter,
+        uncertainty: s.uncertainty,
+        method: s.method,
+        distance: s.distance,
+        tilt: s.tilt.map(|t| TiltAngles {
+            total: t.total,
+            theta: t.theta,
+            phi: t.phi,
+        }),
+        axes: s.axes.map(|(major, minor)| Axes { major, minor }),
+        flags: s.flags,
+    })
 }
 
 impl Measurer for PipelineMeasurer<'_> {
-    fn measure(&mut self, pair: &FramePair<'_>, calibration: &Calibration) -> Result<Outcome, u32> {
-        let frame = |data| Frame::new(data, pair.width, pair.height, pair.width).map_err(|_| 1u32);
+    fn measure(
+        &mut self,
+        pair: &FramePair<'_>,
+        calibration: &Calibration,
+    ) -> Result<Measurement, Failure> {
+        let frame = |data| {
+            Frame::new(data, pair.width, pair.height, pair.width)
+                .map_err(|e| Failure::of(&PipelineError::Frame(e)))
+        };
         let off = frame(pair.off)?;
         let on = frame(pair.on)?;
         let windowed;
@@ -252,20 +243,12 @@ impl Measurer for PipelineMeasurer<'_> {
                 last = t;
             });
         self.last_stages = stages;
-        let profile = profile.map_err(|e| error_code(&e))?;
+        let profile = profile.map_err(|e| Failure::of(&e))?;
         let t = now();
         let solved =
             pipeline::solve_stem(&profile, on.max_value(), cal, &self.params, &mut self.ws);
         self.last_stages.solver_us = now().saturating_sub(t);
-        let s = solved.map_err(|e| error_code(&e))?.solution;
-        let tilt: Real = s.tilt.map(|t| t.total).unwrap_or(0.0);
-        Ok(Outcome {
-            method: s.method.into(),
-            diameter_m: s.diameter as f32,
-            uncertainty_m: s.uncertainty as f32,
-            distance_m: s.distance as f32,
-            tilt_rad: tilt as f32,
-            flags: s.flags.0,
-        })
+        let solved = solved.map_err(|e| Failure::of(&e))?;
+        Ok(stem_reading(&solved.solution))
     }
 }

@@ -2,7 +2,7 @@
 //!
 //! The host runs exactly the core's `pipeline::measure_stem` that the firmware runs, with
 //! buffers allocated here ([`HostWorkspace`]); this module only picks the frames, converts
-//! units for people (millimetres, degrees) and names the flags.
+//! units for people (millimetres, degrees) and names the flags (`protocol::codes`).
 
 use std::borrow::Cow;
 use std::path::{Path, PathBuf};
@@ -15,51 +15,15 @@ use tangent_core::image::{Frame, Pixel};
 use tangent_core::pipeline::{
     self, PipelineConfig, PipelineError, StemMeasurement, Workspace, WorkspaceSizes,
 };
+use tangent_core::protocol::codes::{self, Failure};
 use tangent_core::real::{Real, Vec2, Vec3};
-use tangent_core::solvers::cylinder::{CylinderParams, Flags, Method};
+use tangent_core::solvers::cylinder::CylinderParams;
 
 use crate::capture::{Capture, CaptureError, Mode};
 use crate::pgm::{Pgm, PgmSamples};
 use crate::simulate::scene::Object;
 
 type Vec3d = nalgebra::Vector3<f64>;
-
-/// Every flag with its name as printed and exported (stable: the field log stores them).
-pub const FLAG_NAMES: [(Flags, &str); 14] = [
-    (Flags::ARC_TOO_SHORT, "arc_too_short"),
-    (Flags::POOR_FIT, "poor_fit"),
-    (Flags::TILT_IGNORED, "tilt_ignored"),
-    (Flags::INCONSISTENT, "inconsistent"),
-    (Flags::THREE_TANGENT_FAILED, "three_tangent_failed"),
-    (Flags::FIT_FAILED, "fit_failed"),
-    (Flags::RANGE_LIMIT, "range_limit"),
-    (Flags::TILT_FIT_FAILED, "tilt_fit_failed"),
-    (Flags::LARGE_TILT, "large_tilt"),
-    (Flags::SEVERAL_OBJECTS, "several_objects"),
-    (Flags::STRIPE_SATURATED, "stripe_saturated"),
-    (Flags::AMBIENT_BRIGHT, "ambient_bright"),
-    (Flags::OTHER_OBJECTS, "other_objects"),
-    (Flags::ELLIPTIC, "elliptic"),
-];
-
-/// The names of the flags set in `flags`.
-pub fn flag_names(flags: Flags) -> Vec<&'static str> {
-    FLAG_NAMES
-        .iter()
-        .filter(|(f, _)| flags.contains(*f))
-        .map(|(_, n)| *n)
-        .collect()
-}
-
-/// Name of a solver method as printed and exported.
-pub fn method_name(method: Method) -> &'static str {
-    match method {
-        Method::ThreeTangent => "three_tangent",
-        Method::CircleFit => "circle_fit",
-        Method::CylinderFit => "cylinder_fit",
-        Method::GeneralisedThreeTangent => "generalised_three_tangent",
-    }
-}
 
 /// Why a capture could not be measured (as opposed to a measurement that failed, which is a
 /// [`Reading`] with an error).
@@ -146,8 +110,8 @@ impl Reading {
                     capture,
                     diameter_m: Some(s.diameter),
                     uncertainty_m: Some(s.uncertainty),
-                    method: Some(method_name(s.method)),
-                    flags: flag_names(s.flags),
+                    method: Some(codes::method_name(s.method)),
+                    flags: codes::flag_names(s.flags).collect(),
                     tilt: s.tilt.map(|t| TiltReport {
                         total_deg: t.total.to_degrees(),
                         theta_deg: t.theta.to_degrees(),
@@ -174,7 +138,8 @@ impl Reading {
                 fit_diameter_m: None,
                 distance_m: None,
                 points: None,
-                error: Some(e.to_string()),
+                // The sentence the caliper's report of this failure reads as.
+                error: Some(Failure::of(e).to_string()),
                 truth_diameter_m: truth,
             },
         }

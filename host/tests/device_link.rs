@@ -10,7 +10,8 @@ mod test_device;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use tangent_core::protocol::FrameSel;
+use tangent_core::measurement::Measurement;
+use tangent_core::protocol::{FrameSel, PROTOCOL_VERSION};
 use tangent_host::link::{Link, LinkConfig, LinkError, LinkEvent};
 use test_device::{diameter_of, test_frame, Faults, NotATangent, Setup, TestDevice, HISTORY};
 
@@ -33,9 +34,10 @@ fn collect(link: &mut Link, n: u32, timeout: Duration) -> Vec<u32> {
     let mut seqs = Vec::new();
     while (seqs.len() as u32) < n && Instant::now() < end {
         if let Some(r) = link.next_reading(Duration::from_millis(100)).unwrap() {
+            let Measurement::Stem(stem) = r.measurement;
             assert_eq!(
-                r.diameter_m,
-                diameter_of(r.seq),
+                stem.diameter,
+                f64::from(diameter_of(r.seq)),
                 "content of reading {}",
                 r.seq
             );
@@ -233,7 +235,7 @@ fn frame_dump_and_calibration_over_a_faulty_link() {
 #[test]
 fn another_protocol_version_is_named() {
     let dev = TestDevice::start_with(Setup {
-        protocol_version: 2,
+        protocol_version: PROTOCOL_VERSION + 1,
         ..Setup::default()
     });
     let err = Link::open(dev.path().to_str().unwrap(), cfg())
@@ -243,16 +245,17 @@ fn another_protocol_version_is_named() {
         matches!(
             err,
             LinkError::VersionMismatch {
-                device: 2,
-                host: 1,
+                device,
+                host: PROTOCOL_VERSION,
                 ..
-            }
+            } if device == PROTOCOL_VERSION + 1
         ),
         "{err:?}"
     );
     let text = err.to_string();
     assert!(
-        text.contains("version 2") && text.contains("version 1"),
+        text.contains(&format!("version {}", PROTOCOL_VERSION + 1))
+            && text.contains(&format!("version {PROTOCOL_VERSION}")),
         "{text}"
     );
 }

@@ -11,7 +11,10 @@ use tangent_core::calibration::Calibration;
 use tangent_core::protocol::{
     self, FrameSel, FromDevice, Method, ToDevice, WireCalibration, MAX_FRAME_LEN, MAX_RAW_LEN,
 };
-use tangent_firmware::measure::{FramePair, Measurer, Outcome};
+use tangent_core::measurement::{Measurement, StemReading, TiltAngles};
+use tangent_core::protocol::codes::Failure;
+use tangent_core::solvers::result::Flags;
+use tangent_firmware::measure::{FramePair, Measurer};
 use tangent_firmware::ports::{
     Board, CalibrationStore, Camera, CameraError, Clock, Geometry, Laser, Link, LinkError, Strobe,
     Trigger, Watchdog,
@@ -170,7 +173,7 @@ pub(super) struct TestMeasurer {
 }
 
 impl Measurer for TestMeasurer {
-    fn measure(&mut self, pair: &FramePair<'_>, _: &Calibration) -> Result<Outcome, u32> {
+    fn measure(&mut self, pair: &FramePair<'_>, _: &Calibration) -> Result<Measurement, Failure> {
         assert_eq!(
             (pair.width, pair.height, pair.row_offset),
             (
@@ -181,14 +184,19 @@ impl Measurer for TestMeasurer {
         );
         self.made += 1;
         self.control.lock().unwrap().issued = self.made;
-        Ok(Outcome {
+        Ok(Measurement::Stem(StemReading {
+            diameter: diameter_of(self.made).into(),
+            uncertainty: 0.0015f32.into(),
             method: Method::CircleFit,
-            diameter_m: diameter_of(self.made),
-            uncertainty_m: 0.0015,
-            distance_m: 1.2,
-            tilt_rad: 0.05,
-            flags: 0x0004,
-        })
+            distance: 1.2f32.into(),
+            tilt: Some(TiltAngles {
+                total: 0.05f32.into(),
+                theta: 0.0,
+                phi: 0.05f32.into(),
+            }),
+            axes: None,
+            flags: Flags::TILT_IGNORED,
+        }))
     }
 }
 

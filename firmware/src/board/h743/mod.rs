@@ -53,11 +53,8 @@ pub const DEBOUNCE_US: u64 = 10_000;
 /// Watchdog timeout (µs): the main loop feeds it at least every 100 ms when idle and between
 /// measurements (one measurement takes < 100 ms).
 pub const WATCHDOG_US: u32 = 2_000_000;
-/// USB vendor id of the Tangent (pid.codes test range until one is allocated;
-/// `tangent devices` looks for it).
-pub const USB_VID: u16 = 0x1209;
-/// USB product id.
-pub const USB_PID: u16 = 0x7A6E;
+/// USB vendor and product ids: the device contract's (`tangent devices` looks for them).
+pub use tangent_core::protocol::codes::{USB_PID, USB_VID};
 /// Offset of the calibration sector from the start of flash (bank 2, sector 7; `memory.x`).
 pub const CALIB_OFFSET: u32 = 0x1E_0000;
 /// Size of the calibration sector.
