@@ -18,7 +18,7 @@ use tangent_core::real::Vec2;
 use tangent_core::solvers::cylinder::CylinderParams;
 use tangent_host::capture::{Capture, Mode};
 use tangent_host::measure::{measure_capture, Reading};
-use tangent_host::simulate::scene::Object;
+use tangent_host::truth::Object;
 
 fn corpus() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/captures")

@@ -16,10 +16,12 @@ struct Cli {
 #[derive(Subcommand, Debug)]
 enum Command {
     // Each variant: `Name(cli::name::Args)`; keep one per line, alphabetical.
-    /// Camera and laser-plane calibration (`calibrate camera`, `calibrate laser`).
+    /// Compute a calibration: camera from chessboard images, laser planes from board captures
+    /// (`calibrate camera`, `calibrate laser`).
     Calibrate(cli::calibrate::Args),
-    /// Store the calibration on the device or read it back (`calib push|pull`).
-    Calib(cli::calib::Args),
+    /// The calibration stored on the device: copy a file to it or read it back
+    /// (`device-calibration push|pull`).
+    DeviceCalibration(cli::device_calibration::Args),
     /// List the serial ports that look like a Tangent.
     Devices(cli::devices::Args),
     /// Build the firmware and flash it through probe-rs.
@@ -49,7 +51,7 @@ fn main() -> std::process::ExitCode {
     let result: anyhow::Result<std::process::ExitCode> = match cli.command {
         // Each arm: `Command::Name(args) => cli::name::run(args),`
         Command::Calibrate(args) => cli::calibrate::run(args),
-        Command::Calib(args) => cli::calib::run(args),
+        Command::DeviceCalibration(args) => cli::device_calibration::run(args),
         Command::Devices(args) => cli::devices::run(args),
         Command::Flash(args) => cli::flash::run(args),
         Command::Listen(args) => cli::listen::run(args),
@@ -65,7 +67,7 @@ fn main() -> std::process::ExitCode {
     match result {
         Ok(code) => code,
         Err(err) => {
-            eprintln!("error: {err:#}");
+            eprintln!("error: {}", cli::error_text(&err));
             std::process::ExitCode::FAILURE
         }
     }

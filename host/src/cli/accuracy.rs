@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use anyhow::{anyhow, Context};
+use anyhow::anyhow;
 use plotters::prelude::*;
 use tangent_core::calibration::Calibration;
 use tangent_core::error_model::{predict_diameter_sigma, NoiseModel, StemGeometry};
@@ -57,7 +57,8 @@ fn predict(cal: &Calibration, d: f64, z: f64, scratch: &mut [Vec2]) -> (Option<f
 /// Runs `tangent accuracy`.
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let cal = match &args.calib {
-        Some(p) => calibration_file::read(p).with_context(|| format!("reading {}", p.display()))?,
+        // The error names the file.
+        Some(p) => calibration_file::read(p)?,
         None => Calibration::reference_design(),
     };
     let mut scratch = vec![Vec2::zeros(); 2 * cal.camera.width as usize];
@@ -82,7 +83,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let y_max = y_max.min(20.0);
 
     plot::init_fonts();
-    let err = |e: &dyn std::fmt::Debug| anyhow!("plot: {e:?}");
+    // Plotters reports the file's failure without its name.
+    let err = |e: &dyn std::fmt::Display| anyhow!("{}: {e}", args.out.display());
     let root = BitMapBackend::new(&args.out, (1000, 650)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| err(&e))?;
     let mut chart = ChartBuilder::on(&root)

@@ -13,9 +13,9 @@ use tangent_core::calibration::Calibration;
 use tangent_core::camera::Distortion;
 
 use super::render::{HandMotion, Lighting};
-use super::scene::{Board, Cylinder, Object, Plane, Road, Sphere, Texture, Wave};
 use super::{simulate, Exposure, SimError, SimParams, SimSpec};
 use crate::capture::Mode;
+use crate::truth::{Board, Cylinder, Object, Plane, Road, Sphere, Texture, Wave};
 
 /// One corpus capture: directory name and spec.
 #[derive(Debug, Clone)]
