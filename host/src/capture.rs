@@ -118,10 +118,13 @@ pub enum CaptureError {
     /// A directory that is neither a capture nor holds any.
     #[error("neither a capture (no {META_FILE}) nor a directory of captures")]
     NoCaptures,
+    /// The capture directory could not be listed or created (the caller names it).
+    #[error("{0}")]
+    Directory(std::io::Error),
     /// A file of the capture could not be read or written.
     #[error("{file}: {error}")]
     Io {
-        /// The file, relative to the capture directory (`.` for the directory itself).
+        /// The file, relative to the capture directory.
         file: String,
         /// The I/O error (named in the message, so not also a `source()`).
         error: std::io::Error,
@@ -260,10 +263,7 @@ pub fn find_captures(path: &Path) -> Result<Vec<PathBuf>, CaptureError> {
     if path.join(META_FILE).is_file() {
         return Ok(vec![path.to_path_buf()]);
     }
-    let entries = std::fs::read_dir(path).map_err(|error| CaptureError::Io {
-        file: ".".into(),
-        error,
-    })?;
+    let entries = std::fs::read_dir(path).map_err(CaptureError::Directory)?;
     let mut captures: Vec<PathBuf> = entries
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.join(META_FILE).is_file())
@@ -459,10 +459,7 @@ impl Capture {
     /// the truth curve when present. An inline calibration is written from
     /// `self.calibration`; a calibration given by path is left where it is.
     pub fn write(&self, dir: &Path) -> Result<(), CaptureError> {
-        std::fs::create_dir_all(dir).map_err(|error| CaptureError::Io {
-            file: ".".into(),
-            error,
-        })?;
+        std::fs::create_dir_all(dir).map_err(CaptureError::Directory)?;
         if self.frames.len() != self.meta.frames.len() {
             return Err(CaptureError::InvalidField(format!(
                 "{} frames for {} frame entries",

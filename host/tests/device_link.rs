@@ -397,9 +397,21 @@ fn emulated_device_end_to_end() {
     // Calibration: push the capture's, pull it back, identical.
     let cal_in = dir.path().join("cal.toml");
     tangent_host::calibration_file::write(&cal_in, &src.calibration).unwrap();
-    tangent(&["device-calibration", "push", "--port", &port, cal_in.to_str().unwrap()]);
+    tangent(&[
+        "device-calibration",
+        "push",
+        "--port",
+        &port,
+        cal_in.to_str().unwrap(),
+    ]);
     let cal_out = dir.path().join("pulled.toml");
-    tangent(&["device-calibration", "pull", "--port", &port, cal_out.to_str().unwrap()]);
+    tangent(&[
+        "device-calibration",
+        "pull",
+        "--port",
+        &port,
+        cal_out.to_str().unwrap(),
+    ]);
     assert_eq!(
         tangent_host::calibration_file::read(&cal_out).unwrap(),
         src.calibration
