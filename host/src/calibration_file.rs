@@ -90,16 +90,6 @@ pub enum CalibrationFileError {
     },
 }
 
-impl CalibrationFileError {
-    /// What is wrong, without the file it is in (the error itself when it names no file).
-    pub fn cause(&self) -> &CalibrationFileError {
-        match self {
-            CalibrationFileError::File { error, .. } => error.cause(),
-            other => other,
-        }
-    }
-}
-
 /// Wraps an error of the file at `path` so that its message names the file.
 fn in_file(path: &Path) -> impl FnOnce(CalibrationFileError) -> CalibrationFileError + '_ {
     move |error| CalibrationFileError::File {
