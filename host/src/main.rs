@@ -33,12 +33,15 @@ enum Command {
     /// Record raw frame pairs from the device as capture directories.
     Record(cli::record::Args),
     /// Plot the error model's predicted diameter error against distance (PNG).
+    #[command(long_about = cli::accuracy::LONG_ABOUT)]
     Accuracy(cli::accuracy::Args),
     /// Accuracy against the simulator's truth on fresh random stems (writes docs/accuracy.md).
+    #[command(long_about = cli::evaluate::LONG_ABOUT)]
     Evaluate(cli::evaluate::Args),
     /// A PNG of a capture: frames, difference, true and extracted laser curves.
     Inspect(cli::inspect::Args),
     /// Replay captures and print the stem diameter, uncertainty, method, tilt and flags.
+    #[command(long_about = cli::measure::LONG_ABOUT)]
     Measure(cli::measure::Args),
     /// Render synthetic captures (one stem, random stems, or the test corpus).
     Simulate(cli::simulate::Args),

@@ -235,3 +235,23 @@ fn other_commands_name_their_paths() {
         "Not a directory",
     );
 }
+
+#[test]
+fn measure_exits_as_its_help_says() {
+    let help = text(&tangent(&["measure", "--help"]).stdout);
+    for promise in [
+        "0 when every capture gave a reading",
+        "1 when some gave none",
+        "2 when a capture",
+    ] {
+        assert!(help.contains(promise), "{promise:?} not in --help:\n{help}");
+    }
+    let good = good_capture();
+    assert_eq!(
+        tangent(&["measure", good.to_str().unwrap()]).status.code(),
+        Some(0)
+    );
+    let refused = good.with_file_name("cyl-d1000-z050-partly-outside");
+    let out = tangent(&["measure", good.to_str().unwrap(), refused.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out.stdout));
+}

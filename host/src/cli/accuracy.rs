@@ -11,14 +11,15 @@ use tangent_core::error_model::{predict_diameter_sigma, NoiseModel, StemGeometry
 use tangent_core::real::Vec2;
 use tangent_host::{calibration_file, plot};
 
-/// Arguments of `tangent accuracy`.
-#[derive(clap::Args, Debug)]
-#[command(
-    long_about = "Plots the error model's predicted 1-sigma diameter error (mm) of a \
+/// The long help of `tangent accuracy` (`main.rs` gives it to clap on the subcommand, where
+/// the short doc comment would otherwise replace it).
+pub const LONG_ABOUT: &str = "Plots the error model's predicted 1-sigma diameter error (mm) of a \
 transversal stem against its distance (m), for several diameters, for the three-tangent method \
 (solid) and the circle fit (dashed), with the reference noise model (subpixel noise, speckle, \
-calibration errors). Also prints the table of the plotted values."
-)]
+calibration errors). Also prints the table of the plotted values.";
+
+/// Arguments of `tangent accuracy`.
+#[derive(clap::Args, Debug)]
 pub struct Args {
     /// Calibration file (default: the reference design, one plane).
     #[arg(long, value_name = "FILE")]

@@ -13,17 +13,19 @@ use tangent_core::solvers::cylinder::CylinderParams;
 use tangent_host::measure::{measure_capture, Reading};
 use tangent_host::{calibration_file, capture, plot};
 
-/// Arguments of `tangent measure`.
-#[derive(clap::Args, Debug)]
-#[command(
-    long_about = "Replays recorded captures (a directory with capture.toml and its PGM frames, \
+/// The long help of `tangent measure` (`main.rs` gives it to clap on the subcommand, where
+/// the short doc comment would otherwise replace it).
+pub const LONG_ABOUT: &str =
+    "Replays recorded captures (a directory with capture.toml and its PGM frames, \
 or a directory of such directories) through the same measurement core the device runs, and prints \
 per capture the stem diameter in mm with its 1-sigma uncertainty, the method used, the tilt and \
 quality flags — or why no trustworthy reading exists. A path that cannot be read is reported \
 (with --json as {\"error\": …}) and the other captures are still measured.\n\nExit status: 0 when \
 every capture gave a reading, 1 when some gave none (the reason is printed), 2 when a capture, \
-a path given, or the --calib file could not be read."
-)]
+a path given, or the --calib file could not be read.";
+
+/// Arguments of `tangent measure`.
+#[derive(clap::Args, Debug)]
 pub struct Args {
     /// Capture directories (or directories of captures).
     #[arg(required = true)]
