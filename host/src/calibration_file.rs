@@ -80,7 +80,7 @@ pub enum CalibrationFileError {
     #[error("{0}")]
     Io(std::io::Error),
     /// An error of a calibration file, naming the file: every error of [`read`],
-    /// [`read_camera`] and [`write`] is one, so a message always says which file.
+    /// [`read_camera`] and [`write()`] is one, so a message always says which file.
     #[error("{path}: {error}")]
     File {
         /// The file.

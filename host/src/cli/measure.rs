@@ -22,7 +22,7 @@ per capture the stem diameter in mm with its 1-sigma uncertainty, the method use
 quality flags — or why no trustworthy reading exists. A path that cannot be read is reported \
 (with --json as {\"error\": …}) and the other captures are still measured.\n\nExit status: 0 when \
 every capture gave a reading, 1 when some gave none (the reason is printed), 2 when a capture, \
-a path given, or the --calib file could not be read.";
+a path given, or the --calib file could not be read (or a --plot image not written).";
 
 /// Arguments of `tangent measure`.
 #[derive(clap::Args, Debug)]
@@ -139,7 +139,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
 
 /// Exit status when some capture gave no reading (and every one was read).
 const NO_READING: u8 = 1;
-/// Exit status when a capture, or the `--calib` file, could not be read.
+/// Exit status when a path, a capture or the `--calib` file could not be read (or a `--plot`
+/// image not written).
 const UNREADABLE: u8 = 2;
 
 /// Reports what could not be read: a JSON object `{"error": …}` on standard output with
