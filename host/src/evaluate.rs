@@ -10,8 +10,8 @@ use tangent_core::pipeline::PipelineConfig;
 use tangent_core::solvers::cylinder::CylinderParams;
 
 use crate::measure::{measure_loaded, Reading};
-use crate::simulate::scene::Object;
 use crate::simulate::{corpus::random_stem, simulate};
+use crate::truth::Object;
 
 /// One evaluated capture.
 #[derive(Debug, Clone)]

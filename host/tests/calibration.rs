@@ -599,7 +599,8 @@ use tangent_host::calibrate::laser::{board_capture, calibrate_lasers, BoardCaptu
 use tangent_host::calibration_file;
 use tangent_host::capture::{Capture, Mode};
 use tangent_host::measure::measure_capture;
-use tangent_host::simulate::{corpus, scene::Object};
+use tangent_host::simulate::corpus;
+use tangent_host::truth::Object;
 
 fn captures_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../tests/captures")

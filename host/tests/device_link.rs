@@ -414,9 +414,21 @@ fn emulated_device_end_to_end() {
     // Calibration: push the capture's, pull it back, identical.
     let cal_in = dir.path().join("cal.toml");
     tangent_host::calibration_file::write(&cal_in, &src.calibration).unwrap();
-    tangent(&["calib", "push", "--port", &port, cal_in.to_str().unwrap()]);
+    tangent(&[
+        "device-calibration",
+        "push",
+        "--port",
+        &port,
+        cal_in.to_str().unwrap(),
+    ]);
     let cal_out = dir.path().join("pulled.toml");
-    tangent(&["calib", "pull", "--port", &port, cal_out.to_str().unwrap()]);
+    tangent(&[
+        "device-calibration",
+        "pull",
+        "--port",
+        &port,
+        cal_out.to_str().unwrap(),
+    ]);
     assert_eq!(
         tangent_host::calibration_file::read(&cal_out).unwrap(),
         src.calibration
@@ -494,7 +506,7 @@ fn emulated_device_through_a_faulty_cut_link() {
     let cal = dir.path().join("cal.toml");
     tangent_host::calibration_file::write(&cal, &src.calibration).unwrap();
     tangent(&[
-        "calib",
+        "device-calibration",
         "push",
         "--port",
         dev.pty.to_str().unwrap(),

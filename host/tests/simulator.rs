@@ -14,9 +14,9 @@ use tangent_host::pgm::PgmSamples;
 use tangent_host::simulate::corpus::{self, stem, tilted_axis};
 use tangent_host::simulate::laser::LaserParams;
 use tangent_host::simulate::render::{HandMotion, Lighting};
-use tangent_host::simulate::scene::{Object, Plane, Texture};
 use tangent_host::simulate::sensor::{self, SensorParams};
 use tangent_host::simulate::{simulate, Exposure, SimParams, SimSpec};
+use tangent_host::truth::{Object, Plane, Texture};
 
 fn wall(z: f64, texture: Texture) -> Object {
     Object::Plane(Plane {

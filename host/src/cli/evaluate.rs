@@ -7,15 +7,17 @@ use std::process::ExitCode;
 use anyhow::Context;
 use tangent_host::evaluate::{run as run_samples, section};
 
-/// Arguments of `tangent evaluate`.
-#[derive(clap::Args, Debug)]
-#[command(
-    long_about = "Simulates fresh random stems across the product's envelope (diameters \
+/// The long help of `tangent evaluate` (`main.rs` gives it to clap on the subcommand, where
+/// the short doc comment would otherwise replace it).
+pub const LONG_ABOUT: &str =
+    "Simulates fresh random stems across the product's envelope (diameters \
 50–1000 mm log-uniform, distances 0.5–3 m, forest light), measures each end to end with the \
 device's core, and tabulates the errors against the simulator's truth per diameter and distance \
 bin, three-tangent and fit side by side. The seeds are not the corpus's and were not used to \
-tune anything."
-)]
+tune anything.";
+
+/// Arguments of `tangent evaluate`.
+#[derive(clap::Args, Debug)]
 pub struct Args {
     /// Transversal stems to simulate.
     #[arg(long, default_value_t = 200)]

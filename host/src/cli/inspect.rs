@@ -95,8 +95,8 @@ fn put(img: &mut RgbImage, x: i64, y: i64, c: [u8; 3]) {
 
 /// Runs `tangent inspect`.
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
-    let c = Capture::read(&args.capture)
-        .with_context(|| format!("reading {}", args.capture.display()))?;
+    // A capture's errors name its files relative to it; put the directory in front.
+    let c = Capture::read(&args.capture).with_context(|| args.capture.display().to_string())?;
     let (w, h) = (c.meta.width, c.meta.height);
     let off = c.off_frame();
     let (lit, on) = c.on_frames().next().context("no laser-on frame")?;

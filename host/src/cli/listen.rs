@@ -89,8 +89,8 @@ fn parse_typed(line: &str) -> Vec<Typed> {
 
 /// Runs the listener.
 pub fn run(args: Args) -> Result<ExitCode> {
-    let mut log = FieldLog::open(&args.log)
-        .with_context(|| format!("cannot open the field log {}", args.log.display()))?;
+    // The error names the file.
+    let mut log = FieldLog::open(&args.log).context("cannot open the field log")?;
     if log.torn_bytes() > 0 {
         eprintln!(
             "recovered the field log: an incomplete last record ({} bytes, from a crash) was \
@@ -155,7 +155,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
         id.fw_version,
         id.calib_id
             .map(|c| c.to_string())
-            .unwrap_or_else(|| "NONE — push one with `tangent calib push`".into()),
+            .unwrap_or_else(|| "NONE — push one with `tangent device-calibration push`".into()),
         args.log.display()
     );
 

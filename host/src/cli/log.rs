@@ -54,8 +54,8 @@ pub fn run(args: Args) -> Result<ExitCode> {
 }
 
 fn export(a: ExportArgs) -> Result<ExitCode> {
-    let mut records = FieldLog::read(&a.log)
-        .with_context(|| format!("cannot read the field log {}", a.log.display()))?;
+    // The error names the file.
+    let mut records = FieldLog::read(&a.log).context("cannot read the field log")?;
     if let Some(id) = &a.plot_id {
         records.retain(|r| match r {
             Record::Plot(p) => &p.plot_id == id,

@@ -8,11 +8,11 @@ use std::task::{Context, Poll, Waker};
 use std::time::{Duration, Instant};
 
 use tangent_core::calibration::Calibration;
+use tangent_core::measurement::{Measurement, StemReading, TiltAngles};
+use tangent_core::protocol::codes::Failure;
 use tangent_core::protocol::{
     self, FrameSel, FromDevice, Method, ToDevice, WireCalibration, MAX_FRAME_LEN, MAX_RAW_LEN,
 };
-use tangent_core::measurement::{Measurement, StemReading, TiltAngles};
-use tangent_core::protocol::codes::Failure;
 use tangent_core::solvers::result::Flags;
 use tangent_firmware::measure::{FramePair, Measurer};
 use tangent_firmware::ports::{

@@ -36,8 +36,8 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use tangent_core::calibration::Calibration;
-use tangent_core::protocol::{self, FrameSel, WireCalibration, MAX_FRAME_LEN};
 use tangent_core::protocol::codes::HISTORY_LEN;
+use tangent_core::protocol::{self, FrameSel, WireCalibration, MAX_FRAME_LEN};
 use tangent_firmware::app::{App, Buffers};
 use tangent_firmware::ports::{Devices, Geometry};
 

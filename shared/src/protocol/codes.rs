@@ -378,7 +378,7 @@ impl fmt::Display for DeviceError {
             }
             ErrorCode::NoCalibration => write!(
                 f,
-                "it has no calibration (push one with `tangent calib push --port P FILE`)"
+                "it has no calibration (push one with `tangent device-calibration push --port P FILE`)"
             ),
             ErrorCode::InvalidCalibration => match d {
                 2 => write!(f, "the calibration does not match the device's sensor size"),

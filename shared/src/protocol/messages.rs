@@ -222,7 +222,7 @@ pub struct DeviceError {
 pub enum ErrorCode {
     /// A request frame of another protocol version (`detail` = its version).
     UnsupportedVersion,
-    /// The device has no valid calibration: push one (`tangent calib push`).
+    /// The device has no valid calibration: push one (`tangent device-calibration push`).
     NoCalibration,
     /// The calibration sent is invalid (`detail` = which check failed).
     InvalidCalibration,
