@@ -11,7 +11,7 @@ use tangent_core::image::Frame;
 use tangent_core::pipeline::{self, PipelineConfig, PipelineError, Stage, Workspace};
 use tangent_core::protocol::Method;
 use tangent_core::real::{Real, Vec2, Vec3};
-use tangent_core::solvers::cylinder::CylinderParams;
+use tangent_core::solvers::stem::CylinderParams;
 
 /// A captured frame pair, 8-bit, row-major, `width` bytes per row.
 #[derive(Debug, Clone, Copy)]

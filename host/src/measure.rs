@@ -16,7 +16,8 @@ use tangent_core::pipeline::{
     self, PipelineConfig, PipelineError, StemMeasurement, Workspace, WorkspaceSizes,
 };
 use tangent_core::real::{Real, Vec2, Vec3};
-use tangent_core::solvers::cylinder::{CylinderParams, Flags, Method};
+use tangent_core::solvers::result::{Flags, Method};
+use tangent_core::solvers::stem::CylinderParams;
 
 use crate::capture::{Capture, CaptureError, Mode};
 use crate::pgm::{Pgm, PgmSamples};

@@ -323,8 +323,6 @@ pub fn calibration_relative_sigma(
     sqrt(total)
 }
 
-/// σ of the radius of a geometric circle fit estimated from the data's own residuals: the
-
 #[cfg(test)]
 #[allow(clippy::unnecessary_cast)]
 mod tests {

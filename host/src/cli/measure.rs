@@ -8,7 +8,7 @@ use anyhow::Context;
 use indicatif::{ParallelProgressIterator, ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use tangent_core::pipeline::PipelineConfig;
-use tangent_core::solvers::cylinder::CylinderParams;
+use tangent_core::solvers::stem::CylinderParams;
 use tangent_host::calibration_file;
 use tangent_host::measure::{expand_captures, measure_capture, Reading};
 use tangent_host::plot;
