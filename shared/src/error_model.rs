@@ -4,7 +4,7 @@
 //! [`predict_diameter_sigma`] propagates the point noise of [`crate::noise`] (stripe-centre
 //! noise along `∂X/∂v`, grazing-ray columns, calibration) to the diameter of a transversal
 //! stem for both one-plane methods of the solvers (three-tangent and circle fit), sampling
-//! the lit and visible arc one point per image column ([`sample_columns`]), as the pipeline
+//! the lit and visible arc one point per image column ([`crate::noise::sample_columns`]), as the pipeline
 //! does. It sits above the solvers: it re-solves simulated points with them.
 
 // `!(x > 0.0)` is deliberate throughout: it also rejects NaN, which `x <= 0.0` would let
@@ -15,13 +15,13 @@ use core::fmt;
 
 #[allow(unused_imports)]
 use crate::real::Float;
-use crate::real::{sqrt, Real, Vec2, Vec3};
+use crate::real::{sqrt, Real, Vec2};
 
 use crate::camera::Camera;
 use crate::laser_plane::LaserPlane;
 use crate::noise::{
-    displacement_per_pixel, perturbed, point_sigma, retriangulate, NoiseError, NoiseModel,
-    PointSigma,
+    displacement_per_pixel, perturbed, point_sigma, retriangulate, sample_columns, NoiseError,
+    NoiseModel, PointSigma,
 };
 use crate::solvers::circle::{self, Circle};
 use crate::solvers::lm::LmParams;
@@ -60,6 +60,7 @@ impl From<NoiseError> for ErrorModelError {
     fn from(e: NoiseError) -> Self {
         match e {
             NoiseError::InvalidGeometry => ErrorModelError::InvalidGeometry,
+            NoiseError::ScratchTooSmall => ErrorModelError::ScratchTooSmall,
         }
     }
 }
@@ -109,61 +110,6 @@ pub struct DiameterPrediction {
     pub point: PointSigma,
 }
 
-/// Samples the lit and visible arc of the circle (in-plane coordinates of `plane`, a
-/// transversal stem: axis along the plane normal) at one point per image column, as a
-/// column-wise stripe extraction does. Writes into `out`; returns
-/// `(count, cut)` where `cut` says the arc reaches the image border (an end is not a
-/// grazing ray). Uses the pinhole part of `camera` (`fx`, `cx`, width).
-pub fn sample_columns(
-    plane: &LaserPlane,
-    camera: &Camera,
-    c: &Circle,
-    out: &mut [Vec2],
-) -> Result<(usize, bool), ErrorModelError> {
-    let (a, b) = plane.plane_axes();
-    let s = plane.source;
-    let cam = plane.camera_centre_in_plane();
-    let mut n = 0;
-    let mut cut = false;
-    let w = camera.width;
-    for col in 0..w {
-        let xn = (col as Real - camera.cx) / camera.fx;
-        let m = Vec3::new(1.0, 0.0, -xn);
-        let g = Vec2::new(m.dot(&a), m.dot(&b));
-        let gn2 = g.norm_squared();
-        if !(gn2 > 0.0) {
-            continue;
-        }
-        let h = -m.dot(&s);
-        let q0 = g * (h / gn2);
-        let dir = Vec2::new(-g.y, g.x) / sqrt(gn2);
-        let rel = q0 - c.centre;
-        let bb = dir.dot(&rel);
-        let cc = rel.norm_squared() - c.radius * c.radius;
-        let disc = bb * bb - cc;
-        if !(disc >= 0.0) {
-            continue;
-        }
-        let sq = sqrt(disc);
-        for t in [-bb - sq, -bb + sq] {
-            let q = q0 + dir * t;
-            let nrm = q - c.centre;
-            let lit = nrm.dot(&q) < 0.0;
-            let visible = nrm.dot(&(cam - q)) > 0.0 && plane.from_plane_coords(q).z > 0.0;
-            if lit && visible {
-                let slot = out.get_mut(n).ok_or(ErrorModelError::ScratchTooSmall)?;
-                *slot = q;
-                n += 1;
-                if col == 0 || col + 1 == w {
-                    cut = true;
-                }
-                break;
-            }
-        }
-    }
-    Ok((n, cut))
-}
-
 /// Predicts the 1σ diameter error of a transversal stem for the three-tangent method and the
 /// geometric circle fit (`docs/error-model.md`, "Diameter"): random noise by linear
 /// propagation (exact for small noise), edges from `edge_px`, calibration by re-solving the
@@ -187,7 +133,7 @@ pub fn predict_diameter_sigma(
     }
     let (pts, rest) = scratch.split_at_mut(w);
     let c = Circle::new(Vec2::new(0.0, stem.distance + r), r);
-    let (n, cut) = sample_columns(plane, camera, &c, pts)?;
+    let (n, cut) = sample_columns(plane, camera, c.centre, c.radius, pts)?;
     if n < 8 {
         return Err(ErrorModelError::NotVisible);
     }
@@ -315,7 +261,7 @@ mod tests {
     use super::*;
     use crate::calibration::Calibration;
     use crate::noise::calibration_displacements;
-    use crate::real::PI;
+    use crate::real::{Vec3, PI};
     use crate::solvers::circle::tests::Rng;
     use std::println;
 
@@ -341,7 +287,7 @@ mod tests {
             let pred = predict_diameter_sigma(&plane, &cam, &stem, &noise, &mut scratch).unwrap();
             let c = Circle::new(Vec2::new(0.0, dist + diam / 2.0), diam / 2.0);
             let mut base = std::vec![Vec2::zeros(); cam.width as usize];
-            let (n, _) = sample_columns(&plane, &cam, &c, &mut base).unwrap();
+            let (n, _) = sample_columns(&plane, &cam, c.centre, c.radius, &mut base).unwrap();
             let (a, b) = plane.plane_axes();
             let mut pts = std::vec![Vec2::zeros(); n];
             let trials = 300;

@@ -169,13 +169,17 @@ impl<P: Copy, E, const N: usize> Evaluated<P, E, N> {
     }
 }
 
+/// [`Evaluated`] parameters of the problem `L`.
+pub type EvaluatedOf<L, const N: usize> =
+    Evaluated<<L as LeastSquares<N>>::Params, <L as LeastSquares<N>>::Extra, N>;
+
 /// Minimises `problem` from `start` by Levenberg–Marquardt with the rules of the module
 /// documentation. Returns the minimum with its normal equations and the iterations used.
 pub fn minimise<const N: usize, L: LeastSquares<N>>(
     problem: &L,
-    start: Evaluated<L::Params, L::Extra, N>,
+    start: EvaluatedOf<L, N>,
     params: &LmParams,
-) -> Result<(Evaluated<L::Params, L::Extra, N>, u32), SolveError> {
+) -> Result<(EvaluatedOf<L, N>, u32), SolveError> {
     let mut current = start;
     let mut lambda = params.initial_lambda;
     for it in 1..=params.max_iterations {

@@ -4,7 +4,7 @@
 extern crate std;
 use super::*;
 use crate::camera::Camera;
-use crate::error_model::sample_columns;
+use crate::noise::sample_columns;
 use crate::solvers::circle::tests::Rng;
 use crate::solvers::circle::Circle;
 use crate::solvers::cylinder_fit::tests::{planes, section, tilted_cylinder};
@@ -21,7 +21,7 @@ fn noisy_columns(
 ) {
     let cam = Camera::reference_design();
     let mut buf = [Vec2::zeros(); 800];
-    let (n, _) = sample_columns(plane, &cam, c, &mut buf).unwrap();
+    let (n, _) = sample_columns(plane, &cam, c.centre, c.radius, &mut buf).unwrap();
     out.clear();
     for q in &buf[..n] {
         let x = plane.from_plane_coords(*q);
