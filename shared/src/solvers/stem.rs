@@ -1,7 +1,7 @@
 //! The stem diameter of one capture (thesis chapter 9; `docs/cylinder.md`, "Choosing the
 //! method"): [`solve`] runs the methods — three-tangent and robust circle fit in one plane,
 //! cylinder fit and generalised three-tangent over two or more — gives each its 1σ from the
-//! points' stored σ and the noise model, chooses the reported diameter ([`choose`]), sets
+//! points' stored σ and the noise model, chooses the reported diameter, sets
 //! the quality [`Flags`], and returns a specific [`SolveError`] when nothing is trustworthy.
 
 // `!(x > 0.0)` is deliberate throughout: it also rejects NaN, which `x <= 0.0` would let

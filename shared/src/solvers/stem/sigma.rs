@@ -45,7 +45,9 @@ pub(super) fn arc_angle(points: &[Vec2], centre: Vec2) -> Real {
     hi - lo
 }
 
-/// Point noise (1σ, in-plane vector, metres) of the in-plane point `q` of `plane`.
+/// Model point noise (1σ, in-plane vector, metres) of the in-plane point `q` of `plane`: for
+/// points the data does not contain (an arc's nearest tangent point); data points carry
+/// their σ.
 pub(super) fn noise_vector(plane: &LaserPlane, q: Vec2, params: &CylinderParams) -> Vec2 {
     let x = plane.from_plane_coords(q);
     let g =
