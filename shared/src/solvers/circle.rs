@@ -434,7 +434,7 @@ pub struct RobustParams {
     pub tuning: Real,
     /// Floor of the robust scale (same units as the points): keeps exact or nearly exact
     /// data from getting a zero scale (which would reject every point). Set it to the
-    /// expected point noise (e.g. from [`crate::error_model`]).
+    /// expected point noise (e.g. from [`crate::noise`]).
     pub min_scale: Real,
     /// Most reweighting rounds.
     pub max_rounds: u32,

@@ -132,7 +132,7 @@ pub struct CylinderSolution {
     /// Method of the reported diameter.
     pub method: Method,
     /// 1σ uncertainty of `diameter` (metres): random (point noise, edges) and calibration,
-    /// from [`crate::error_model`] and the data.
+    /// from the points' σ, the noise model ([`crate::noise`]) and the data.
     pub uncertainty: Real,
     /// Stem tilt, when two planes measured it.
     pub tilt: Option<Tilt>,
