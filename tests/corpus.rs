@@ -14,7 +14,7 @@ use tangent_core::error_model::{predict_diameter_sigma, StemGeometry};
 use tangent_core::noise::NoiseModel;
 use tangent_core::pipeline::PipelineConfig;
 use tangent_core::real::{Vec2, Vec3};
-use tangent_core::solvers::cylinder::CylinderParams;
+use tangent_core::solvers::stem::CylinderParams;
 use tangent_host::capture::{Capture, Mode};
 use tangent_host::measure::{measure_capture, Reading};
 use tangent_host::truth::Object;

@@ -12,7 +12,7 @@ use tangent_core::measurement::{Axes, Measurement, StemReading, TiltAngles};
 use tangent_core::pipeline::{self, PipelineConfig, PipelineError, Stage, Workspace};
 use tangent_core::protocol::codes::Failure;
 use tangent_core::real::{Real, Vec2, Vec3};
-use tangent_core::solvers::cylinder::{CylinderParams, CylinderSolution};
+use tangent_core::solvers::stem::{CylinderParams, CylinderSolution};
 
 /// A captured frame pair, 8-bit, row-major, `width` bytes per row.
 #[derive(Debug, Clone, Copy)]

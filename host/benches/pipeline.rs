@@ -7,7 +7,7 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use std::hint::black_box;
 use tangent_core::image::Frame;
 use tangent_core::pipeline::{extract_profile, measure_stem, PipelineConfig};
-use tangent_core::solvers::cylinder::CylinderParams;
+use tangent_core::solvers::stem::CylinderParams;
 use tangent_host::measure::HostWorkspace;
 use tangent_host::pgm::PgmSamples;
 use tangent_host::simulate::{corpus::random_stem, simulate};

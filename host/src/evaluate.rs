@@ -7,7 +7,7 @@ use std::fmt::Write as _;
 
 use rayon::prelude::*;
 use tangent_core::pipeline::PipelineConfig;
-use tangent_core::solvers::cylinder::CylinderParams;
+use tangent_core::solvers::stem::CylinderParams;
 
 use crate::measure::{measure_loaded, Reading};
 use crate::simulate::{corpus::random_stem, simulate};

@@ -34,7 +34,7 @@ use serde::{Deserialize, Serialize};
 use tangent_core::measurement::Measurement;
 use tangent_core::protocol::calibration_record::CRC32;
 use tangent_core::protocol::{codes, Reading};
-use tangent_core::solvers::cylinder::Flags;
+use tangent_core::solvers::result::Flags;
 
 /// First line of every field log.
 pub const MAGIC_LINE: &str = "TANGENT-FIELDLOG 1\n";
@@ -66,7 +66,7 @@ pub struct TreeRecord {
     pub uncertainty_mm: f64,
     /// Stem tilt from the laser-plane normal (degrees; 0 when not measured).
     pub tilt_deg: f64,
-    /// Quality flags (bits of `solvers::cylinder::Flags`).
+    /// Quality flags (bits of `solvers::result::Flags`).
     pub flags: u16,
     /// Host time of the reading (RFC 3339, UTC).
     pub time: String,

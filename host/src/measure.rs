@@ -17,7 +17,7 @@ use tangent_core::pipeline::{
 };
 use tangent_core::protocol::codes::{self, Failure};
 use tangent_core::real::{Real, Vec2, Vec3};
-use tangent_core::solvers::cylinder::CylinderParams;
+use tangent_core::solvers::stem::CylinderParams;
 
 use crate::capture::{Capture, CaptureError, Mode};
 use crate::pgm::{Pgm, PgmSamples};

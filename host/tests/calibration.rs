@@ -594,7 +594,7 @@ use tangent_core::calibration::Calibration;
 use tangent_core::error_model::{predict_diameter_sigma, StemGeometry};
 use tangent_core::noise::NoiseModel;
 use tangent_core::pipeline::PipelineConfig;
-use tangent_core::solvers::cylinder::CylinderParams;
+use tangent_core::solvers::stem::CylinderParams;
 use tangent_host::calibrate::laser::{board_capture, calibrate_lasers, BoardCapture};
 use tangent_host::calibration_file;
 use tangent_host::capture::{Capture, Mode};

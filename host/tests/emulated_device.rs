@@ -445,7 +445,7 @@ fn to_u8(pgm: &tangent_host::pgm::Pgm) -> Vec<u8> {
 #[test]
 fn on_device_measurements_equal_the_hosts() {
     use tangent_core::pipeline::{self, PipelineConfig};
-    use tangent_core::solvers::cylinder::CylinderParams;
+    use tangent_core::solvers::stem::CylinderParams;
     use tangent_host::measure::HostWorkspace;
     use tangent_host::simulate::{corpus, simulate};
 

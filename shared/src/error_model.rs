@@ -4,7 +4,7 @@
 //! [`predict_diameter_sigma`] propagates the point noise of [`crate::noise`] (stripe-centre
 //! noise along `∂X/∂v`, grazing-ray columns, calibration) to the diameter of a transversal
 //! stem for both one-plane methods of the solvers (three-tangent and circle fit), sampling
-//! the lit and visible arc one point per image column ([`sample_columns`]), as the pipeline
+//! the lit and visible arc one point per image column ([`crate::noise::sample_columns`]), as the pipeline
 //! does. It sits above the solvers: it re-solves simulated points with them.
 
 // `!(x > 0.0)` is deliberate throughout: it also rejects NaN, which `x <= 0.0` would let
@@ -15,16 +15,17 @@ use core::fmt;
 
 #[allow(unused_imports)]
 use crate::real::Float;
-use crate::real::{norm, sqrt, Mat3, Real, Vec2, Vec3};
+use crate::real::{sqrt, Real, Vec2};
 
 use crate::camera::Camera;
 use crate::laser_plane::LaserPlane;
 use crate::noise::{
-    displacement_per_pixel, perturbed, point_sigma, retriangulate, NoiseError, NoiseModel,
-    PointSigma,
+    displacement_per_pixel, perturbed, point_sigma, retriangulate, sample_columns, NoiseError,
+    NoiseModel, PointSigma,
 };
-use crate::solvers::circle::{self, Circle, LmParams};
-use crate::solvers::cylinder::{self, ThreeTangentParams};
+use crate::solvers::circle::{self, Circle};
+use crate::solvers::lm::LmParams;
+use crate::solvers::three_tangent::{three_tangent, ThreeTangentParams};
 use crate::solvers::SolveError;
 use nalgebra::{SMatrix, SVector};
 
@@ -59,6 +60,7 @@ impl From<NoiseError> for ErrorModelError {
     fn from(e: NoiseError) -> Self {
         match e {
             NoiseError::InvalidGeometry => ErrorModelError::InvalidGeometry,
+            NoiseError::ScratchTooSmall => ErrorModelError::ScratchTooSmall,
         }
     }
 }
@@ -66,76 +68,6 @@ impl From<NoiseError> for ErrorModelError {
 impl From<SolveError> for ErrorModelError {
     fn from(e: SolveError) -> Self {
         ErrorModelError::Solve(e)
-    }
-}
-
-/// heteroscedasticity-consistent sandwich `A⁻¹BA⁻¹` with `B = Σ dᵢ²JᵢJᵢᵀ·n/(n − 3)`
-/// (`dᵢ = |qᵢ − c| − r`, `J = (−nᵢ, −1)`; White 1980, with the `n/(n − 3)` small-sample
-/// correction). Unlike `σ̂²(JᵀJ)⁻¹` it does not assume equal noise on every point, so the
-/// noisy, dim ends of a curve count with the noise they really have
-/// (`docs/error-model.md`, "Data-driven fit uncertainty"). Points with `|dᵢ| > cutoff`
-/// (the robust fit's rejected outliers) are left out. Infinite if `A` is singular or fewer
-/// than 4 points remain.
-pub fn circle_radius_sigma_residuals(c: &Circle, points: &[Vec2], cutoff: Real) -> Real {
-    let mut a = Mat3::zeros();
-    let mut b = Mat3::zeros();
-    let mut n = 0usize;
-    for q in points {
-        let d = q - c.centre;
-        let len = norm(&d);
-        if !(len > 0.0) {
-            continue;
-        }
-        let res = len - c.radius;
-        if !(res.abs() <= cutoff) {
-            continue;
-        }
-        let nn = d / len;
-        let j = Vec3::new(-nn.x, -nn.y, -1.0);
-        let jj = j * j.transpose();
-        a += jj;
-        b += jj * (res * res);
-        n += 1;
-    }
-    if n < 4 {
-        return Real::INFINITY;
-    }
-    let k = n as Real / (n - 3) as Real;
-    match a.try_inverse() {
-        Some(inv) => {
-            let cov = inv * b * inv;
-            sqrt((cov[(2, 2)] * k).max(0.0))
-        }
-        None => Real::INFINITY,
-    }
-}
-
-/// σ of the radius of a geometric circle fit (unweighted least squares, as
-/// [`circle::fit_geometric`]) when each point `qᵢ` has an independent error along the
-/// vector `gᵢ` (1σ): the sandwich `A⁻¹BA⁻¹`, `A = ΣJJᵀ`, `B = Σ(nᵢ·gᵢ)²JJᵀ`,
-/// `J = (−nᵢ, −1)` (`docs/error-model.md`, "Circle fit"). Infinite if `A` is singular.
-pub fn circle_radius_sigma<I: Iterator<Item = (Vec2, Vec2)>>(c: &Circle, points: I) -> Real {
-    let mut a = Mat3::zeros();
-    let mut b = Mat3::zeros();
-    for (q, g) in points {
-        let d = q - c.centre;
-        let n = norm(&d);
-        if !(n > 0.0) {
-            continue;
-        }
-        let nn = d / n;
-        let j = Vec3::new(-nn.x, -nn.y, -1.0);
-        let jj = j * j.transpose();
-        let s = nn.dot(&g);
-        a += jj;
-        b += jj * (s * s);
-    }
-    match a.try_inverse() {
-        Some(inv) => {
-            let cov = inv * b * inv;
-            sqrt(cov[(2, 2)].max(0.0))
-        }
-        None => Real::INFINITY,
     }
 }
 
@@ -178,61 +110,6 @@ pub struct DiameterPrediction {
     pub point: PointSigma,
 }
 
-/// Samples the lit and visible arc of the circle (in-plane coordinates of `plane`, a
-/// transversal stem: axis along the plane normal) at one point per image column, as a
-/// column-wise stripe extraction does. Writes into `out`; returns
-/// `(count, cut)` where `cut` says the arc reaches the image border (an end is not a
-/// grazing ray). Uses the pinhole part of `camera` (`fx`, `cx`, width).
-pub fn sample_columns(
-    plane: &LaserPlane,
-    camera: &Camera,
-    c: &Circle,
-    out: &mut [Vec2],
-) -> Result<(usize, bool), ErrorModelError> {
-    let (a, b) = plane.plane_axes();
-    let s = plane.source;
-    let cam = plane.camera_centre_in_plane();
-    let mut n = 0;
-    let mut cut = false;
-    let w = camera.width;
-    for col in 0..w {
-        let xn = (col as Real - camera.cx) / camera.fx;
-        let m = Vec3::new(1.0, 0.0, -xn);
-        let g = Vec2::new(m.dot(&a), m.dot(&b));
-        let gn2 = g.norm_squared();
-        if !(gn2 > 0.0) {
-            continue;
-        }
-        let h = -m.dot(&s);
-        let q0 = g * (h / gn2);
-        let dir = Vec2::new(-g.y, g.x) / sqrt(gn2);
-        let rel = q0 - c.centre;
-        let bb = dir.dot(&rel);
-        let cc = rel.norm_squared() - c.radius * c.radius;
-        let disc = bb * bb - cc;
-        if !(disc >= 0.0) {
-            continue;
-        }
-        let sq = sqrt(disc);
-        for t in [-bb - sq, -bb + sq] {
-            let q = q0 + dir * t;
-            let nrm = q - c.centre;
-            let lit = nrm.dot(&q) < 0.0;
-            let visible = nrm.dot(&(cam - q)) > 0.0 && plane.from_plane_coords(q).z > 0.0;
-            if lit && visible {
-                let slot = out.get_mut(n).ok_or(ErrorModelError::ScratchTooSmall)?;
-                *slot = q;
-                n += 1;
-                if col == 0 || col + 1 == w {
-                    cut = true;
-                }
-                break;
-            }
-        }
-    }
-    Ok((n, cut))
-}
-
 /// Predicts the 1σ diameter error of a transversal stem for the three-tangent method and the
 /// geometric circle fit (`docs/error-model.md`, "Diameter"): random noise by linear
 /// propagation (exact for small noise), edges from `edge_px`, calibration by re-solving the
@@ -256,7 +133,7 @@ pub fn predict_diameter_sigma(
     }
     let (pts, rest) = scratch.split_at_mut(w);
     let c = Circle::new(Vec2::new(0.0, stem.distance + r), r);
-    let (n, cut) = sample_columns(plane, camera, &c, pts)?;
+    let (n, cut) = sample_columns(plane, camera, c.centre, c.radius, pts)?;
     if n < 8 {
         return Err(ErrorModelError::NotVisible);
     }
@@ -283,7 +160,7 @@ pub fn predict_diameter_sigma(
     let arc_angle = hi - lo;
 
     // --- circle fit: random part by the sandwich formula.
-    let fit_random = circle_radius_sigma(&c, pts.iter().map(|q| (*q, noise_of(*q))));
+    let fit_random = circle::circle_radius_sigma(&c, pts.iter().map(|q| (*q, noise_of(*q))));
 
     // --- three-tangent: α from the end columns, D from the window parabola.
     let u_c = Vec2::new(0.0, 1.0);
@@ -322,7 +199,7 @@ pub fn predict_diameter_sigma(
     let base_tt = if cut {
         None
     } else {
-        cylinder::three_tangent(pts, &ThreeTangentParams::default())
+        three_tangent(pts, &ThreeTangentParams::default())
             .ok()
             .map(|t| t.radius)
     };
@@ -347,7 +224,7 @@ pub fn predict_diameter_sigma(
             *o = pl.to_plane_coords(x);
         }
         if let Some(r0) = base_tt {
-            if let Ok(t) = cylinder::three_tangent(moved, &ThreeTangentParams::default()) {
+            if let Ok(t) = three_tangent(moved, &ThreeTangentParams::default()) {
                 cal_tt += (t.radius - r0).powi(2);
             }
         }
@@ -384,7 +261,7 @@ mod tests {
     use super::*;
     use crate::calibration::Calibration;
     use crate::noise::calibration_displacements;
-    use crate::real::PI;
+    use crate::real::{Vec3, PI};
     use crate::solvers::circle::tests::Rng;
     use std::println;
 
@@ -410,7 +287,7 @@ mod tests {
             let pred = predict_diameter_sigma(&plane, &cam, &stem, &noise, &mut scratch).unwrap();
             let c = Circle::new(Vec2::new(0.0, dist + diam / 2.0), diam / 2.0);
             let mut base = std::vec![Vec2::zeros(); cam.width as usize];
-            let (n, _) = sample_columns(&plane, &cam, &c, &mut base).unwrap();
+            let (n, _) = sample_columns(&plane, &cam, c.centre, c.radius, &mut base).unwrap();
             let (a, b) = plane.plane_axes();
             let mut pts = std::vec![Vec2::zeros(); n];
             let trials = 300;
@@ -422,7 +299,7 @@ mod tests {
                     *p = q + Vec2::new(g.dot(&a), g.dot(&b))
                         * (noise.image_px() * rng.gauss() as Real);
                 }
-                let t = cylinder::three_tangent(&pts, &ThreeTangentParams::default())
+                let t = three_tangent(&pts, &ThreeTangentParams::default())
                     .unwrap()
                     .radius as f64;
                 let f = circle::fit_geometric(
@@ -522,51 +399,5 @@ mod tests {
                 }
             }
         }
-    }
-
-    /// The residual sandwich must follow the real spread of the fit radius when the noise is
-    /// heteroscedastic (ends 5× noisier than the middle, as on a dim, far stripe), where
-    /// `σ̂²(JᵀJ)⁻¹` (equal noise assumed) under-states it. 400 replicas: the observed σ is
-    /// known to ±1/√(2·400) ≈ 3.5 %; the mean sandwich (a ratio of residual sums) to a
-    /// few %; the linearisation is exact to O(σ/r) = 1 %. Tolerance 15 % (≈ 4 standard
-    /// errors), far below the 40 % by which the equal-noise estimate misses here.
-    #[test]
-    fn residual_sandwich_matches_heteroscedastic_spread() {
-        let (c0, r0) = (Vec2::new(0.0, 2.0), 0.15);
-        let n = 80;
-        let mut rng = Rng::new(41);
-        let (mut sum, mut sum2, mut sand, mut lm) = (0.0, 0.0, 0.0, 0.0);
-        let reps = 400;
-        let mut pts = std::vec![Vec2::zeros(); n];
-        for _ in 0..reps {
-            for (i, p) in pts.iter_mut().enumerate() {
-                let tau = 2.0 * i as Real / (n - 1) as Real - 1.0;
-                let ang = -0.5 * PI + 1.1 * tau; // ±63° about the point nearest the origin
-                let dir = Vec2::new(ang.cos(), ang.sin());
-                let sigma = 1e-3 * (1.0 + 4.0 * tau.powi(4));
-                *p = c0 + dir * (r0 + sigma * rng.gauss() as Real);
-            }
-            let f =
-                circle::fit_geometric(&pts, circle::fit_hyper(&pts).unwrap(), &LmParams::default())
-                    .unwrap();
-            sum += f.circle.radius;
-            sum2 += f.circle.radius * f.circle.radius;
-            sand += circle_radius_sigma_residuals(&f.circle, &pts, Real::INFINITY);
-            lm += f.std_dev.z;
-        }
-        let k = reps as Real;
-        let observed = (sum2 / k - (sum / k).powi(2)).max(0.0).sqrt();
-        let (sand, lm) = (sand / k, lm / k);
-        println!("observed {observed:.3e}, sandwich {sand:.3e}, equal-noise {lm:.3e}");
-        assert!(
-            (sand / observed - 1.0).abs() < 0.15,
-            "sandwich {sand} vs observed {observed}"
-        );
-        assert!(
-            lm < 0.8 * observed,
-            "the equal-noise σ should under-state here: {lm} vs {observed}"
-        );
-        // Degenerate input: too few points.
-        assert!(circle_radius_sigma_residuals(&Circle::new(c0, r0), &pts[..3], 1.0).is_infinite());
     }
 }

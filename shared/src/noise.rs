@@ -24,6 +24,7 @@ use core::fmt;
 use crate::real::Float;
 use crate::real::{norm, sqrt, Real, Vec2, Vec3, PI};
 
+use crate::camera::Camera;
 use crate::laser_plane::LaserPlane;
 
 /// Why a point's noise could not be computed.
@@ -31,12 +32,15 @@ use crate::laser_plane::LaserPlane;
 pub enum NoiseError {
     /// The point is not in front of the camera, or the plane/ray geometry is degenerate.
     InvalidGeometry,
+    /// The output buffer is shorter than the number of samples.
+    ScratchTooSmall,
 }
 
 impl fmt::Display for NoiseError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             NoiseError::InvalidGeometry => f.write_str("invalid geometry for the noise model"),
+            NoiseError::ScratchTooSmall => f.write_str("scratch buffer too small"),
         }
     }
 }
@@ -323,7 +327,62 @@ pub fn calibration_relative_sigma(
     sqrt(total)
 }
 
-/// σ of the radius of a geometric circle fit estimated from the data's own residuals: the
+/// Samples the lit and visible arc of the circle of `centre` and `radius` (in-plane
+/// coordinates of `plane`, a transversal stem: axis along the plane normal) at one point per
+/// image column, as a column-wise stripe extraction does: the points whose noise this module
+/// describes (exact column, noisy row). Writes into `out`; returns
+/// `(count, cut)` where `cut` says the arc reaches the image border (an end is not a
+/// grazing ray). Uses the pinhole part of `camera` (`fx`, `cx`, width).
+pub fn sample_columns(
+    plane: &LaserPlane,
+    camera: &Camera,
+    centre: Vec2,
+    radius: Real,
+    out: &mut [Vec2],
+) -> Result<(usize, bool), NoiseError> {
+    let (a, b) = plane.plane_axes();
+    let s = plane.source;
+    let cam = plane.camera_centre_in_plane();
+    let mut n = 0;
+    let mut cut = false;
+    let w = camera.width;
+    for col in 0..w {
+        let xn = (col as Real - camera.cx) / camera.fx;
+        let m = Vec3::new(1.0, 0.0, -xn);
+        let g = Vec2::new(m.dot(&a), m.dot(&b));
+        let gn2 = g.norm_squared();
+        if !(gn2 > 0.0) {
+            continue;
+        }
+        let h = -m.dot(&s);
+        let q0 = g * (h / gn2);
+        let dir = Vec2::new(-g.y, g.x) / sqrt(gn2);
+        let rel = q0 - centre;
+        let bb = dir.dot(&rel);
+        let cc = rel.norm_squared() - radius * radius;
+        let disc = bb * bb - cc;
+        if !(disc >= 0.0) {
+            continue;
+        }
+        let sq = sqrt(disc);
+        for t in [-bb - sq, -bb + sq] {
+            let q = q0 + dir * t;
+            let nrm = q - centre;
+            let lit = nrm.dot(&q) < 0.0;
+            let visible = nrm.dot(&(cam - q)) > 0.0 && plane.from_plane_coords(q).z > 0.0;
+            if lit && visible {
+                let slot = out.get_mut(n).ok_or(NoiseError::ScratchTooSmall)?;
+                *slot = q;
+                n += 1;
+                if col == 0 || col + 1 == w {
+                    cut = true;
+                }
+                break;
+            }
+        }
+    }
+    Ok((n, cut))
+}
 
 #[cfg(test)]
 #[allow(clippy::unnecessary_cast)]

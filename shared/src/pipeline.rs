@@ -24,7 +24,8 @@ use crate::image::{Frame, FrameError, FrameMut, Pixel};
 use crate::laser_plane::{triangulate, TriangulationError};
 use crate::noise::{self, NoiseModel};
 use crate::real::{Real, Vec2, Vec3};
-use crate::solvers::cylinder::{self, CylinderInput, CylinderParams, CylinderSolution, Flags};
+use crate::solvers::result::Flags;
+use crate::solvers::stem::{self, CylinderInput, CylinderParams, CylinderSolution};
 use crate::solvers::SolveError;
 
 /// Tunable parameters of the image part of the chain. [`Default`] suits the reference hardware
@@ -395,7 +396,7 @@ pub fn measure_stem<P: Pixel>(
     solve_stem(&profile, on.max_value(), calibration, params, ws)
 }
 
-/// The solver half of [`measure_stem`]: the cylinder solver ([`cylinder::solve`]:
+/// The solver half of [`measure_stem`]: the cylinder solver ([`stem::solve`]:
 /// three-tangent, circle or cylinder fit, chosen by the data) on the points of every plane
 /// that [`extract_profile`] left in `ws`, with the [`image_flags`] added (`full_scale`: the
 /// laser-on frame's [`Frame::max_value`]). A curve that runs off the frame is
@@ -428,11 +429,11 @@ pub fn solve_stem<P: Pixel>(
         sigmas: &sigmas[..n_planes],
         planes: &calibration.planes[..n_planes],
     };
-    let scratch = cylinder::Scratch {
+    let scratch = stem::Scratch {
         points: &mut *ws.scratch_points,
         values: &mut *ws.scratch_values,
     };
-    let mut solution = cylinder::solve(&input, params, scratch)?;
+    let mut solution = stem::solve(&input, params, scratch)?;
     solution.flags.insert(image_flags(profile, full_scale));
     Ok(StemMeasurement {
         solution,

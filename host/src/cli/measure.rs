@@ -9,7 +9,7 @@ use indicatif::{ParallelProgressIterator, ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use tangent_core::calibration::Calibration;
 use tangent_core::pipeline::PipelineConfig;
-use tangent_core::solvers::cylinder::CylinderParams;
+use tangent_core::solvers::stem::CylinderParams;
 use tangent_host::measure::{measure_capture, Reading};
 use tangent_host::{calibration_file, capture, plot};
 
