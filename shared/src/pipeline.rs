@@ -20,7 +20,7 @@ use crate::image::segment::{self, Connectivity, ObjectFeatures, SegmentError};
 use crate::image::select::{self, SelectionParams};
 use crate::image::subtract::{self, SubtractStats};
 use crate::image::threshold::{self, ThresholdError, ThresholdMethod};
-use crate::image::{Frame, FrameError, FrameMut, Pixel};
+use crate::image::{Frame, FrameError, Pixel};
 use crate::laser_plane::{triangulate, TriangulationError};
 use crate::noise::{self, NoiseModel};
 use crate::real::{Real, Vec2, Vec3};
@@ -384,8 +384,8 @@ pub fn image_flags(profile: &Profile, full_scale: u32) -> Flags {
 
 /// Measures a stem: [`extract_profile`], then [`solve_stem`] on its points.
 pub fn measure_stem<P: Pixel>(
-    off: &Frame<'_, P>,
-    on: &Frame<'_, P>,
+    off: &Frame<P, impl AsRef<[P]>>,
+    on: &Frame<P, impl AsRef<[P]>>,
     calibration: &Calibration,
     config: &PipelineConfig,
     params: &CylinderParams,
@@ -506,8 +506,8 @@ pub fn difference_noise(histogram: &[u32]) -> Real {
 /// On success the workspace holds the difference frame, the labels, the curve points and the
 /// 3-D points; the returned [`Profile`] says where each plane's points are.
 pub fn extract_profile<P: Pixel>(
-    off: &Frame<'_, P>,
-    on: &Frame<'_, P>,
+    off: &Frame<P, impl AsRef<[P]>>,
+    on: &Frame<P, impl AsRef<[P]>>,
     calibration: &Calibration,
     config: &PipelineConfig,
     ws: &mut Workspace<'_, P>,
@@ -536,8 +536,8 @@ pub enum Stage {
 /// instruction-count benchmark time-stamps them; `docs/performance.md`). With an empty
 /// closure it compiles to [`extract_profile`].
 pub fn extract_profile_probed<P: Pixel>(
-    off: &Frame<'_, P>,
-    on: &Frame<'_, P>,
+    off: &Frame<P, impl AsRef<[P]>>,
+    on: &Frame<P, impl AsRef<[P]>>,
     calibration: &Calibration,
     config: &PipelineConfig,
     ws: &mut Workspace<'_, P>,
@@ -561,8 +561,8 @@ pub fn extract_profile_probed<P: Pixel>(
     let n_planes = calibration.planes.len();
 
     // 1. Subtraction (thesis §5.3.1).
-    let mut diff = FrameMut::new(&mut ws.diff[..pixels], width, height, width)?
-        .with_bit_depth(on.bit_depth())?;
+    let mut diff =
+        Frame::new(&mut ws.diff[..pixels], width, height, width)?.with_bit_depth(on.bit_depth())?;
     // One pass writes the difference, its statistics and its histogram (`ws.histogram`,
     // exactly `threshold::histogram` of the difference).
     let stats = subtract::subtract_with_histogram(on, off, &mut diff, ws.histogram).map_err(
@@ -571,7 +571,6 @@ pub fn extract_profile_probed<P: Pixel>(
             e => PipelineError::Threshold(e),
         },
     )?;
-    let diff = diff.as_frame();
     let full_scale = on.max_value();
     // The noise of the difference image, from its histogram (needed for both tests below).
     let hist_len = threshold::histogram_len(&diff).min(ws.histogram.len());
@@ -610,7 +609,7 @@ pub fn extract_profile_probed<P: Pixel>(
     probe(Stage::Thresholded);
 
     // 3. Segmentation with the 2×2 mask (§5.4) and feature extraction (§5.5).
-    let mut labels = FrameMut::new(&mut ws.labels[..pixels], width, height, width)?;
+    let mut labels = Frame::new(&mut ws.labels[..pixels], width, height, width)?;
     let seg = segment::segment(
         &diff,
         t,
@@ -619,7 +618,6 @@ pub fn extract_profile_probed<P: Pixel>(
         ws.objects,
         Connectivity::Eight,
     )?;
-    let labels = labels.as_frame();
     let objects = &ws.objects[..seg.objects.min(ws.objects.len())];
 
     probe(Stage::Segmented);
@@ -1006,7 +1004,7 @@ mod tests {
         (off, on)
     }
 
-    fn frames<'a>(off: &'a [u8], on: &'a [u8]) -> (Frame<'a, u8>, Frame<'a, u8>) {
+    fn frames<'a>(off: &'a [u8], on: &'a [u8]) -> (Frame<u8, &'a [u8]>, Frame<u8, &'a [u8]>) {
         (
             Frame::new(off, W, H, W).unwrap(),
             Frame::new(on, W, H, W).unwrap(),

@@ -23,7 +23,7 @@
 use core::fmt;
 
 use super::lanes::{pack4, ByteGreater};
-use super::{Frame, FrameError, FrameMut, Pixel};
+use super::{Frame, FrameError, Pixel};
 use crate::real::Real;
 
 /// Which pixel pairs the segmentation considers connected.
@@ -380,14 +380,14 @@ fn next_foreground_word<P: Pixel>(
 /// user the scene is too cluttered or the threshold too low. On error `labels` holds partial
 /// provisional labels and must not be used.
 pub fn segment<P: Pixel>(
-    image: &Frame<'_, P>,
+    image: &Frame<P, impl AsRef<[P]>>,
     threshold: u32,
-    labels: &mut FrameMut<'_, u16>,
+    labels: &mut Frame<u16, impl AsMut<[u16]>>,
     table: &mut [u16],
     features: &mut [ObjectFeatures],
     connectivity: Connectivity,
 ) -> Result<Segmentation, SegmentError> {
-    image.check_same_size(&labels.as_frame())?;
+    image.check_same_size(labels)?;
     let (width, height) = (image.width(), image.height());
     if width > 1 << 16 || height > 1 << 16 || width.saturating_mul(height) > u32::MAX as usize {
         return Err(SegmentError::FrameTooLarge { width, height });

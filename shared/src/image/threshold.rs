@@ -13,7 +13,7 @@
 
 use core::fmt;
 
-use super::{Frame, FrameError, FrameMut, Pixel};
+use super::{Frame, FrameError, Pixel};
 
 /// Value written by [`threshold_mask`] for a foreground pixel (background is `0`).
 pub const MASK_FOREGROUND: u8 = 1;
@@ -72,7 +72,7 @@ impl fmt::Display for ThresholdError {
 #[cfg(feature = "std")]
 impl std::error::Error for ThresholdError {}
 
-fn pixel_count<P: Pixel>(frame: &Frame<'_, P>) -> Result<u32, ThresholdError> {
+fn pixel_count<P: Pixel, S>(frame: &Frame<P, S>) -> Result<u32, ThresholdError> {
     frame
         .width()
         .checked_mul(frame.height())
@@ -81,7 +81,7 @@ fn pixel_count<P: Pixel>(frame: &Frame<'_, P>) -> Result<u32, ThresholdError> {
 }
 
 /// Number of histogram bins a frame needs: `2^bit_depth` (256 for 8-bit, 1024 for 10-bit).
-pub fn histogram_len<P: Pixel>(frame: &Frame<'_, P>) -> usize {
+pub fn histogram_len<P: Pixel, S>(frame: &Frame<P, S>) -> usize {
     frame.max_value() as usize + 1
 }
 
@@ -91,7 +91,10 @@ pub fn histogram_len<P: Pixel>(frame: &Frame<'_, P>) -> usize {
 /// `bins` needs at least [`histogram_len`] entries; extra entries are cleared and stay zero.
 /// Values above the frame's declared saturation level (bad data: a 10-bit frame holding 1100)
 /// are counted in the top bin `2^bit_depth - 1`, i.e. treated as saturated.
-pub fn histogram<P: Pixel>(frame: &Frame<'_, P>, bins: &mut [u32]) -> Result<u32, ThresholdError> {
+pub fn histogram<P: Pixel>(
+    frame: &Frame<P, impl AsRef<[P]>>,
+    bins: &mut [u32],
+) -> Result<u32, ThresholdError> {
     let levels = histogram_len(frame);
     if bins.len() < levels {
         return Err(ThresholdError::HistogramTooSmall {
@@ -276,11 +279,11 @@ impl ThresholdMethod {
 /// Writes the binary mask of `frame`: [`MASK_FOREGROUND`] where `value > threshold`, `0`
 /// elsewhere. Returns the number of foreground pixels. `mask` must have the frame's size.
 pub fn threshold_mask<P: Pixel>(
-    frame: &Frame<'_, P>,
+    frame: &Frame<P, impl AsRef<[P]>>,
     threshold: u32,
-    mask: &mut FrameMut<'_, u8>,
+    mask: &mut Frame<u8, impl AsMut<[u8]>>,
 ) -> Result<u32, ThresholdError> {
-    frame.check_same_size(&mask.as_frame())?;
+    frame.check_same_size(mask)?;
     pixel_count(frame)?;
     let mut count = 0u32;
     for y in 0..frame.height() {
@@ -301,11 +304,11 @@ pub fn threshold_mask<P: Pixel>(
 /// 255 long ([`ThresholdError::BadThresholds`]). With one threshold this is
 /// [`threshold_mask`].
 pub fn classify<P: Pixel>(
-    frame: &Frame<'_, P>,
+    frame: &Frame<P, impl AsRef<[P]>>,
     thresholds: &[u32],
-    out: &mut FrameMut<'_, u8>,
+    out: &mut Frame<u8, impl AsMut<[u8]>>,
 ) -> Result<(), ThresholdError> {
-    frame.check_same_size(&out.as_frame())?;
+    frame.check_same_size(out)?;
     if thresholds.len() > 255 || thresholds.windows(2).any(|w| w[0] >= w[1]) {
         return Err(ThresholdError::BadThresholds);
     }
@@ -482,18 +485,18 @@ mod tests {
         let px: [u8; 6] = [0, 10, 11, 200, 50, 10];
         let f = Frame::new(&px, 3, 2, 3).unwrap();
         let mut m = [7u8; 6];
-        let mut fm = FrameMut::new(&mut m, 3, 2, 3).unwrap();
+        let mut fm = Frame::new(&mut m, 3, 2, 3).unwrap();
         assert_eq!(threshold_mask(&f, 10, &mut fm).unwrap(), 3);
         assert_eq!(m, [0, 0, 1, 1, 1, 0]);
-        let mut fm = FrameMut::new(&mut m, 3, 2, 3).unwrap();
+        let mut fm = Frame::new(&mut m, 3, 2, 3).unwrap();
         classify(&f, &[10, 60], &mut fm).unwrap();
         assert_eq!(m, [0, 0, 1, 2, 1, 0]);
-        let mut fm = FrameMut::new(&mut m, 3, 2, 3).unwrap();
+        let mut fm = Frame::new(&mut m, 3, 2, 3).unwrap();
         assert_eq!(
             classify(&f, &[60, 10], &mut fm).unwrap_err(),
             ThresholdError::BadThresholds
         );
-        let mut fm = FrameMut::new(&mut m, 2, 3, 2).unwrap();
+        let mut fm = Frame::new(&mut m, 2, 3, 2).unwrap();
         assert!(matches!(
             threshold_mask(&f, 10, &mut fm).unwrap_err(),
             ThresholdError::Frame(FrameError::SizeMismatch { .. })

@@ -26,7 +26,7 @@ fn run(mask: &[u8], w: usize, h: usize, conn: Connectivity) -> Out {
     let mut labels = vec![0xFFFFu16; w * h];
     let mut table = vec![0u16; worst_case_labels(w, h, conn) + 1];
     let mut features = vec![ObjectFeatures::empty(0); w * h];
-    let mut lf = FrameMut::new(&mut labels, w, h, w).unwrap();
+    let mut lf = Frame::new(&mut labels, w, h, w).unwrap();
     let seg = segment(&img, 0, &mut lf, &mut table, &mut features, conn).unwrap();
     features.truncate(seg.objects);
     Out {
@@ -198,7 +198,7 @@ fn intensity_features_on_a_known_shape() {
     }
     let fi = Frame::new(&img, w, h, w).unwrap();
     let mut labels = vec![0u16; w * h];
-    let mut lf = FrameMut::new(&mut labels, w, h, w).unwrap();
+    let mut lf = Frame::new(&mut labels, w, h, w).unwrap();
     let mut table = [0u16; 8];
     let mut feats = [ObjectFeatures::empty(0); 2];
     let seg = segment(&fi, 5, &mut lf, &mut table, &mut feats, Connectivity::Eight).unwrap();
@@ -224,7 +224,7 @@ fn full_tables_are_errors() {
     let (m, w, h) = parse(&["#.#.#", ".....", "#.#.#"]);
     let img = Frame::new(&m, w, h, w).unwrap();
     let mut labels = vec![0u16; w * h];
-    let mut lf = FrameMut::new(&mut labels, w, h, w).unwrap();
+    let mut lf = Frame::new(&mut labels, w, h, w).unwrap();
     let mut feats = [ObjectFeatures::empty(0); 6];
     // 6 provisional labels needed; a table of 6 entries holds 5.
     let mut table = [0u16; 6];
