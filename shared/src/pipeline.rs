@@ -19,7 +19,7 @@ use crate::curve::{self, CurveError, CurvePoint, ExtractParams, SmoothParams, MA
 use crate::image::segment::{self, Connectivity, ObjectFeatures, SegmentError};
 use crate::image::select::{self, SelectionParams};
 use crate::image::subtract::{self, SubtractStats};
-use crate::image::threshold::{self, ThresholdError, ThresholdMethod};
+use crate::image::threshold::{self, Floors, ThresholdError, ThresholdMethod};
 use crate::image::{Frame, FrameError, Pixel};
 use crate::laser_plane::{triangulate, TriangulationError};
 use crate::noise::{self, NoiseModel};
@@ -33,25 +33,9 @@ use crate::solvers::SolveError;
 pub struct PipelineConfig {
     /// How the difference image is thresholded before segmentation.
     pub threshold: ThresholdMethod,
-    /// Lowest threshold the automatic methods may return (grey levels of the difference
-    /// image). Keeps sensor noise out of the segmentation when the laser is weak.
-    pub min_threshold: u32,
-    /// Fraction of the brightest difference below which a pixel never counts as laser: the
-    /// threshold is at least `relative_threshold × max_difference`.
-    pub relative_threshold: Real,
-    /// Absolute floor of the darkness test: the brightest difference must reach at least this
-    /// many grey levels, or the pair is "dark" (the laser did not reach anything in range).
-    pub min_contrast: u32,
-    /// Noise-relative darkness test: the brightest difference must also reach
-    /// `contrast_snr × σ̂`, with `σ̂` the difference image's noise estimated from its own
-    /// histogram ([`difference_noise`]). The max of `N` ≈ 3.6·10⁵ noise pixels is ≈ 4.5 σ, so
-    /// 8 σ is never reached by noise alone while a stripe 10 grey levels high over σ ≈ 0.8
-    /// passes (docs/pipeline.md, "Contrast and threshold").
-    pub contrast_snr: Real,
-    /// Noise-relative floor of the segmentation threshold: `threshold_snr × σ̂` (a Gaussian
-    /// pixel exceeds 5 σ with probability 3·10⁻⁷, i.e. < 1 false pixel per frame), so that dim
-    /// stripe ends are segmented as far as the noise allows.
-    pub threshold_snr: Real,
+    /// Floors of the darkness test and of the threshold, relative to the difference image's
+    /// noise.
+    pub floors: Floors,
     /// Object selection (the per-object criteria; how many to keep is set by the pipeline).
     pub selection: SelectionParams,
     /// Candidates kept per plane before merging fragments of a broken curve.
@@ -75,16 +59,7 @@ impl Default for PipelineConfig {
     fn default() -> Self {
         PipelineConfig {
             threshold: ThresholdMethod::Otsu,
-            min_threshold: 6,
-            relative_threshold: 0.08,
-            // Kept at 20 DN: stripes peaking at 9–19 DN (far, dark bark) are well above the
-            // noise (σ̂ ≈ 0.7–1.2 DN) but their fits err by 10–50 mm (measured on the
-            // evaluation's development seeds); the noise-relative test below still applies.
-            min_contrast: 20,
-            contrast_snr: 8.0,
-            // Off by default: σ̂ includes the stripe's own pixels, so on bright stripes it
-            // would raise the threshold and cut the stripe ends (measured: worse fits).
-            threshold_snr: 0.0,
+            floors: Floors::default(),
             selection: SelectionParams::default(),
             max_fragments: 4,
             max_fragment_gap: 40,
@@ -480,26 +455,6 @@ struct Candidate {
     plane: usize,
 }
 
-/// Noise σ (grey levels) of a difference image `max(on − off, 0)`, from its histogram.
-///
-/// With `on − off = X ~ N(0, σ²)` off the stripe, the clamped difference has
-/// `E[max(X, 0)] = σ/√(2π)`, so `σ̂ = √(2π)·mean`. The mean is taken over all pixels: the
-/// stripe's few hundred pixels inflate it slightly, which only makes the tests that use `σ̂`
-/// more conservative. Sensor noise, shot noise on bright ambient and the structure left by
-/// hand motion all count as noise here, as they should. Returns 0 for an empty histogram.
-pub fn difference_noise(histogram: &[u32]) -> Real {
-    let (mut n, mut sum) = (0u64, 0u64);
-    for (level, &count) in histogram.iter().enumerate() {
-        n += count as u64;
-        sum += count as u64 * level as u64;
-    }
-    if n == 0 {
-        return 0.0;
-    }
-    let two_pi: Real = 2.0 * crate::real::PI;
-    crate::real::sqrt(two_pi) * (sum as Real / n as Real)
-}
-
 /// Runs the image part of the chain and triangulates the curves: `off` and `on` are the
 /// laser-off and laser-on frames (all of the calibration's planes lit in `on`).
 ///
@@ -574,10 +529,8 @@ pub fn extract_profile_probed<P: Pixel>(
     let full_scale = on.max_value();
     // The noise of the difference image, from its histogram (needed for both tests below).
     let hist_len = threshold::histogram_len(&diff).min(ws.histogram.len());
-    let noise = difference_noise(&ws.histogram[..hist_len]);
-    let dark_floor = (config.min_contrast as Real).max(config.contrast_snr * noise);
-    // `dark_floor` is finite: `difference_noise` of a histogram always is.
-    if (stats.max_difference as Real) < dark_floor {
+    let noise = threshold::difference_noise(&ws.histogram[..hist_len]);
+    if !config.floors.is_lit(stats.max_difference, noise) {
         return Err(PipelineError::NoLaserLight {
             max_difference: stats.max_difference,
         });
@@ -594,17 +547,7 @@ pub fn extract_profile_probed<P: Pixel>(
     // 2. Threshold (§5.3.2), floored so that sensor noise never becomes foreground: at
     //    least `threshold_snr` noise σ's and `min_threshold` grey levels.
     let auto = config.threshold.threshold(&ws.histogram[..hist_len])?;
-    let relative = (config.relative_threshold * stats.max_difference as Real) as u32;
-    let noise_floor: Real = <Real as crate::real::Float>::ceil(config.threshold_snr * noise);
-    let noise_floor = if noise_floor.is_finite() && noise_floor > 0.0 {
-        noise_floor as u32
-    } else {
-        0
-    };
-    let t = auto
-        .max(config.min_threshold)
-        .max(relative)
-        .max(noise_floor);
+    let t = config.floors.apply(auto, stats.max_difference, noise);
 
     probe(Stage::Thresholded);
 
@@ -1078,7 +1021,10 @@ mod tests {
         let (off_f, on_f) = frames(&off, &on);
         let mut b = Buffers::new(1);
         let cfg = PipelineConfig {
-            min_contrast: 0,
+            floors: Floors {
+                min_contrast: 0,
+                ..Floors::default()
+            },
             ..PipelineConfig::default()
         };
         let err = extract_profile(&off_f, &on_f, &cal, &cfg, &mut b.ws()).unwrap_err();
@@ -1151,23 +1097,10 @@ mod tests {
         );
     }
 
-    /// `difference_noise` recovers σ of Gaussian noise from the clamped difference's histogram
-    /// (E[max(X,0)] = σ/√(2π)); 1-DN rounding adds ≈ 1/12 DN² of variance, so the tolerance
-    /// is 5 % at σ = 3 DN. A dim stripe (12 DN) over noise σ ≈ 0.8 DN passes the
-    /// noise-relative test; the same noise alone does not.
+    /// A dim stripe (12 DN) over noise σ ≈ 0.8 DN passes the noise-relative darkness test
+    /// (`threshold::Floors::is_lit`); the same noise alone does not.
     #[test]
     fn contrast_test_is_relative_to_the_noise() {
-        let mut hist = vec![0u32; 256];
-        let mut rng = crate::solvers::circle::tests::Rng::new(7);
-        let sigma: f64 = 3.0;
-        for _ in 0..200_000 {
-            let x = (sigma * rng.gauss()).round().max(0.0) as usize;
-            hist[x.min(255)] += 1;
-        }
-        let est = difference_noise(&hist);
-        assert!((est as f64 / sigma - 1.0).abs() < 0.05, "σ̂ = {est}");
-        assert_eq!(difference_noise(&[0; 4]), 0.0);
-
         let cal = calibration(1);
         let (off, mut on) = render(&cal, &[0], 2.5, 300..450, 12.0, 4);
         // ±1 DN noise on the laser-on frame (σ ≈ 0.8 DN).
@@ -1181,7 +1114,10 @@ mod tests {
         // With the absolute floor lowered (the default keeps 20 DN, see PipelineConfig), the
         // noise-relative test alone decides: 13 DN over σ̂ < 1 DN is light.
         let cfg = PipelineConfig {
-            min_contrast: 8,
+            floors: Floors {
+                min_contrast: 8,
+                ..Floors::default()
+            },
             ..PipelineConfig::default()
         };
         let prof = extract_profile(&off_f, &on_f, &cal, &cfg, &mut ws).unwrap();
