@@ -12,7 +12,7 @@
 //! | camera model | [`camera`] | `docs/camera-model.md` |
 //! | laser planes, triangulation | [`laser_plane`] | `docs/laser-plane.md` |
 //! | calibration set | [`calibration`] | `docs/formats.md` |
-//! | frames, subtraction, thresholds, segmentation, speckle filter | [`image`] | `docs/image-processing.md` |
+//! | frames, subtraction, thresholds, segmentation | [`image`] | `docs/image-processing.md` |
 //! | subpixel peak estimators | [`peaks`] | `docs/subpixel.md` |
 //! | laser-curve extraction and smoothing | [`curve`] | `docs/subpixel.md` §8 |
 //! | noise of one point (stripe, speckle, calibration) | [`noise`] | `docs/error-model.md` |

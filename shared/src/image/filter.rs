@@ -394,6 +394,7 @@ mod tests {
     fn kernel_weights_are_the_normalised_sampled_gaussian() {
         for &sigma in &[0.4, 0.8, 1.0, 1.7, 3.0, 5.0] {
             let k = GaussianKernel::new(sigma as Real).unwrap();
+            assert_eq!(k.sigma(), sigma as Real);
             let r = k.radius();
             assert_eq!(r, ((3.0 * sigma).ceil() as usize).max(1));
             let sum: u32 = (-(r as isize)..=r as isize).map(|i| k.weight(i)).sum();

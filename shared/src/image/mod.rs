@@ -8,7 +8,12 @@
 use core::fmt;
 use core::marker::PhantomData;
 
-pub mod filter;
+// The speckle filter is kept for tests only: on the device it would cost ≈ 20 M instructions per
+// 752×480 frame (docs/image-processing.md, "Cost"), 4–7 times the whole measurement, while
+// `curve::smooth` already averages the speckle jitter along the curve at almost no cost
+// (docs/subpixel.md §8); the full-frame chain test (`select`) still exercises it.
+#[cfg(test)]
+pub(crate) mod filter;
 mod lanes;
 pub mod segment;
 pub mod select;
