@@ -6,9 +6,8 @@
 use criterion::{criterion_group, criterion_main, Criterion};
 use std::hint::black_box;
 use tangent_core::image::Frame;
-use tangent_core::pipeline::{extract_profile, measure_stem, PipelineConfig};
+use tangent_core::pipeline::{extract_profile, measure_stem, OwnedBuffers, PipelineConfig};
 use tangent_core::solvers::cylinder::CylinderParams;
-use tangent_host::measure::HostWorkspace;
 use tangent_host::pgm::PgmSamples;
 use tangent_host::simulate::{corpus::random_stem, simulate};
 
@@ -28,7 +27,7 @@ fn bench(c: &mut Criterion) {
         let (w, h) = (on.width, on.height);
         let off_f = Frame::new(off_px, w, h, w).expect("frame");
         let on_f = Frame::new(on_px, w, h, w).expect("frame");
-        let mut hw = HostWorkspace::<u8>::new(w, h, 8, cal.planes.len());
+        let mut hw = OwnedBuffers::<u8>::for_frame(w, h, 8, cal.planes.len());
         let config = PipelineConfig::default();
         let params = CylinderParams::default();
         c.bench_function(&format!("extract_profile_752x480_{name}"), |b| {

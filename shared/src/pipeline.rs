@@ -14,6 +14,14 @@
 
 use core::fmt;
 
+mod buffers;
+
+#[cfg(any(test, feature = "alloc"))]
+pub use buffers::OwnedBuffers;
+pub use buffers::{
+    Buffers, Objects, SmallBuffers, BINS_8BIT, LABEL_TABLE_LEN, MAX_OBJECTS, NO_OBJECTS,
+};
+
 use crate::calibration::{Calibration, MAX_PLANES};
 use crate::curve::{self, CurveError, CurvePoint, ExtractParams, SmoothParams, MAX_CURVES};
 use crate::image::segment::{self, Connectivity, ObjectFeatures, SegmentError};
@@ -206,8 +214,8 @@ impl From<TriangulationError> for PipelineError {
     }
 }
 
-/// Caller-owned working memory of the pipeline. [`Workspace::sizes`] gives the lengths
-/// needed for a frame size; the host allocates them, the firmware places them in static RAM.
+/// Caller-owned working memory of the pipeline: borrowed from a [`Buffers`] (static),
+/// an `OwnedBuffers` (heap, feature `alloc`), or any slices of the [`WorkspaceSizes`].
 #[derive(Debug)]
 pub struct Workspace<'a, P: Pixel> {
     /// Difference frame (`width × height`).
@@ -254,13 +262,22 @@ impl WorkspaceSizes {
     /// The label table is sized for a cluttered scene (4096 provisional labels), not for the
     /// pathological worst case (a checkerboard needs `width × height / 2`): a scene with more
     /// blobs than that is reported as `Segment(TooManyLabels)` instead of being measured.
-    pub fn new(width: usize, height: usize, bit_depth: u8, planes: usize) -> Self {
+    pub const fn new(width: usize, height: usize, bit_depth: u8, planes: usize) -> Self {
+        // `Ord::min`/`clamp` are not `const`.
+        let bits = if bit_depth > 16 { 16 } else { bit_depth };
+        let planes = if planes < 1 {
+            1
+        } else if planes > MAX_PLANES {
+            MAX_PLANES
+        } else {
+            planes
+        };
         WorkspaceSizes {
             pixels: width * height,
-            histogram: 1usize << bit_depth.min(16),
-            label_table: 4096,
-            objects: 1024,
-            points: width * planes.clamp(1, MAX_PLANES) * 2,
+            histogram: 1usize << bits,
+            label_table: LABEL_TABLE_LEN,
+            objects: MAX_OBJECTS,
+            points: width * planes * 2,
         }
     }
 }
@@ -854,49 +871,8 @@ mod tests {
     const W: usize = 752;
     const H: usize = 480;
 
-    struct Buffers {
-        diff: Vec<u8>,
-        labels: Vec<u16>,
-        histogram: Vec<u32>,
-        table: Vec<u16>,
-        objects: Vec<ObjectFeatures>,
-        curve: Vec<CurvePoint>,
-        points: Vec<Vec3>,
-        sigmas: Vec<Real>,
-        scratch_points: Vec<Vec2>,
-        scratch_values: Vec<Real>,
-    }
-
-    impl Buffers {
-        fn new(planes: usize) -> Self {
-            let s = WorkspaceSizes::new(W, H, 8, planes);
-            Buffers {
-                diff: vec![0; s.pixels],
-                labels: vec![0; s.pixels],
-                histogram: vec![0; s.histogram],
-                table: vec![0; s.label_table],
-                objects: vec![ObjectFeatures::empty(0); s.objects],
-                curve: vec![CurvePoint::ZERO; s.points],
-                points: vec![Vec3::zeros(); s.points],
-                sigmas: vec![0.0; s.points],
-                scratch_points: vec![Vec2::zeros(); s.points],
-                scratch_values: vec![0.0; s.points],
-            }
-        }
-        fn ws(&mut self) -> Workspace<'_, u8> {
-            Workspace {
-                diff: &mut self.diff,
-                labels: &mut self.labels,
-                histogram: &mut self.histogram,
-                label_table: &mut self.table,
-                objects: &mut self.objects,
-                curve: &mut self.curve,
-                points: &mut self.points,
-                sigmas: &mut self.sigmas,
-                scratch_points: &mut self.scratch_points,
-                scratch_values: &mut self.scratch_values,
-            }
-        }
+    fn buffers(planes: usize) -> OwnedBuffers<u8> {
+        OwnedBuffers::for_frame(W, H, 8, planes)
     }
 
     fn calibration(planes: usize) -> Calibration {
@@ -960,8 +936,8 @@ mod tests {
         let z = 1.2;
         let (off, on) = render(&cal, &[0], z, 150..600, 150.0, 12);
         let (off_f, on_f) = frames(&off, &on);
-        let mut b = Buffers::new(1);
-        let mut ws = b.ws();
+        let mut b = buffers(1);
+        let mut ws = b.workspace();
         let prof =
             extract_profile(&off_f, &on_f, &cal, &PipelineConfig::default(), &mut ws).unwrap();
         let pts = prof.points(ws.points, 0);
@@ -987,8 +963,8 @@ mod tests {
         let z = 0.9;
         let (off, on) = render(&cal, &[0, 1], z, 200..500, 120.0, 5);
         let (off_f, on_f) = frames(&off, &on);
-        let mut b = Buffers::new(2);
-        let mut ws = b.ws();
+        let mut b = buffers(2);
+        let mut ws = b.workspace();
         let prof =
             extract_profile(&off_f, &on_f, &cal, &PipelineConfig::default(), &mut ws).unwrap();
         for k in 0..2 {
@@ -1007,9 +983,15 @@ mod tests {
         let cal = calibration(1);
         let (off, on) = render(&cal, &[0], 1.0, 100..101, 0.0, 30);
         let (off_f, on_f) = frames(&off, &on);
-        let mut b = Buffers::new(1);
-        let err = extract_profile(&off_f, &on_f, &cal, &PipelineConfig::default(), &mut b.ws())
-            .unwrap_err();
+        let mut b = buffers(1);
+        let err = extract_profile(
+            &off_f,
+            &on_f,
+            &cal,
+            &PipelineConfig::default(),
+            &mut b.workspace(),
+        )
+        .unwrap_err();
         assert_eq!(err, PipelineError::NoLaserLight { max_difference: 0 });
     }
 
@@ -1019,7 +1001,7 @@ mod tests {
         let off = vec![255u8; W * H];
         let on = off.clone();
         let (off_f, on_f) = frames(&off, &on);
-        let mut b = Buffers::new(1);
+        let mut b = buffers(1);
         let cfg = PipelineConfig {
             floors: Floors {
                 min_contrast: 0,
@@ -1027,7 +1009,7 @@ mod tests {
             },
             ..PipelineConfig::default()
         };
-        let err = extract_profile(&off_f, &on_f, &cal, &cfg, &mut b.ws()).unwrap_err();
+        let err = extract_profile(&off_f, &on_f, &cal, &cfg, &mut b.workspace()).unwrap_err();
         assert!(
             matches!(err, PipelineError::AmbientSaturated { .. }),
             "{err:?}"
@@ -1045,9 +1027,15 @@ mod tests {
             }
         }
         let (off_f, on_f) = frames(&off, &on);
-        let mut b = Buffers::new(1);
-        let err = extract_profile(&off_f, &on_f, &cal, &PipelineConfig::default(), &mut b.ws())
-            .unwrap_err();
+        let mut b = buffers(1);
+        let err = extract_profile(
+            &off_f,
+            &on_f,
+            &cal,
+            &PipelineConfig::default(),
+            &mut b.workspace(),
+        )
+        .unwrap_err();
         assert_eq!(err, PipelineError::NoCurve);
     }
 
@@ -1056,8 +1044,8 @@ mod tests {
         let cal = calibration(1);
         let (off, on) = render(&cal, &[0], 1.0, 0..300, 100.0, 10);
         let (off_f, on_f) = frames(&off, &on);
-        let mut b = Buffers::new(1);
-        let mut ws = b.ws();
+        let mut b = buffers(1);
+        let mut ws = b.workspace();
         let prof =
             extract_profile(&off_f, &on_f, &cal, &PipelineConfig::default(), &mut ws).unwrap();
         assert!(prof.touches_edge);
@@ -1068,9 +1056,9 @@ mod tests {
         let cal = calibration(1);
         let small = vec![0u8; 100 * 100];
         let f = Frame::new(&small, 100, 100, 100).unwrap();
-        let mut b = Buffers::new(1);
-        let err =
-            extract_profile(&f, &f, &cal, &PipelineConfig::default(), &mut b.ws()).unwrap_err();
+        let mut b = buffers(1);
+        let err = extract_profile(&f, &f, &cal, &PipelineConfig::default(), &mut b.workspace())
+            .unwrap_err();
         assert_eq!(
             err,
             PipelineError::FrameSizeMismatch {
@@ -1081,10 +1069,11 @@ mod tests {
 
         let (off, on) = render(&cal, &[0], 1.0, 100..400, 100.0, 10);
         let (off_f, on_f) = frames(&off, &on);
-        let mut b = Buffers::new(1);
-        b.points.truncate(10);
-        let err = extract_profile(&off_f, &on_f, &cal, &PipelineConfig::default(), &mut b.ws())
-            .unwrap_err();
+        let mut b = buffers(1);
+        let mut ws = b.workspace();
+        ws.points = &mut core::mem::take(&mut ws.points)[..10];
+        let err =
+            extract_profile(&off_f, &on_f, &cal, &PipelineConfig::default(), &mut ws).unwrap_err();
         assert!(
             matches!(
                 err,
@@ -1109,8 +1098,8 @@ mod tests {
             *v = (*v as i32 + n as i32 - 1).clamp(0, 255) as u8;
         }
         let (off_f, on_f) = frames(&off, &on);
-        let mut b = Buffers::new(1);
-        let mut ws = b.ws();
+        let mut b = buffers(1);
+        let mut ws = b.workspace();
         // With the absolute floor lowered (the default keeps 20 DN, see PipelineConfig), the
         // noise-relative test alone decides: 13 DN over σ̂ < 1 DN is light.
         let cfg = PipelineConfig {

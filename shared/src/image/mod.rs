@@ -24,12 +24,15 @@ pub mod threshold;
 pub trait Pixel: Copy + Default + Ord + Into<u32> + fmt::Debug + 'static {
     /// Bits of the storage type (8 or 16).
     const STORAGE_BITS: u8;
+    /// The value 0 (usable in `const` buffer initialisers).
+    const ZERO: Self;
     /// Converts from `u32`, saturating at the storage type's maximum.
     fn saturate_from(v: u32) -> Self;
 }
 
 impl Pixel for u8 {
     const STORAGE_BITS: u8 = 8;
+    const ZERO: Self = 0;
     #[inline]
     fn saturate_from(v: u32) -> Self {
         if v > u8::MAX as u32 {
@@ -42,6 +45,7 @@ impl Pixel for u8 {
 
 impl Pixel for u16 {
     const STORAGE_BITS: u8 = 16;
+    const ZERO: Self = 0;
     #[inline]
     fn saturate_from(v: u32) -> Self {
         if v > u16::MAX as u32 {

@@ -126,6 +126,23 @@ pub struct ObjectFeatures {
 }
 
 impl ObjectFeatures {
+    /// All fields zero, for initialising caller-owned buffers (a static of it lands in
+    /// `.bss`); [`segment`] initialises every entry it uses.
+    pub const ZERO: ObjectFeatures = ObjectFeatures {
+        label: 0,
+        pixel_count: 0,
+        min_x: 0,
+        max_x: 0,
+        min_y: 0,
+        max_y: 0,
+        intensity_sum: 0,
+        intensity_x_sum: 0,
+        intensity_y_sum: 0,
+        x_sum: 0,
+        y_sum: 0,
+        peak_intensity: 0,
+    };
+
     /// Features of an object with no pixel yet (identity element of the accumulation).
     pub const fn empty(label: u16) -> Self {
         ObjectFeatures {
