@@ -1,12 +1,13 @@
 //! Host benchmarks of the measurement chain on a 752×480 frame pair: the image part alone
 //! (`extract_profile`: subtract, threshold, segment, select, subpixel curve, triangulate) and
-//! the whole stem measurement (`measure_stem`). The frames come from the simulator (rendered
+//! the whole stem measurement (`instrument::measure_with::<Stem>`). The frames come from the simulator (rendered
 //! once, outside the timed loop). Results: docs/performance.md.
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use std::hint::black_box;
 use tangent_core::image::Frame;
-use tangent_core::pipeline::{extract_profile, measure_stem, OwnedBuffers, PipelineConfig};
+use tangent_core::instrument::{measure_with, Stem};
+use tangent_core::pipeline::{extract_profile, OwnedBuffers, PipelineConfig};
 use tangent_core::solvers::cylinder::CylinderParams;
 use tangent_host::pgm::PgmSamples;
 use tangent_host::simulate::{corpus::random_stem, simulate};
@@ -44,7 +45,7 @@ fn bench(c: &mut Criterion) {
         });
         c.bench_function(&format!("measure_stem_752x480_{name}"), |b| {
             b.iter(|| {
-                black_box(measure_stem(
+                black_box(measure_with::<Stem, u8>(
                     &off_f,
                     &on_f,
                     &cal,

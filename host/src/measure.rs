@@ -1,8 +1,9 @@
 //! Replaying captures through the measurement core: a capture in, a [`Reading`] out.
 //!
-//! The host runs exactly the core's `pipeline::measure_stem` that the firmware runs, with
-//! its buffers on the heap (`OwnedBuffers`); this module only picks the frames, converts
-//! units for people (millimetres, degrees) and names the flags (`protocol::codes`).
+//! The capture's mode selects the instrument; the host runs exactly the core's
+//! `instrument::measure_with` that the firmware runs, with its buffers on the heap
+//! (`OwnedBuffers`); this module only picks the frames, converts units for people
+//! (millimetres, degrees) and names the flags (`protocol::codes`).
 
 use std::borrow::Cow;
 use std::path::{Path, PathBuf};
@@ -11,7 +12,9 @@ use serde::Serialize;
 use tangent_core::calibration::Calibration;
 use tangent_core::curve::CurvePoint;
 use tangent_core::image::{Frame, Pixel};
-use tangent_core::pipeline::{self, OwnedBuffers, PipelineConfig, PipelineError, StemMeasurement};
+use tangent_core::instrument::stem::StemMeasurement;
+use tangent_core::instrument::{self, Stem};
+use tangent_core::pipeline::{OwnedBuffers, PipelineConfig, PipelineError};
 use tangent_core::protocol::codes::{self, Failure};
 use tangent_core::real::Vec3;
 use tangent_core::solvers::cylinder::CylinderParams;
@@ -266,7 +269,14 @@ fn run<P: Pixel>(
             Frame::new(off, pgm.width, pgm.height, pgm.width)?.with_bit_depth(pgm.bit_depth())?;
         let on =
             Frame::new(on, pgm.width, pgm.height, pgm.width)?.with_bit_depth(pgm.bit_depth())?;
-        pipeline::measure_stem(&off, &on, calibration, config, params, &mut hw.workspace())
+        instrument::measure_with::<Stem, P>(
+            &off,
+            &on,
+            calibration,
+            config,
+            params,
+            &mut hw.workspace(),
+        )
     })();
     (result, hw)
 }
@@ -330,8 +340,13 @@ pub fn measure_loaded(
     config: &PipelineConfig,
     params: &CylinderParams,
 ) -> Result<Outcome, MeasureError> {
-    if capture.meta.mode != Mode::Cylinder {
-        return Err(MeasureError::UnsupportedMode(capture.meta.mode));
+    // The instruments the host reports on (the stem's detailed solution feeds the extra
+    // keys of `Reading`).
+    match capture.meta.mode {
+        Mode::Cylinder => {}
+        mode @ (Mode::Sphere | Mode::Wall | Mode::Road) => {
+            return Err(MeasureError::UnsupportedMode(mode))
+        }
     }
     let calibration = calibration
         .cloned()

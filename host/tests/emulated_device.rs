@@ -444,7 +444,8 @@ fn to_u8(pgm: &tangent_host::pgm::Pgm) -> Vec<u8> {
 /// decision (outlier rejection, method choice) flips, which the method comparison catches.
 #[test]
 fn on_device_measurements_equal_the_hosts() {
-    use tangent_core::pipeline::{self, OwnedBuffers, PipelineConfig};
+    use tangent_core::instrument::{measure_with, Stem};
+    use tangent_core::pipeline::{OwnedBuffers, PipelineConfig};
     use tangent_core::solvers::cylinder::CylinderParams;
     use tangent_host::simulate::{corpus, simulate};
 
@@ -487,7 +488,7 @@ fn on_device_measurements_equal_the_hosts() {
         let off_f = tangent_core::image::Frame::new(&off, w, h, w).unwrap();
         let on_f = tangent_core::image::Frame::new(&on, w, h, w).unwrap();
         let mut ws = OwnedBuffers::<u8>::for_frame(w, h, 8, capture.calibration.planes.len());
-        let host = pipeline::measure_stem(
+        let host = measure_with::<Stem, u8>(
             &off_f,
             &on_f,
             &capture.calibration,
