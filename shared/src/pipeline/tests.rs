@@ -10,6 +10,9 @@ use crate::laser_plane::LaserPlane;
 use std::vec;
 use std::vec::Vec;
 
+/// A borrowed 8-bit frame.
+pub(crate) type View<'a> = Frame<u8, &'a [u8]>;
+
 const W: usize = 752;
 const H: usize = 480;
 
@@ -65,10 +68,7 @@ pub(crate) fn render(
     (off, on)
 }
 
-pub(crate) fn frames<'a>(
-    off: &'a [u8],
-    on: &'a [u8],
-) -> (Frame<u8, &'a [u8]>, Frame<u8, &'a [u8]>) {
+pub(crate) fn frames<'a>(off: &'a [u8], on: &'a [u8]) -> (View<'a>, View<'a>) {
     (
         Frame::new(off, W, H, W).unwrap(),
         Frame::new(on, W, H, W).unwrap(),
