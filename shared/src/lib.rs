@@ -24,7 +24,7 @@
 //! | instruments: points → one [`Measurement`] per capture mode | [`instrument`] | `docs/pipeline.md` |
 //!
 //! The handful of types a library user needs are re-exported here: a [`Frame`] pair and a
-//! [`Calibration`] in, working memory from [`Buffers`] (static) or [`OwnedBuffers`] (heap,
+//! [`Calibration`] in, working memory from [`Buffers`] (static) or `OwnedBuffers` (heap,
 //! feature `alloc`), [`measure`] with the capture's [`Mode`], one [`Measurement`] or a
 //! [`PipelineError`] out. `examples/measure_pair.rs` shows it end to end.
 #![no_std]
