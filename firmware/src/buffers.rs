@@ -49,7 +49,7 @@ macro_rules! board_buffers {
             use core::sync::atomic::{AtomicBool, Ordering};
             use tangent_core::protocol::MAX_FRAME_LEN;
             use $crate::buffers::FrameBuffer;
-            use $crate::measure::{self, SmallBuffers};
+            use tangent_core::pipeline::{Objects, SmallBuffers, Workspace, NO_OBJECTS};
 
             // (Not `FRAME_BYTES`: the caller's constant may have that name.)
             const BYTES: usize = $frame_bytes;
@@ -64,7 +64,7 @@ macro_rules! board_buffers {
             $(#[$small])*
             static mut SMALL: SmallBuffers<{ $points }> = SmallBuffers::new();
             $(#[$objects])*
-            static mut OBJECTS: measure::Objects = measure::NO_OBJECTS;
+            static mut OBJECTS: Objects = NO_OBJECTS;
             static mut RX: [u8; MAX_FRAME_LEN] = [0; MAX_FRAME_LEN];
 
             if TAKEN.swap(true, Ordering::AcqRel) {
@@ -89,7 +89,7 @@ macro_rules! board_buffers {
                 };
                 let diff = &mut *addr_of_mut!(DIFF);
                 let labels = &mut *addr_of_mut!(LABELS);
-                let workspace = measure::workspace(
+                let workspace = Workspace::from_parts(
                     &mut diff[..pixels],
                     &mut labels[..pixels],
                     &mut *addr_of_mut!(OBJECTS),

@@ -28,19 +28,8 @@ pub const META_FILE: &str = "capture.toml";
 /// Header line of the truth-curve CSV.
 pub const TRUTH_CURVE_HEADER: &str = "plane,column,row_px,x_m,y_m,z_m,object";
 
-/// What the capture measures (selects the solver).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Mode {
-    /// A stem (cylinder, possibly tilted or elliptic).
-    Cylinder,
-    /// A sphere.
-    Sphere,
-    /// One or more walls (planes).
-    Wall,
-    /// A road-surface profile.
-    Road,
-}
+/// What the capture measures: its `mode` key selects the instrument (`tangent_core::instrument`).
+pub use tangent_core::measurement::Mode;
 
 /// One frame of the capture: its PGM file and the laser planes lit while it was exposed.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

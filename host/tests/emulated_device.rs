@@ -444,9 +444,9 @@ fn to_u8(pgm: &tangent_host::pgm::Pgm) -> Vec<u8> {
 /// decision (outlier rejection, method choice) flips, which the method comparison catches.
 #[test]
 fn on_device_measurements_equal_the_hosts() {
-    use tangent_core::pipeline::{self, PipelineConfig};
+    use tangent_core::instrument::{measure_with, Stem};
+    use tangent_core::pipeline::{OwnedBuffers, PipelineConfig};
     use tangent_core::solvers::stem::CylinderParams;
-    use tangent_host::measure::HostWorkspace;
     use tangent_host::simulate::{corpus, simulate};
 
     let Some(elf) = firmware_elf() else { return };
@@ -487,8 +487,8 @@ fn on_device_measurements_equal_the_hosts() {
 
         let off_f = tangent_core::image::Frame::new(&off, w, h, w).unwrap();
         let on_f = tangent_core::image::Frame::new(&on, w, h, w).unwrap();
-        let mut ws = HostWorkspace::<u8>::new(w, h, 8, capture.calibration.planes.len());
-        let host = pipeline::measure_stem(
+        let mut ws = OwnedBuffers::<u8>::for_frame(w, h, 8, capture.calibration.planes.len());
+        let host = measure_with::<Stem, u8>(
             &off_f,
             &on_f,
             &capture.calibration,

@@ -27,17 +27,17 @@ use cortex_m::peripheral::SYST;
 use cortex_m_semihosting::{nr, syscall};
 use tangent_core::protocol::{self, calibration_record, WireCalibration};
 
-use tangent_core::pipeline::Workspace;
+use tangent_core::pipeline::{Workspace, WorkspaceSizes};
 
 use crate::app::Buffers;
-use crate::measure;
+
 use crate::pgm;
 use crate::ports::{self, CameraError, Devices, Geometry, LinkError, Strobe};
 
 /// Largest frame the emulated board accepts (752 × 480 8-bit).
 pub const MAX_FRAME: usize = 752 * 480;
 /// Curve/point entries of the pipeline's workspace: 752 columns, two planes.
-pub const POINTS: usize = measure::points_for(752, 2);
+pub const POINTS: usize = WorkspaceSizes::new(752, 480, 8, 2).points;
 /// Bytes of the semihosting command line the board reads.
 const MAX_COMMAND_LINE: usize = 4096;
 

@@ -15,6 +15,7 @@ use core::fmt;
 use crate::curve::CurveError;
 use crate::image::segment::SegmentError;
 use crate::image::threshold::ThresholdError;
+use crate::measurement::Mode;
 use crate::pipeline::PipelineError;
 use crate::solvers::result::{Flags, Method};
 use crate::solvers::SolveError;
@@ -127,6 +128,9 @@ pub enum Failure {
         /// Labels the table holds.
         capacity: u32,
     },
+    /// Code 16: the instrument of this mode has no solver yet (the number is the [`Mode`]:
+    /// 0 cylinder, 1 sphere, 2 wall, 3 road).
+    UnsupportedMode(Mode),
     /// A code this version does not know (a newer firmware).
     Unknown {
         /// The code.
@@ -184,6 +188,7 @@ impl Failure {
             PipelineError::Triangulation(_) => Failure::Triangulation,
             PipelineError::OutsideFrame => Failure::OutsideFrame,
             PipelineError::Solve(e) => Failure::Solve(*e),
+            PipelineError::UnsupportedMode(mode) => Failure::UnsupportedMode(*mode),
         }
     }
 
@@ -205,6 +210,7 @@ impl Failure {
             Failure::OutsideFrame => 13,
             Failure::Solve(_) => 14,
             Failure::TooManyLabels { .. } => 15,
+            Failure::UnsupportedMode(_) => 16,
             Failure::Unknown { code, .. } => *code,
         }
     }
@@ -219,6 +225,7 @@ impl Failure {
             | Failure::TooManyLabels { capacity: n }
             | Failure::Unknown { argument: n, .. } => n.min(ARGUMENT_MAX),
             Failure::Solve(e) => solve_error_number(e),
+            Failure::UnsupportedMode(mode) => mode_number(mode),
             Failure::Frame
             | Failure::FrameSize
             | Failure::Workspace
@@ -259,6 +266,10 @@ impl Failure {
                 None => Failure::Unknown { code, argument: n },
             },
             15 => Failure::TooManyLabels { capacity: n },
+            16 => match mode_of_number(n) {
+                Some(mode) => Failure::UnsupportedMode(mode),
+                None => Failure::Unknown { code, argument: n },
+            },
             _ => Failure::Unknown { code, argument: n },
         }
     }
@@ -270,6 +281,27 @@ impl Failure {
             detail: self.detail(),
         }
     }
+}
+
+/// The number of a [`Mode`] in a [`Failure::UnsupportedMode`] detail.
+fn mode_number(mode: Mode) -> u32 {
+    match mode {
+        Mode::Cylinder => 0,
+        Mode::Sphere => 1,
+        Mode::Wall => 2,
+        Mode::Road => 3,
+    }
+}
+
+/// The [`Mode`] of a number ([`mode_number`]'s inverse).
+fn mode_of_number(n: u32) -> Option<Mode> {
+    Some(match n {
+        0 => Mode::Cylinder,
+        1 => Mode::Sphere,
+        2 => Mode::Wall,
+        3 => Mode::Road,
+        _ => return None,
+    })
 }
 
 /// The number of a [`SolveError`] in a [`Failure::Solve`] detail.
@@ -356,6 +388,11 @@ impl fmt::Display for Failure {
             Failure::TooManyLabels { capacity } => write!(
                 f,
                 "segmentation: more than {capacity} provisional labels needed (image too cluttered)"
+            ),
+            Failure::UnsupportedMode(mode) => write!(
+                f,
+                "the {} instrument has no solver yet (update the software)",
+                mode.name()
             ),
             Failure::Unknown { code, argument } => write!(
                 f,

@@ -16,8 +16,8 @@
 //! and the bring-up (`start`: clock tree, pin map, USB descriptors, buffers) need the
 //! feature `h743`; `src/bin/h743.rs` only starts the board and runs the application.
 
-use crate::measure;
 use crate::mt9v034::{self, Window};
+use tangent_core::pipeline::WorkspaceSizes;
 
 #[cfg(feature = "h743")]
 mod devices;
@@ -45,7 +45,7 @@ pub const WIDTH: u16 = mt9v034::WIDTH;
 /// Bytes of one frame.
 pub const FRAME_BYTES: usize = WIDTH as usize * WINDOW_ROWS as usize;
 /// Curve/point entries of the pipeline's workspace: every column, two planes.
-pub const POINTS: usize = measure::points_for(WIDTH as usize, 2);
+pub const POINTS: usize = WorkspaceSizes::new(WIDTH as usize, WINDOW_ROWS as usize, 8, 2).points;
 /// Pixel clock of the sensor module (its own 26.66 MHz oscillator).
 pub const PIXCLK_HZ: u64 = 26_660_000;
 /// Trigger debounce time (µs): mechanical bounce of a tactile switch lasts < 5 ms.

@@ -61,6 +61,9 @@ fn every_pipeline_error() -> Vec<PipelineError> {
             None => break,
         }
     }
+    all.push(PipelineError::UnsupportedMode(
+        crate::measurement::Mode::Road,
+    ));
     all
 }
 
@@ -125,7 +128,7 @@ fn failure_codes_are_the_documented_ones() {
         got,
         [
             1, 2, 3, 4, 5, 1, 6, 6, 1, 1, 15, 7, 8, 9, 1, 10, 10, 8, 11, 12, 13, 14, 14, 14, 14,
-            14, 14, 14, 14, 14, 14
+            14, 14, 14, 14, 14, 14, 16
         ]
     );
     assert_eq!(
