@@ -10,19 +10,16 @@
 //! forester would expect to be measured must give a reading; captures that cannot be measured
 //! (target outside the frame, nothing in range, blinding sun) must give their specific error.
 
-use std::path::{Path, PathBuf};
-
-use tangent_core::error_model::{predict_diameter_sigma, NoiseModel, StemGeometry};
+use tangent_core::error_model::{predict_diameter_sigma, StemGeometry};
+use tangent_core::noise::NoiseModel;
 use tangent_core::pipeline::PipelineConfig;
-use tangent_core::real::Vec2;
-use tangent_core::solvers::cylinder::CylinderParams;
+use tangent_core::real::{Vec2, Vec3};
+use tangent_core::solvers::stem::CylinderParams;
 use tangent_host::capture::{Capture, Mode};
 use tangent_host::measure::{measure_capture, Reading};
-use tangent_host::simulate::scene::Object;
+use tangent_host::truth::Object;
 
-fn corpus() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/captures")
-}
+use tangent_corpus::captures as corpus;
 
 fn read(name: &str) -> Reading {
     measure_capture(
@@ -48,7 +45,7 @@ fn predicted_sigma(name: &str) -> f64 {
         .or(c.semi_axes_m.map(|[a, b]| (a + b) / 2.0))
         .expect("radius");
     let plane = capture.calibration.planes[0];
-    let centre = nalgebra::Vector3::from(c.axis_point_m);
+    let centre = Vec3::from(c.axis_point_m);
     let distance = (plane.to_plane_coords(centre) - Vec2::zeros()).norm() - r;
     let mut scratch = vec![Vec2::zeros(); 2 * capture.calibration.camera.width as usize];
     let p = predict_diameter_sigma(

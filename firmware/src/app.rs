@@ -18,6 +18,8 @@
 use embassy_futures::select::{select, select3, Either, Either3};
 use heapless::Deque;
 use tangent_core::calibration::Calibration;
+use tangent_core::measurement::Measurement;
+use tangent_core::protocol::codes::HISTORY_LEN;
 use tangent_core::protocol::{
     self, DeviceError, DeviceInfo, ErrorCode, Feed, FrameEncoder, FrameSel, FrameSetInfo,
     FromDevice, LinkStats, Reading, Request, Response, SelfTestReport, ToDevice, WireCalibration,
@@ -25,11 +27,11 @@ use tangent_core::protocol::{
 };
 
 use crate::exposure::{self, Exposure};
-use crate::hal::{
+use crate::measure::{FramePair, Measurer};
+use crate::ports::{
     Board, CalibrationStore, Camera, CameraError, Clock, Devices, Laser, Link, Strobe, Trigger,
     Watchdog,
 };
-use crate::measure::{FramePair, Measurer};
 use crate::stats::Welford;
 
 /// Hard limit of the laser on-time of one exposure (µs): the longest exposure plus
@@ -43,8 +45,6 @@ pub const CAPTURE_TIMEOUT_US: u64 = 250_000;
 const GUARD_POLL_US: u32 = 500;
 /// Idle wake-up period: feeds the watchdog while nothing happens (µs).
 const IDLE_TICK_US: u32 = 100_000;
-/// Readings kept for [`Request::History`].
-pub const HISTORY_LEN: usize = 64;
 /// Every `PEAK_ROW_STEP`-th row is sampled for auto-exposure.
 const PEAK_ROW_STEP: usize = 4;
 
@@ -65,7 +65,7 @@ pub struct App<'b, B: Board, M: Measurer> {
     measurer: M,
     off: &'b mut [u8],
     on: &'b mut [u8],
-    rx: protocol::Decoder<'b>,
+    rx: protocol::Decoder<&'b mut [u8]>,
     enc: FrameEncoder,
     calibration: Option<Calibration>,
     /// The calibration as received (f64), returned unchanged by `ReadCalibration`.
@@ -135,15 +135,22 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
 
     /// Runs forever: announces the device, then serves the trigger and the link.
     pub async fn run(&mut self) -> ! {
-        B::log(format_args!(
-            "tangent firmware {} up, calibration {:?}",
-            env!("CARGO_PKG_VERSION"),
-            self.calibration.as_ref().map(|c| c.id)
-        ));
-        self.send_info(UNSOLICITED).await;
+        self.announce().await;
         loop {
             self.step().await;
         }
+    }
+
+    /// Logs the start and sends the unsolicited `Info` banner (what a boot looks like to
+    /// the host). [`App::run`] calls it once; a test board that runs [`App::step`] itself
+    /// calls it after each (simulated) boot.
+    pub async fn announce(&mut self) {
+        B::log(format_args!(
+            "tangent firmware {} up, calibration {:?}",
+            crate::VERSION,
+            self.calibration.as_ref().map(|c| c.id)
+        ));
+        self.send_info(UNSOLICITED).await;
     }
 
     /// One turn of the main loop: waits for an event (or does one stream measurement) and
@@ -360,7 +367,7 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
         let g = self.dev.camera.geometry();
         let info = DeviceInfo {
             protocol_version: PROTOCOL_VERSION,
-            fw_version: env!("CARGO_PKG_VERSION"),
+            fw_version: crate::VERSION,
             board: B::KIND,
             calib_id: self.calibration.as_ref().map(|c| c.id),
             frame_width: g.width,
@@ -391,7 +398,9 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
         match self.measure_once().await {
             Ok(mut reading) => {
                 if let Some(s) = stats {
-                    s.push(reading.diameter_m as f64);
+                    match reading.measurement {
+                        Measurement::Stem(stem) => s.push(stem.diameter as f64),
+                    }
                     reading.stats = Some(s.summary());
                 }
                 if self.history.is_full() {
@@ -439,22 +448,14 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
             "pipeline capture={} time_us={}",
             info.capture, self.last_pipeline_us
         ));
-        let outcome = result.map_err(|detail| DeviceError {
-            code: ErrorCode::MeasurementFailed,
-            detail,
-        })?;
+        let measurement = result.map_err(|failure| failure.device_error())?;
         self.seq = self.seq.wrapping_add(1).max(1);
         Ok(Reading {
             seq: self.seq,
             timestamp_ms: info.timestamp_ms,
             calib_id: cal.id,
-            method: outcome.method,
-            diameter_m: outcome.diameter_m,
-            uncertainty_m: outcome.uncertainty_m,
-            distance_m: outcome.distance_m,
-            tilt_rad: outcome.tilt_rad,
-            flags: outcome.flags,
             exposure_us: info.exposure_us,
+            measurement,
             stats: None,
         })
     }

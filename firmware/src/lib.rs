@@ -1,24 +1,33 @@
 //! Tangent firmware: the portable application and its two boards.
 //!
-//! * [`hal`] — the hardware traits (camera, laser, trigger, link, clock, calibration
-//!   store, watchdog);
+//! * [`ports`] — the application's ports: one trait per device it uses (camera, laser,
+//!   trigger, link, clock, calibration store, watchdog);
 //! * [`app`] — the state machine over them (trigger → exposures → pipeline → report,
 //!   protocol commands);
-//! * [`measure`] — the seam to the shared pipeline; [`exposure`], [`stats`], [`pgm`] — small pure pieces, unit-tested on the host
-//!   (`cargo test --target x86_64-unknown-linux-gnu --no-default-features --lib`);
-//! * `board::h743` (feature `h743`) and `board::qemu` (feature `qemu`): the boards.
+//! * [`measure`] — the seam to the shared pipeline;
+//! * [`mt9v034`] — the image sensor's set-up over any `embedded-hal-async` I²C bus;
+//! * [`exposure`], [`stats`], [`pgm`] — small pure pieces;
+//! * [`board`] — the boards: `board::h743` (drivers with feature `h743`) and `board::qemu`
+//!   (feature `qemu`), each with its clocks, pins and buffers (one `board_buffers!` per
+//!   board).
+//!
+//! Everything but the boards' drivers builds for the host and is unit-tested there
+//! (`cargo test --target x86_64-unknown-linux-gnu --no-default-features --lib`); the host's
+//! link tests run [`app::App`] on a test board.
 //!
 //! See `docs/firmware.md`.
 #![cfg_attr(not(test), no_std)]
 #![deny(missing_docs)]
 
-pub mod app;
-pub mod exposure;
-pub mod hal;
-pub mod measure;
-pub mod pgm;
-pub mod stats;
+/// The firmware's version (`DeviceInfo::fw_version`).
+pub const VERSION: &str = env!("CARGO_PKG_VERSION");
 
-/// The boards (only on the Cortex-M target).
-#[cfg(target_os = "none")]
+pub mod app;
 pub mod board;
+mod buffers;
+pub mod exposure;
+pub mod measure;
+pub mod mt9v034;
+pub mod pgm;
+pub mod ports;
+pub mod stats;

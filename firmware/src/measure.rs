@@ -5,13 +5,13 @@
 //! behaviour and the pipeline's working memory stays owned by the board's `main`.
 
 use tangent_core::calibration::Calibration;
-use tangent_core::curve::CurvePoint;
-use tangent_core::image::segment::ObjectFeatures;
 use tangent_core::image::Frame;
+use tangent_core::instrument::{self, Stem};
+use tangent_core::measurement::Measurement;
 use tangent_core::pipeline::{self, PipelineConfig, PipelineError, Stage, Workspace};
-use tangent_core::protocol::Method;
-use tangent_core::real::{Real, Vec2, Vec3};
-use tangent_core::solvers::cylinder::CylinderParams;
+use tangent_core::protocol::codes::Failure;
+use tangent_core::real::Real;
+use tangent_core::solvers::stem::CylinderParams;
 
 /// A captured frame pair, 8-bit, row-major, `width` bytes per row.
 #[derive(Debug, Clone, Copy)]
@@ -30,125 +30,19 @@ pub struct FramePair<'a> {
     pub laser_mask: u8,
 }
 
-/// What a measurement found.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Outcome {
-    /// The solver used.
-    pub method: Method,
-    /// Diameter (metres).
-    pub diameter_m: f32,
-    /// Predicted standard uncertainty (metres).
-    pub uncertainty_m: f32,
-    /// Distance to the stem axis (metres).
-    pub distance_m: f32,
-    /// Tilt (radians).
-    pub tilt_rad: f32,
-    /// [`tangent_core::protocol::flags`].
-    pub flags: u16,
-}
-
 /// Runs the measurement on a frame pair.
 pub trait Measurer {
-    /// Measures; the error is a code sent as the detail of
-    /// [`tangent_core::protocol::ErrorCode::MeasurementFailed`].
-    fn measure(&mut self, pair: &FramePair<'_>, calibration: &Calibration) -> Result<Outcome, u32>;
+    /// Measures; a failure is sent as [`Failure::device_error`] (the code map and the
+    /// sentence the host prints are in `tangent_core::protocol::codes`).
+    fn measure(
+        &mut self,
+        pair: &FramePair<'_>,
+        calibration: &Calibration,
+    ) -> Result<Measurement, Failure>;
 }
 
-/// Label-table entries of the workspace (`pipeline::WorkspaceSizes::new`).
-pub const LABEL_TABLE: usize = 4096;
-/// Object-feature entries of the workspace.
-pub const OBJECTS: usize = 1024;
-/// Histogram bins for 8-bit frames.
-pub const HISTOGRAM: usize = 256;
-
-/// Curve/point entries for `width` columns and `planes` planes
-/// (`pipeline::WorkspaceSizes::new`: two per column and plane).
-pub const fn points_for(width: usize, planes: usize) -> usize {
-    width * planes * 2
-}
-
-/// The pipeline's point and table buffers (everything but the two per-pixel buffers and the
-/// object features), const-constructible so a board can place them in a static of its choice.
-pub struct SmallBuffers<const POINTS: usize> {
-    /// Histogram.
-    pub histogram: [u32; HISTOGRAM],
-    /// Segmentation equivalence table.
-    pub label_table: [u16; LABEL_TABLE],
-    /// Curve points.
-    pub curve: [CurvePoint; POINTS],
-    /// 3-D points.
-    pub points: [Vec3; POINTS],
-    /// Solver scratch (2-D).
-    pub scratch_points: [Vec2; POINTS],
-    /// Solver scratch (values).
-    pub scratch_values: [Real; POINTS],
-}
-
-impl<const POINTS: usize> SmallBuffers<POINTS> {
-    /// Zeroed buffers.
-    pub const fn new() -> Self {
-        SmallBuffers {
-            histogram: [0; HISTOGRAM],
-            label_table: [0; LABEL_TABLE],
-            curve: [CurvePoint::ZERO; POINTS],
-            points: [Vec3::new(0.0, 0.0, 0.0); POINTS],
-            scratch_points: [Vec2::new(0.0, 0.0); POINTS],
-            scratch_values: [0.0; POINTS],
-        }
-    }
-}
-
-impl<const POINTS: usize> Default for SmallBuffers<POINTS> {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
-/// Object-feature buffer of the workspace (≈ 57 KB: placed separately from
-/// [`SmallBuffers`] so boards can spread the workspace over RAM regions).
-pub type Objects = [ObjectFeatures; OBJECTS];
-
-/// An all-zero [`Objects`] buffer (all-zero so that a static of it lands in `.bss`, not in
-/// `.data` with a 57 KB image in flash; the pipeline initialises every entry it uses).
-#[allow(clippy::large_const_arrays)] // only used to initialise statics (zeroed, in .bss)
-pub const NO_OBJECTS: Objects = [ZERO_OBJECT; OBJECTS];
-
-const ZERO_OBJECT: ObjectFeatures = ObjectFeatures {
-    label: 0,
-    pixel_count: 0,
-    min_x: 0,
-    max_x: 0,
-    min_y: 0,
-    max_y: 0,
-    intensity_sum: 0,
-    intensity_x_sum: 0,
-    intensity_y_sum: 0,
-    x_sum: 0,
-    y_sum: 0,
-    peak_intensity: 0,
-};
-
-/// Assembles a [`Workspace`] from a board's buffers.
-pub fn workspace<'w, const POINTS: usize>(
-    diff: &'w mut [u8],
-    labels: &'w mut [u16],
-    objects: &'w mut Objects,
-    small: &'w mut SmallBuffers<POINTS>,
-) -> Workspace<'w, u8> {
-    Workspace {
-        diff,
-        labels,
-        histogram: &mut small.histogram,
-        label_table: &mut small.label_table,
-        objects,
-        curve: &mut small.curve,
-        points: &mut small.points,
-        scratch_points: &mut small.scratch_points,
-        scratch_values: &mut small.scratch_values,
-    }
-}
-
-/// The shared pipeline (`tangent_core::pipeline::measure_stem`) with its working memory.
+/// The shared pipeline (`tangent_core::instrument`, the stem instrument) with its working
+/// memory.
 pub struct PipelineMeasurer<'w> {
     ws: Workspace<'w, u8>,
     /// Image-chain parameters.
@@ -169,7 +63,7 @@ pub struct PipelineMeasurer<'w> {
 pub struct StageTimes {
     /// Subtraction, threshold, segmentation, selection, curve extraction, triangulation.
     pub image_us: [u64; 6],
-    /// Cylinder solver ([`pipeline::solve_stem`]).
+    /// Cylinder solver ([`instrument::solve_with`] of [`Stem`]).
     pub solver_us: u64,
 }
 
@@ -196,30 +90,16 @@ pub fn window_calibration(cal: &Calibration, row_offset: usize, height: usize) -
     c
 }
 
-/// Detail code of a [`PipelineError`] for [`tangent_core::protocol::ErrorCode::MeasurementFailed`]
-/// (the variant's position in the enum, `docs/protocol.md`).
-pub fn error_code(e: &PipelineError) -> u32 {
-    match e {
-        PipelineError::Frame(_) => 1,
-        PipelineError::FrameSizeMismatch { .. } => 2,
-        PipelineError::WorkspaceTooSmall { .. } => 3,
-        PipelineError::NoLaserLight { .. } => 4,
-        PipelineError::AmbientSaturated { .. } => 5,
-        PipelineError::Threshold(_) => 6,
-        PipelineError::Segment(_) => 7,
-        PipelineError::NoCurve => 8,
-        PipelineError::CurveTooShort { .. } => 9,
-        PipelineError::Curve(_) => 10,
-        PipelineError::Calibration => 11,
-        PipelineError::Triangulation(_) => 12,
-        PipelineError::OutsideFrame => 13,
-        PipelineError::Solve(_) => 14,
-    }
-}
-
 impl Measurer for PipelineMeasurer<'_> {
-    fn measure(&mut self, pair: &FramePair<'_>, calibration: &Calibration) -> Result<Outcome, u32> {
-        let frame = |data| Frame::new(data, pair.width, pair.height, pair.width).map_err(|_| 1u32);
+    fn measure(
+        &mut self,
+        pair: &FramePair<'_>,
+        calibration: &Calibration,
+    ) -> Result<Measurement, Failure> {
+        let frame = |data| {
+            Frame::new(data, pair.width, pair.height, pair.width)
+                .map_err(|e| Failure::of(&PipelineError::Frame(e)))
+        };
         let off = frame(pair.off)?;
         let on = frame(pair.on)?;
         let windowed;
@@ -248,19 +128,17 @@ impl Measurer for PipelineMeasurer<'_> {
                 last = t;
             });
         self.last_stages = stages;
-        let profile = profile.map_err(|e| error_code(&e))?;
+        let profile = profile.map_err(|e| Failure::of(&e))?;
         let t = now();
-        let solved =
-            pipeline::solve_stem(&profile, on.max_value(), cal, &self.params, &mut self.ws);
+        let solved = instrument::solve_with::<Stem, u8>(
+            &profile,
+            on.max_value(),
+            cal,
+            &self.params,
+            &mut self.ws,
+        );
         self.last_stages.solver_us = now().saturating_sub(t);
-        let s = solved.map_err(|e| error_code(&e))?.solution;
-        Ok(Outcome {
-            method: s.method.into(),
-            diameter_m: s.diameter as f32,
-            uncertainty_m: s.uncertainty as f32,
-            distance_m: s.distance as f32,
-            tilt_rad: s.tilt.map(|t| t.total).unwrap_or(0.0),
-            flags: s.flags.0,
-        })
+        let solved = solved.map_err(|e| Failure::of(&e))?;
+        Ok(Measurement::from(&solved))
     }
 }

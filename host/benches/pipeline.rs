@@ -1,14 +1,14 @@
 //! Host benchmarks of the measurement chain on a 752×480 frame pair: the image part alone
 //! (`extract_profile`: subtract, threshold, segment, select, subpixel curve, triangulate) and
-//! the whole stem measurement (`measure_stem`). The frames come from the simulator (rendered
+//! the whole stem measurement (`instrument::measure_with::<Stem>`). The frames come from the simulator (rendered
 //! once, outside the timed loop). Results: docs/performance.md.
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use std::hint::black_box;
 use tangent_core::image::Frame;
-use tangent_core::pipeline::{extract_profile, measure_stem, PipelineConfig};
-use tangent_core::solvers::cylinder::CylinderParams;
-use tangent_host::measure::HostWorkspace;
+use tangent_core::instrument::{measure_with, Stem};
+use tangent_core::pipeline::{extract_profile, OwnedBuffers, PipelineConfig};
+use tangent_core::solvers::stem::CylinderParams;
 use tangent_host::pgm::PgmSamples;
 use tangent_host::simulate::{corpus::random_stem, simulate};
 
@@ -28,7 +28,7 @@ fn bench(c: &mut Criterion) {
         let (w, h) = (on.width, on.height);
         let off_f = Frame::new(off_px, w, h, w).expect("frame");
         let on_f = Frame::new(on_px, w, h, w).expect("frame");
-        let mut hw = HostWorkspace::<u8>::new(w, h, 8, cal.planes.len());
+        let mut hw = OwnedBuffers::<u8>::for_frame(w, h, 8, cal.planes.len());
         let config = PipelineConfig::default();
         let params = CylinderParams::default();
         c.bench_function(&format!("extract_profile_752x480_{name}"), |b| {
@@ -45,7 +45,7 @@ fn bench(c: &mut Criterion) {
         });
         c.bench_function(&format!("measure_stem_752x480_{name}"), |b| {
             b.iter(|| {
-                black_box(measure_stem(
+                black_box(measure_with::<Stem, u8>(
                     &off_f,
                     &on_f,
                     &cal,

@@ -15,12 +15,13 @@
 
 use std::path::{Path, PathBuf};
 
+use tangent_core::protocol::codes::Failure;
 use tangent_core::protocol::{calibration_record, WireCalibration};
+use tangent_firmware::board::h743;
 use tangent_host::simulate::{corpus, simulate};
 
-/// The H743 board's read-out window (firmware/src/board/h743.rs: `WINDOW_ROWS`,
-/// `WINDOW_ROW_OFFSET`).
-const WINDOW: (usize, usize) = (160, 160);
+/// The H743 board's read-out window: (first sensor row, rows).
+const WINDOW: (usize, usize) = (h743::WINDOW.first_row as usize, h743::WINDOW.rows as usize);
 
 const STAGES: [&str; 7] = [
     "subtraction + histogram",
@@ -125,7 +126,10 @@ fn main() {
             let instr = us * 1000.0;
             let result = match field("diameter_m=").parse::<f64>() {
                 Ok(d) => format!("d = {:.1} mm", d * 1e3),
-                Err(_) => format!("error {}", field("detail=")),
+                Err(_) => match field("detail=").parse::<u32>() {
+                    Ok(detail) => format!("error {}", Failure::from_detail(detail).code()),
+                    Err(_) => "error".to_string(),
+                },
             };
             println!(
                 "| {name} | {pixels} | {:.2} M | {:.2} | {:.1} ms | {result} |",

@@ -78,14 +78,34 @@ pub enum CalibrationFileError {
     /// The values parse but do not form a valid calibration (e.g. a normal of zero length).
     #[error("invalid calibration: {0}")]
     Invalid(CalibrationError),
-    /// The file could not be read or written.
-    #[error("calibration file {path}: {source}")]
-    Io {
+    /// The file could not be read or written (always inside [`CalibrationFileError::File`],
+    /// which names it).
+    #[error("{0}")]
+    Io(std::io::Error),
+    /// An error of a calibration file, naming the file: every error of [`read`],
+    /// [`read_camera`] and [`write()`] is one, so a message always says which file.
+    #[error("{path}: {error}")]
+    File {
         /// The file.
         path: String,
-        /// The I/O error.
-        source: std::io::Error,
+        /// What is wrong with it.
+        error: Box<CalibrationFileError>,
     },
+}
+
+/// Wraps an error of the file at `path` so that its message names the file.
+fn in_file(path: &Path) -> impl FnOnce(CalibrationFileError) -> CalibrationFileError + '_ {
+    move |error| CalibrationFileError::File {
+        path: path.display().to_string(),
+        error: Box::new(error),
+    }
+}
+
+/// Reads a file's text; the error names the file.
+fn read_text(path: &Path) -> Result<String, CalibrationFileError> {
+    std::fs::read_to_string(path)
+        .map_err(CalibrationFileError::Io)
+        .map_err(in_file(path))
 }
 
 fn at(line: &Option<usize>) -> String {
@@ -303,13 +323,10 @@ pub fn parse_camera(text: &str) -> Result<(u32, Camera, Vec<PlaneToml>), Calibra
     Ok((file.id, camera, file.planes))
 }
 
-/// Reads a camera-only (or complete) calibration file; see [`parse_camera`].
+/// Reads a camera-only (or complete) calibration file; see [`parse_camera`]. Every error
+/// names the file.
 pub fn read_camera(path: &Path) -> Result<(u32, Camera, Vec<PlaneToml>), CalibrationFileError> {
-    let text = std::fs::read_to_string(path).map_err(|source| CalibrationFileError::Io {
-        path: path.display().to_string(),
-        source,
-    })?;
-    parse_camera(&text)
+    parse_camera(&read_text(path)?).map_err(in_file(path))
 }
 
 /// Maps a `toml` deserialisation error to the precise variants.
@@ -353,19 +370,14 @@ pub fn to_string(c: &Calibration) -> String {
     toml::to_string(&CalibrationToml::from_calibration(c)).unwrap_or_default()
 }
 
-/// Reads and parses a calibration file.
+/// Reads and parses a calibration file; every error names the file.
 pub fn read(path: &Path) -> Result<Calibration, CalibrationFileError> {
-    let text = std::fs::read_to_string(path).map_err(|source| CalibrationFileError::Io {
-        path: path.display().to_string(),
-        source,
-    })?;
-    parse(&text)
+    parse(&read_text(path)?).map_err(in_file(path))
 }
 
-/// Writes a calibration file.
+/// Writes a calibration file; the error names the file.
 pub fn write(path: &Path, c: &Calibration) -> Result<(), CalibrationFileError> {
-    std::fs::write(path, to_string(c)).map_err(|source| CalibrationFileError::Io {
-        path: path.display().to_string(),
-        source,
-    })
+    std::fs::write(path, to_string(c))
+        .map_err(CalibrationFileError::Io)
+        .map_err(in_file(path))
 }

@@ -5,6 +5,10 @@
 //! the calibration) and, for synthetic or reference captures, the ground truth. The format is
 //! specified for people writing captures by hand in `docs/formats.md`; this module is its
 //! reader and writer. Every malformation is a specific [`CaptureError`].
+//!
+//! Errors name the files of a capture relative to its directory (`capture.toml`,
+//! `frame on.pgm`, `calibration file ../unit.toml`); whoever chose the directory names it in
+//! front, once (`tangent measure` prints `DIR: frame on.pgm: truncated PGM raster …`).
 
 use std::path::{Path, PathBuf};
 
@@ -13,7 +17,7 @@ use tangent_core::calibration::Calibration;
 
 use crate::calibration_file::{self, CalibrationFileError};
 use crate::pgm::{Pgm, PgmError};
-use crate::simulate::scene::Object;
+use crate::truth::{Object, TruthPoint};
 
 /// The `format_version` this reader understands.
 pub const FORMAT_VERSION: u32 = 1;
@@ -24,19 +28,8 @@ pub const META_FILE: &str = "capture.toml";
 /// Header line of the truth-curve CSV.
 pub const TRUTH_CURVE_HEADER: &str = "plane,column,row_px,x_m,y_m,z_m,object";
 
-/// What the capture measures (selects the solver).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Mode {
-    /// A stem (cylinder, possibly tilted or elliptic).
-    Cylinder,
-    /// A sphere.
-    Sphere,
-    /// One or more walls (planes).
-    Wall,
-    /// A road-surface profile.
-    Road,
-}
+/// What the capture measures: its `mode` key selects the instrument (`tangent_core::instrument`).
+pub use tangent_core::measurement::Mode;
 
 /// One frame of the capture: its PGM file and the laser planes lit while it was exposed.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -101,31 +94,29 @@ pub struct CaptureMeta {
     pub simulation: Option<toml::Value>,
 }
 
-/// One point of the true laser curve.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TruthPoint {
-    /// Laser plane index.
-    pub plane: usize,
-    /// Image column `u` (the curve is sampled at pixel-centre columns).
-    pub column: u32,
-    /// Subpixel row `v` of the curve's centre in that column (pixels).
-    pub row_px: f64,
-    /// The 3-D point on the object (camera frame, metres).
-    pub point_m: [f64; 3],
-    /// Index of the lit object in `truth.objects`.
-    pub object: usize,
-}
-
-/// Why a capture could not be read or written.
+/// Why a capture could not be read or written. Files are named relative to the capture
+/// directory, which the message does not repeat: the caller puts it in front.
 #[derive(Debug, thiserror::Error)]
 pub enum CaptureError {
+    /// The capture directory does not exist.
+    #[error("no such capture directory")]
+    NoSuchDirectory,
+    /// The path exists but is not a directory.
+    #[error("not a directory (a capture is a directory holding {META_FILE})")]
+    NotADirectory,
+    /// A directory that is neither a capture nor holds any.
+    #[error("neither a capture (no {META_FILE}) nor a directory of captures")]
+    NoCaptures,
+    /// The capture directory could not be listed or created (the caller names it).
+    #[error("{0}")]
+    Directory(std::io::Error),
     /// A file of the capture could not be read or written.
-    #[error("{path}: {source}")]
+    #[error("{file}: {error}")]
     Io {
-        /// The file.
-        path: PathBuf,
-        /// The I/O error.
-        source: std::io::Error,
+        /// The file, relative to the capture directory.
+        file: String,
+        /// The I/O error (named in the message, so not also a `source()`).
+        error: std::io::Error,
     },
     /// `capture.toml` has a key the format does not define.
     #[error("capture.toml: unknown key `{key}`{}", at(.line))]
@@ -157,10 +148,18 @@ pub enum CaptureError {
     /// A field has an impossible value (message says which).
     #[error("capture.toml: {0}")]
     InvalidField(String),
-    /// The calibration (inline or referenced) is invalid.
+    /// The inline calibration (`[calibration]` table) is invalid.
     #[error("calibration: {0}")]
     Calibration(#[from] CalibrationFileError),
-    /// A frame file is not a valid PGM.
+    /// The calibration file the capture refers to is invalid.
+    #[error("calibration file {file}: {error}")]
+    CalibrationFile {
+        /// The file, as `capture.toml` names it (relative to the capture directory).
+        file: String,
+        /// What is wrong with it.
+        error: CalibrationFileError,
+    },
+    /// A frame file is not a valid PGM (an I/O error on it is [`CaptureError::Io`]).
     #[error("frame {file}: {source}")]
     Pgm {
         /// The frame file.
@@ -246,6 +245,34 @@ pub struct Capture {
     pub truth_curve: Option<Vec<TruthPoint>>,
 }
 
+/// The capture directories `path` names: `path` itself when it holds [`META_FILE`], else
+/// its sub-directories that do, sorted by name. The error says why `path` holds none.
+pub fn find_captures(path: &Path) -> Result<Vec<PathBuf>, CaptureError> {
+    check_directory(path)?;
+    if path.join(META_FILE).is_file() {
+        return Ok(vec![path.to_path_buf()]);
+    }
+    let entries = std::fs::read_dir(path).map_err(CaptureError::Directory)?;
+    let mut captures: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.join(META_FILE).is_file())
+        .collect();
+    if captures.is_empty() {
+        return Err(CaptureError::NoCaptures);
+    }
+    captures.sort();
+    Ok(captures)
+}
+
+/// `dir` exists and is a directory (other failures surface when its files are read).
+fn check_directory(dir: &Path) -> Result<(), CaptureError> {
+    match std::fs::metadata(dir) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Err(CaptureError::NoSuchDirectory),
+        Ok(m) if !m.is_dir() => Err(CaptureError::NotADirectory),
+        _ => Ok(()),
+    }
+}
+
 fn check_file_name(name: &str) -> Result<(), CaptureError> {
     let p = Path::new(name);
     let plain = !name.is_empty()
@@ -328,7 +355,17 @@ impl CaptureMeta {
         match &self.calibration {
             toml::Value::String(name) => {
                 // A calibration may live next to several captures, so `..` is allowed here.
-                Ok(calibration_file::read(&dir.join(name))?)
+                // Read here rather than by `calibration_file::read` so that the error names
+                // the file as `capture.toml` does, relative to the capture.
+                let text =
+                    std::fs::read_to_string(dir.join(name)).map_err(|error| CaptureError::Io {
+                        file: name.clone(),
+                        error,
+                    })?;
+                calibration_file::parse(&text).map_err(|error| CaptureError::CalibrationFile {
+                    file: name.clone(),
+                    error,
+                })
             }
             toml::Value::Table(_) => Ok(calibration_file::from_value(self.calibration.clone())?),
             other => Err(CaptureError::InvalidField(format!(
@@ -342,11 +379,12 @@ impl CaptureMeta {
 impl Capture {
     /// Reads and checks a capture directory.
     pub fn read(dir: &Path) -> Result<Self, CaptureError> {
-        let meta_path = dir.join(META_FILE);
-        let text = std::fs::read_to_string(&meta_path).map_err(|source| CaptureError::Io {
-            path: meta_path.clone(),
-            source,
-        })?;
+        check_directory(dir)?;
+        let text =
+            std::fs::read_to_string(dir.join(META_FILE)).map_err(|error| CaptureError::Io {
+                file: META_FILE.into(),
+                error,
+            })?;
         let meta = CaptureMeta::parse(&text)?;
         let calibration = meta.resolve_calibration(dir)?;
         let cam = (calibration.camera.width, calibration.camera.height);
@@ -369,10 +407,7 @@ impl Capture {
         let expected_maxval = (1u32 << meta.bit_depth) - 1;
         let mut frames = Vec::with_capacity(meta.frames.len());
         for f in &meta.frames {
-            let pgm = Pgm::read(&dir.join(&f.file)).map_err(|source| CaptureError::Pgm {
-                file: f.file.clone(),
-                source,
-            })?;
+            let pgm = Pgm::read(&dir.join(&f.file)).map_err(|e| frame_error(&f.file, e))?;
             if (pgm.width, pgm.height) != (meta.width as usize, meta.height as usize) {
                 return Err(CaptureError::FrameSizeMismatch {
                     file: f.file.clone(),
@@ -392,9 +427,11 @@ impl Capture {
         }
         let truth_curve = match meta.truth.as_ref().and_then(|t| t.truth_curve.as_ref()) {
             Some(name) => {
-                let path = dir.join(name);
-                let text = std::fs::read_to_string(&path)
-                    .map_err(|source| CaptureError::Io { path, source })?;
+                let text =
+                    std::fs::read_to_string(dir.join(name)).map_err(|error| CaptureError::Io {
+                        file: name.clone(),
+                        error,
+                    })?;
                 Some(parse_truth_curve(&text, name)?)
             }
             None => None,
@@ -411,10 +448,7 @@ impl Capture {
     /// the truth curve when present. An inline calibration is written from
     /// `self.calibration`; a calibration given by path is left where it is.
     pub fn write(&self, dir: &Path) -> Result<(), CaptureError> {
-        std::fs::create_dir_all(dir).map_err(|source| CaptureError::Io {
-            path: dir.to_path_buf(),
-            source,
-        })?;
+        std::fs::create_dir_all(dir).map_err(CaptureError::Directory)?;
         if self.frames.len() != self.meta.frames.len() {
             return Err(CaptureError::InvalidField(format!(
                 "{} frames for {} frame entries",
@@ -425,10 +459,7 @@ impl Capture {
         for (entry, pgm) in self.meta.frames.iter().zip(&self.frames) {
             check_file_name(&entry.file)?;
             pgm.write(&dir.join(&entry.file))
-                .map_err(|source| CaptureError::Pgm {
-                    file: entry.file.clone(),
-                    source,
-                })?;
+                .map_err(|e| frame_error(&entry.file, e))?;
         }
         if let (Some(points), Some(name)) = (
             &self.truth_curve,
@@ -438,12 +469,17 @@ impl Capture {
                 .and_then(|t| t.truth_curve.as_ref()),
         ) {
             check_file_name(name)?;
-            let path = dir.join(name);
-            std::fs::write(&path, format_truth_curve(points))
-                .map_err(|source| CaptureError::Io { path, source })?;
+            std::fs::write(dir.join(name), format_truth_curve(points)).map_err(|error| {
+                CaptureError::Io {
+                    file: name.clone(),
+                    error,
+                }
+            })?;
         }
-        let path = dir.join(META_FILE);
-        std::fs::write(&path, self.meta_text()?).map_err(|source| CaptureError::Io { path, source })
+        std::fs::write(dir.join(META_FILE), self.meta_text()?).map_err(|error| CaptureError::Io {
+            file: META_FILE.into(),
+            error,
+        })
     }
 
     /// The `capture.toml` text [`Capture::write`] writes.
@@ -478,6 +514,21 @@ impl Capture {
             .zip(&self.frames)
             .filter(|(e, _)| !e.lasers_on.is_empty())
             .map(|(e, p)| (e.lasers_on.as_slice(), p))
+    }
+}
+
+/// A frame's error, its file named as `capture.toml` names it: an I/O error is the capture's,
+/// a malformed PGM is [`CaptureError::Pgm`].
+fn frame_error(file: &str, error: PgmError) -> CaptureError {
+    match error {
+        PgmError::Io { error, .. } => CaptureError::Io {
+            file: file.to_string(),
+            error,
+        },
+        source => CaptureError::Pgm {
+            file: file.to_string(),
+            source,
+        },
     }
 }
 

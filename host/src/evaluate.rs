@@ -7,11 +7,11 @@ use std::fmt::Write as _;
 
 use rayon::prelude::*;
 use tangent_core::pipeline::PipelineConfig;
-use tangent_core::solvers::cylinder::CylinderParams;
+use tangent_core::solvers::stem::CylinderParams;
 
 use crate::measure::{measure_loaded, Reading};
-use crate::simulate::scene::Object;
 use crate::simulate::{corpus::random_stem, simulate};
+use crate::truth::Object;
 
 /// One evaluated capture.
 #[derive(Debug, Clone)]

@@ -38,6 +38,7 @@ use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
+use tangent_core::measurement::Measurement;
 
 mod export;
 mod scan;
@@ -47,7 +48,8 @@ pub use scan::{
     scan, DamageKind, DamagedSpan, Duplicate, HeaderlessPlot, Located, Scan, Tolerated,
 };
 use tangent_core::protocol::calibration_record::CRC32;
-use tangent_core::solvers::cylinder::Flags;
+use tangent_core::protocol::{codes, Reading};
+use tangent_core::solvers::result::Flags;
 
 /// First line of every field log.
 pub const MAGIC_LINE: &str = "TANGENT-FIELDLOG 1\n";
@@ -79,7 +81,7 @@ pub struct TreeRecord {
     pub uncertainty_mm: f64,
     /// Stem tilt from the laser-plane normal (degrees; 0 when not measured).
     pub tilt_deg: f64,
-    /// Quality flags (bits of `solvers::cylinder::Flags`).
+    /// Quality flags (bits of `solvers::result::Flags`).
     pub flags: u16,
     /// Host time of the reading (RFC 3339, UTC).
     pub time: String,
@@ -91,6 +93,37 @@ pub struct TreeRecord {
     pub seq: u32,
     /// Device time of the reading (ms since its boot).
     pub device_time_ms: u64,
+}
+
+impl TreeRecord {
+    /// The record of a reading from the device, stamped with the host's time now.
+    pub fn from_reading(
+        r: &Reading,
+        plot_id: &str,
+        tree_id: u32,
+        species: &str,
+        device_id: &str,
+    ) -> TreeRecord {
+        let Measurement::Stem(stem) = r.measurement;
+        TreeRecord {
+            plot_id: plot_id.to_string(),
+            tree_id,
+            species: species.to_string(),
+            // Via f32, the precision of the wire, so a reading logs the same digits whatever
+            // precision the host computes in.
+            diameter_mm: stem.diameter as f32 as f64 * 1e3,
+            uncertainty_mm: stem.uncertainty as f32 as f64 * 1e3,
+            tilt_deg: stem
+                .tilt
+                .map_or(0.0, |t| (t.total as f32 as f64).to_degrees()),
+            flags: stem.flags.0,
+            time: now_rfc3339(),
+            device_id: device_id.to_string(),
+            calib_id: r.calib_id,
+            seq: r.seq,
+            device_time_ms: r.timestamp_ms,
+        }
+    }
 }
 
 /// One journal record.
@@ -125,33 +158,13 @@ pub enum FieldLogError {
     NoPlot,
 }
 
-/// The names of the quality flags, for people and exports.
-pub const FLAG_NAMES: [(Flags, &str); 13] = [
-    (Flags::ARC_TOO_SHORT, "ARC_TOO_SHORT"),
-    (Flags::POOR_FIT, "POOR_FIT"),
-    (Flags::TILT_IGNORED, "TILT_IGNORED"),
-    (Flags::INCONSISTENT, "INCONSISTENT"),
-    (Flags::THREE_TANGENT_FAILED, "THREE_TANGENT_FAILED"),
-    (Flags::FIT_FAILED, "FIT_FAILED"),
-    (Flags::RANGE_LIMIT, "RANGE_LIMIT"),
-    (Flags::TILT_FIT_FAILED, "TILT_FIT_FAILED"),
-    (Flags::LARGE_TILT, "LARGE_TILT"),
-    (Flags::SEVERAL_OBJECTS, "SEVERAL_OBJECTS"),
-    (Flags::STRIPE_SATURATED, "STRIPE_SATURATED"),
-    (Flags::AMBIENT_BRIGHT, "AMBIENT_BRIGHT"),
-    (Flags::OTHER_OBJECTS, "OTHER_OBJECTS"),
-];
-
-/// Flag names joined by `+` (unknown bits as hex); empty when no flag is set.
+/// Flag names in capitals (how exports have always spelt [`codes::FLAG_NAMES`]) joined by
+/// `+`, unknown bits as hex; empty when no flag is set.
 pub fn flag_names(flags: u16) -> String {
-    let mut names = Vec::new();
-    let mut rest = flags;
-    for (f, name) in FLAG_NAMES {
-        if flags & f.0 != 0 {
-            names.push(name.to_string());
-            rest &= !f.0;
-        }
-    }
+    let mut names: Vec<String> = codes::flag_names(Flags(flags))
+        .map(str::to_ascii_uppercase)
+        .collect();
+    let rest = flags & !codes::known_flags().0;
     if rest != 0 {
         names.push(format!("0x{rest:04X}"));
     }

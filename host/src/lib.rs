@@ -18,3 +18,4 @@ pub mod pgm;
 pub mod plot;
 pub mod simulate;
 pub mod study;
+pub mod truth;

@@ -10,7 +10,7 @@
 //!   fresh tag) after [`LinkConfig::reply_timeout`]; only idempotent requests are re-sent.
 //!   Readings carry a sequence number: a gap (or an idle link, which could hide a lost
 //!   *last* reading) makes the link ask `History { after_seq }` and the device re-sends what
-//!   it kept (its last 64 readings). Duplicates (a reading seen twice) are dropped. So the
+//!   it kept (its last [`codes::HISTORY_LEN`] readings). Duplicates (a reading seen twice) are dropped. So the
 //!   caller of [`Link::next_reading`] sees every reading once, in sequence order.
 //! * **Cable yanked / port gone.** A read or write error closes the port; the link re-opens
 //!   the same path until [`LinkConfig::reconnect_timeout`], repeats the handshake (protocol
@@ -22,38 +22,29 @@
 //!   a [`LinkError::VersionMismatch`] naming both versions; a port that answers nothing
 //!   valid is a [`LinkError::NotATangent`].
 //!
-//! The receive side splits the byte stream at 0x00 itself and decodes each frame with
-//! [`protocol::decode`] rather than holding a [`protocol::Decoder`]: the decoder borrows a
-//! caller-owned buffer, which a long-lived host struct cannot own alongside it without a
-//! self-referential type; the framing rules (delimiter, oversize discard, counters) are the
-//! same.
+//! The receive side is the core's [`Decoder`], the one the firmware runs, here owning its
+//! buffer (a `Vec<u8>` of [`MAX_FRAME_LEN`]).
 
 use std::collections::{BTreeMap, VecDeque};
 use std::io::{ErrorKind, Read, Write};
 use std::time::{Duration, Instant};
 
 use tangent_core::protocol::{
-    self, Board, DeviceError, ErrorCode, FrameEncoder, FrameSel, FrameSetInfo, FromDevice,
-    LinkStats, ProtocolError, Reading, Request, Response, SelfTestReport, ToDevice,
-    WireCalibration, FRAME_CHUNK_MAX, MAX_FRAME_LEN, PROTOCOL_VERSION, UNSOLICITED,
+    self, codes, Board, Decoder, DeviceError, ErrorCode, Feed, FrameEncoder, FrameSel,
+    FrameSetInfo, FromDevice, LinkStats, ProtocolError, Reading, Request, Response, SelfTestReport,
+    ToDevice, WireCalibration, FRAME_CHUNK_MAX, MAX_FRAME_LEN, PROTOCOL_VERSION, UNSOLICITED,
 };
-
-/// USB vendor id of the Tangent (pid.codes, `firmware/src/bin/h743.rs`).
-pub const TANGENT_USB_VID: u16 = 0x1209;
-/// USB product id of the Tangent (`firmware/src/bin/h743.rs`).
-pub const TANGENT_USB_PID: u16 = 0x7A6E;
 
 /// Line rate set on the port. USB CDC-ACM and ptys ignore it; a USB–UART adapter wired to
 /// the board's UART would need it.
 pub const BAUD: u32 = 115_200;
 
-/// Readings the device keeps for `History` (the firmware's `HISTORY_LEN`, documented in
-/// `docs/protocol.md`). Missing readings older than this are given up at once; younger
-/// ones are asked for again.
-pub const DEVICE_HISTORY: u32 = 64;
+/// Readings the device keeps for `History` ([`codes::HISTORY_LEN`]). Missing readings older
+/// than this are given up at once; younger ones are asked for again.
+const DEVICE_HISTORY: u32 = codes::HISTORY_LEN as u32;
 
 /// Replays in a row that bring none of the missing readings before they are given up
-/// anyway (a device with a shorter history than [`DEVICE_HISTORY`]). On a noisy line a
+/// anyway (a device with a shorter history than [`codes::HISTORY_LEN`]). On a noisy line a
 /// replayed reading frame is damaged with probability p (≈ 0.45 at 1 % dropped + 1 %
 /// corrupted bytes); giving up after k fruitless replays loses a reading the device still
 /// has with probability pᵏ: 6 gave ≈ 1 % (seen under load), 12 gives < 10⁻⁴.
@@ -61,6 +52,9 @@ const MAX_FRUITLESS_REPLAYS: u32 = 12;
 
 /// How long one `read` on the port may block: bounds the latency of deadlines.
 const POLL: Duration = Duration::from_millis(20);
+
+/// Most bytes taken from the port per `read`.
+const READ_CHUNK: usize = 1024;
 
 /// Timing of the link.
 #[derive(Debug, Clone)]
@@ -141,7 +135,7 @@ pub enum LinkError {
         waited: Duration,
     },
     /// The device answered with an error.
-    #[error("the device refused {what}: {}", describe_device_error(.error))]
+    #[error("the device refused {what}: {error}")]
     Device {
         /// The request.
         what: &'static str,
@@ -156,34 +150,6 @@ pub enum LinkError {
         /// What came back (debug form).
         got: String,
     },
-}
-
-/// A sentence for a device error, with what to do about it.
-pub fn describe_device_error(e: &DeviceError) -> String {
-    let d = e.detail;
-    match e.code {
-        ErrorCode::UnsupportedVersion => {
-            format!("it does not speak protocol version {d} (update one side)")
-        }
-        ErrorCode::NoCalibration => {
-            "it has no calibration (push one with `tangent calib push --port P FILE`)".into()
-        }
-        ErrorCode::InvalidCalibration => match d {
-            2 => "the calibration does not match the device's sensor size".into(),
-            _ => "the calibration is invalid (check it with `tangent calibrate`)".into(),
-        },
-        ErrorCode::StorageFailure => format!("its calibration storage failed (code {d})"),
-        ErrorCode::CameraTimeout => "the camera delivered no frame in time".into(),
-        ErrorCode::CameraFailure => format!("the camera failed (driver code {d})"),
-        ErrorCode::LaserTimeout => "a laser stayed on too long and was forced off".into(),
-        ErrorCode::MeasurementFailed => format!(
-            "no stem was measured (pipeline code {d}): aim the lines at the stem, 0.5–3 m away"
-        ),
-        ErrorCode::NoFrames => "no frame pair has been captured yet".into(),
-        ErrorCode::StaleCapture => "a newer capture replaced the one being read".into(),
-        ErrorCode::OutOfRange => "the read went past the end of the frame".into(),
-        ErrorCode::Busy => "it is busy (e.g. streaming); try again".into(),
-    }
 }
 
 /// Device identity and health ([`protocol::DeviceInfo`], owned).
@@ -298,6 +264,9 @@ pub enum LinkEvent {
     },
     /// The device rebooted: its sequence numbers restart.
     Rebooted,
+    /// A trigger press or a stream reading could not be measured (the error's `Display` is
+    /// the sentence for the forester, `protocol::codes`).
+    MeasurementFailed(DeviceError),
     /// Readings could not be recovered (they fell out of the device's history).
     Unrecoverable {
         /// First missing sequence number.
@@ -415,8 +384,11 @@ pub struct Link {
     path: String,
     cfg: LinkConfig,
     port: Option<Box<dyn serialport::SerialPort>>,
-    rx: Vec<u8>,
-    discarding: bool,
+    /// Frames in progress.
+    rx: Decoder<Vec<u8>>,
+    /// Bytes read from the port and not yet fed to `rx`: `inbox[inbox_at..]`.
+    inbox: Vec<u8>,
+    inbox_at: usize,
     enc: FrameEncoder,
     next_tag: u16,
     identity: DeviceIdentity,
@@ -448,8 +420,9 @@ impl Link {
             path: path.to_string(),
             cfg,
             port: Some(port),
-            rx: Vec::with_capacity(2 * MAX_FRAME_LEN),
-            discarding: false,
+            rx: Decoder::new(vec![0; MAX_FRAME_LEN]),
+            inbox: Vec::with_capacity(READ_CHUNK),
+            inbox_at: 0,
             enc: FrameEncoder::new(),
             next_tag: 1,
             identity: DeviceIdentity {
@@ -606,8 +579,9 @@ impl Link {
     /// restarts a running stream and asks for the readings missed meanwhile.
     fn reconnect(&mut self, why: &str) -> Result<(), LinkError> {
         self.port = None;
-        self.rx.clear();
-        self.discarding = false;
+        self.rx.reset();
+        self.inbox.clear();
+        self.inbox_at = 0;
         self.emit(LinkEvent::Lost(why.to_string()));
         let started = Instant::now();
         let mut attempts = 0;
@@ -642,46 +616,28 @@ impl Link {
     /// Reads until one frame ends or `deadline` passes.
     fn pump(&mut self, deadline: Instant) -> Result<Option<Incoming>, LinkError> {
         loop {
-            if let Some(i) = self.rx.iter().position(|&b| b == protocol::DELIMITER) {
-                let mut frame: Vec<u8> = self.rx.drain(..=i).collect();
-                frame.pop();
-                if std::mem::take(&mut self.discarding) {
-                    self.counters.oversize += 1;
-                    return Ok(Some(Incoming::Rejected));
-                }
-                if frame.is_empty() {
-                    continue;
-                }
-                return Ok(Some(self.decode(&mut frame)));
-            }
-            if self.rx.len() > MAX_FRAME_LEN {
-                self.rx.clear();
-                self.discarding = true;
+            if let Some(incoming) = self.next_frame() {
+                return Ok(Some(incoming));
             }
             let now = Instant::now();
             if now >= deadline {
                 return Ok(None);
             }
-            let mut buf = [0u8; 1024];
+            self.inbox.resize(READ_CHUNK, 0);
+            self.inbox_at = 0;
             let timeout = (deadline - now).min(POLL);
             let r = match self.port.as_mut() {
                 Some(p) => p
                     .set_timeout(timeout)
                     .map_err(std::io::Error::from)
-                    .and_then(|()| p.read(&mut buf)),
+                    .and_then(|()| p.read(&mut self.inbox)),
                 None => Err(std::io::Error::new(ErrorKind::NotConnected, "port closed")),
             };
+            let n = *r.as_ref().unwrap_or(&0);
+            self.inbox.truncate(n);
             match r {
                 Ok(0) => self.reconnect("end of file")?,
-                Ok(n) => {
-                    self.bytes_in += n;
-                    if !self.discarding {
-                        self.rx.extend_from_slice(&buf[..n]);
-                    } else if let Some(z) = buf[..n].iter().position(|&b| b == 0) {
-                        // Keep the delimiter that ends the discarded frame and what follows.
-                        self.rx.extend_from_slice(&buf[z..n]);
-                    }
-                }
+                Ok(n) => self.bytes_in += n,
                 Err(e) if e.kind() == ErrorKind::TimedOut || e.kind() == ErrorKind::Interrupted => {
                 }
                 Err(e) => self.reconnect(&e.to_string())?,
@@ -689,23 +645,31 @@ impl Link {
         }
     }
 
-    fn decode(&mut self, frame: &mut [u8]) -> Incoming {
-        match protocol::decode::<FromDevice>(frame) {
-            Ok(msg) => {
+    /// Feeds the unread bytes to the decoder until one frame ends (`None` when they run out).
+    fn next_frame(&mut self) -> Option<Incoming> {
+        let input = self.inbox.get(self.inbox_at..).unwrap_or_default();
+        let (incoming, remaining) = match self.rx.feed::<FromDevice>(input) {
+            Feed::Consumed => (None, 0),
+            Feed::Frame { message, remaining } => {
                 self.counters.frames_ok += 1;
                 self.last_frame_at = Instant::now();
-                Incoming::Message(msg.tag, Reply::from(msg.response))
+                let reply = Reply::from(message.response);
+                (Some(Incoming::Message(message.tag, reply)), remaining.len())
             }
-            Err(ProtocolError::VersionMismatch { received }) => {
-                self.counters.version_mismatch += 1;
-                self.peer_version = Some(received);
-                Incoming::Rejected
+            Feed::Rejected { error, remaining } => {
+                match error {
+                    ProtocolError::VersionMismatch { received } => {
+                        self.counters.version_mismatch += 1;
+                        self.peer_version = Some(received);
+                    }
+                    ProtocolError::Oversize => self.counters.oversize += 1,
+                    _ => self.counters.malformed += 1,
+                }
+                (Some(Incoming::Rejected), remaining.len())
             }
-            Err(_) => {
-                self.counters.malformed += 1;
-                Incoming::Rejected
-            }
-        }
+        };
+        self.inbox_at = self.inbox.len() - remaining;
+        incoming
     }
 
     /// Handles a message that is not the awaited reply: readings go to the tracker, a
@@ -715,6 +679,9 @@ impl Link {
             Reply::Reading(r) => {
                 let duplicate = self.seq.accept(r);
                 self.counters.duplicates += duplicate as u64;
+            }
+            Reply::Error(e) if e.code == ErrorCode::MeasurementFailed => {
+                self.emit(LinkEvent::MeasurementFailed(e));
             }
             Reply::Info(i) if tag == UNSOLICITED => {
                 // The boot banner.
@@ -1058,7 +1025,7 @@ pub fn list_ports() -> Result<Vec<PortCandidate>, serialport::Error> {
                 _ => (None, None, None),
             };
             PortCandidate {
-                is_tangent: usb == Some((TANGENT_USB_VID, TANGENT_USB_PID)),
+                is_tangent: usb == Some((codes::USB_VID, codes::USB_PID)),
                 path: p.port_name,
                 usb,
                 serial_number,
@@ -1094,20 +1061,25 @@ pub fn device_id(path: &str, identity: &DeviceIdentity) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use tangent_core::measurement::{Measurement, StemReading};
     use tangent_core::protocol::Method;
+    use tangent_core::solvers::result::Flags;
 
     fn r(seq: u32) -> Reading {
         Reading {
             seq,
             timestamp_ms: seq as u64 * 10,
             calib_id: 1,
-            method: Method::CircleFit,
-            diameter_m: 0.3,
-            uncertainty_m: 0.001,
-            distance_m: 1.0,
-            tilt_rad: 0.0,
-            flags: 0,
             exposure_us: 100,
+            measurement: Measurement::Stem(StemReading {
+                diameter: 0.3,
+                uncertainty: 0.001,
+                method: Method::CircleFit,
+                distance: 1.0,
+                tilt: None,
+                axes: None,
+                flags: Flags::default(),
+            }),
             stats: None,
         }
     }

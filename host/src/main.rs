@@ -16,10 +16,12 @@ struct Cli {
 #[derive(Subcommand, Debug)]
 enum Command {
     // Each variant: `Name(cli::name::Args)`; keep one per line, alphabetical.
-    /// Camera and laser-plane calibration (`calibrate camera`, `calibrate laser`).
+    /// Compute a calibration: camera from chessboard images, laser planes from board captures
+    /// (`calibrate camera`, `calibrate laser`).
     Calibrate(cli::calibrate::Args),
-    /// Store the calibration on the device or read it back (`calib push|pull`).
-    Calib(cli::calib::Args),
+    /// The calibration stored on the device: copy a file to it or read it back
+    /// (`device-calibration push|pull`).
+    DeviceCalibration(cli::device_calibration::Args),
     /// List the serial ports that look like a Tangent.
     Devices(cli::devices::Args),
     /// Build the firmware and flash it through probe-rs.
@@ -31,12 +33,15 @@ enum Command {
     /// Record raw frame pairs from the device as capture directories.
     Record(cli::record::Args),
     /// Plot the error model's predicted diameter error against distance (PNG).
+    #[command(long_about = cli::accuracy::LONG_ABOUT)]
     Accuracy(cli::accuracy::Args),
     /// Accuracy against the simulator's truth on fresh random stems (writes docs/accuracy.md).
+    #[command(long_about = cli::evaluate::LONG_ABOUT)]
     Evaluate(cli::evaluate::Args),
     /// A PNG of a capture: frames, difference, true and extracted laser curves.
     Inspect(cli::inspect::Args),
     /// Replay captures and print the stem diameter, uncertainty, method, tilt and flags.
+    #[command(long_about = cli::measure::LONG_ABOUT)]
     Measure(cli::measure::Args),
     /// Render synthetic captures (one stem, random stems, or the test corpus).
     Simulate(cli::simulate::Args),
@@ -49,7 +54,7 @@ fn main() -> std::process::ExitCode {
     let result: anyhow::Result<std::process::ExitCode> = match cli.command {
         // Each arm: `Command::Name(args) => cli::name::run(args),`
         Command::Calibrate(args) => cli::calibrate::run(args),
-        Command::Calib(args) => cli::calib::run(args),
+        Command::DeviceCalibration(args) => cli::device_calibration::run(args),
         Command::Devices(args) => cli::devices::run(args),
         Command::Flash(args) => cli::flash::run(args),
         Command::Listen(args) => cli::listen::run(args),
@@ -65,7 +70,7 @@ fn main() -> std::process::ExitCode {
     match result {
         Ok(code) => code,
         Err(err) => {
-            eprintln!("error: {err:#}");
+            eprintln!("error: {}", cli::error_text(&err));
             std::process::ExitCode::FAILURE
         }
     }

@@ -1,8 +1,9 @@
 //! Replaying captures through the measurement core: a capture in, a [`Reading`] out.
 //!
-//! The host runs exactly the core's `pipeline::measure_stem` that the firmware runs, with
-//! buffers allocated here ([`HostWorkspace`]); this module only picks the frames, converts
-//! units for people (millimetres, degrees) and names the flags.
+//! The capture's mode selects the instrument; the host runs exactly the core's
+//! `instrument::measure_with` that the firmware runs, with its buffers on the heap
+//! (`OwnedBuffers`); this module only picks the frames, converts units for people
+//! (millimetres, degrees) and names the flags (`protocol::codes`).
 
 use std::borrow::Cow;
 use std::path::{Path, PathBuf};
@@ -10,56 +11,19 @@ use std::path::{Path, PathBuf};
 use serde::Serialize;
 use tangent_core::calibration::Calibration;
 use tangent_core::curve::CurvePoint;
-use tangent_core::image::segment::ObjectFeatures;
 use tangent_core::image::{Frame, Pixel};
-use tangent_core::pipeline::{
-    self, PipelineConfig, PipelineError, StemMeasurement, Workspace, WorkspaceSizes,
-};
-use tangent_core::real::{Real, Vec2, Vec3};
-use tangent_core::solvers::cylinder::{CylinderParams, Flags, Method};
+use tangent_core::instrument::stem::StemMeasurement;
+use tangent_core::instrument::{self, Stem};
+use tangent_core::pipeline::{OwnedBuffers, PipelineConfig, PipelineError};
+use tangent_core::protocol::codes::{self, Failure};
+use tangent_core::real::Vec3;
+use tangent_core::solvers::stem::CylinderParams;
 
 use crate::capture::{Capture, CaptureError, Mode};
 use crate::pgm::{Pgm, PgmSamples};
 use crate::simulate::scene::Object;
 
 type Vec3d = nalgebra::Vector3<f64>;
-
-/// Every flag with its name as printed and exported (stable: the field log stores them).
-pub const FLAG_NAMES: [(Flags, &str); 14] = [
-    (Flags::ARC_TOO_SHORT, "arc_too_short"),
-    (Flags::POOR_FIT, "poor_fit"),
-    (Flags::TILT_IGNORED, "tilt_ignored"),
-    (Flags::INCONSISTENT, "inconsistent"),
-    (Flags::THREE_TANGENT_FAILED, "three_tangent_failed"),
-    (Flags::FIT_FAILED, "fit_failed"),
-    (Flags::RANGE_LIMIT, "range_limit"),
-    (Flags::TILT_FIT_FAILED, "tilt_fit_failed"),
-    (Flags::LARGE_TILT, "large_tilt"),
-    (Flags::SEVERAL_OBJECTS, "several_objects"),
-    (Flags::STRIPE_SATURATED, "stripe_saturated"),
-    (Flags::AMBIENT_BRIGHT, "ambient_bright"),
-    (Flags::OTHER_OBJECTS, "other_objects"),
-    (Flags::ELLIPTIC, "elliptic"),
-];
-
-/// The names of the flags set in `flags`.
-pub fn flag_names(flags: Flags) -> Vec<&'static str> {
-    FLAG_NAMES
-        .iter()
-        .filter(|(f, _)| flags.contains(*f))
-        .map(|(_, n)| *n)
-        .collect()
-}
-
-/// Name of a solver method as printed and exported.
-pub fn method_name(method: Method) -> &'static str {
-    match method {
-        Method::ThreeTangent => "three_tangent",
-        Method::CircleFit => "circle_fit",
-        Method::CylinderFit => "cylinder_fit",
-        Method::GeneralisedThreeTangent => "generalised_three_tangent",
-    }
-}
 
 /// Why a capture could not be measured (as opposed to a measurement that failed, which is a
 /// [`Reading`] with an error).
@@ -146,8 +110,8 @@ impl Reading {
                     capture,
                     diameter_m: Some(s.diameter),
                     uncertainty_m: Some(s.uncertainty),
-                    method: Some(method_name(s.method)),
-                    flags: flag_names(s.flags),
+                    method: Some(codes::method_name(s.method)),
+                    flags: codes::flag_names(s.flags).collect(),
                     tilt: s.tilt.map(|t| TiltReport {
                         total_deg: t.total.to_degrees(),
                         theta_deg: t.theta.to_degrees(),
@@ -174,7 +138,8 @@ impl Reading {
                 fit_diameter_m: None,
                 distance_m: None,
                 points: None,
-                error: Some(e.to_string()),
+                // The sentence the caliper's report of this failure reads as.
+                error: Some(Failure::of(e).to_string()),
                 truth_diameter_m: truth,
             },
         }
@@ -210,65 +175,6 @@ impl Reading {
             (None, Some(e)) => format!("no reading: {e}"),
             (None, None) => "no reading".to_string(),
         }
-    }
-}
-
-/// Heap-allocated buffers for the core's [`Workspace`], sized by [`WorkspaceSizes`].
-pub struct HostWorkspace<P: Pixel> {
-    diff: Vec<P>,
-    labels: Vec<u16>,
-    histogram: Vec<u32>,
-    label_table: Vec<u16>,
-    objects: Vec<ObjectFeatures>,
-    curve: Vec<CurvePoint>,
-    points: Vec<Vec3>,
-    scratch_points: Vec<Vec2>,
-    scratch_values: Vec<Real>,
-}
-
-impl<P: Pixel> HostWorkspace<P> {
-    /// Buffers for a `width × height` frame of `bit_depth` bits and `planes` laser planes.
-    pub fn new(width: usize, height: usize, bit_depth: u8, planes: usize) -> Self {
-        let s = WorkspaceSizes::new(width, height, bit_depth, planes);
-        HostWorkspace {
-            diff: vec![P::default(); s.pixels],
-            labels: vec![0; s.pixels],
-            histogram: vec![0; s.histogram],
-            label_table: vec![0; s.label_table],
-            objects: vec![ObjectFeatures::empty(0); s.objects],
-            curve: vec![CurvePoint::ZERO; s.points],
-            points: vec![Vec3::zeros(); s.points],
-            scratch_points: vec![Vec2::zeros(); s.points],
-            scratch_values: vec![0.0; s.points],
-        }
-    }
-
-    /// The core's view of these buffers.
-    pub fn workspace(&mut self) -> Workspace<'_, P> {
-        Workspace {
-            diff: &mut self.diff,
-            labels: &mut self.labels,
-            histogram: &mut self.histogram,
-            label_table: &mut self.label_table,
-            objects: &mut self.objects,
-            curve: &mut self.curve,
-            points: &mut self.points,
-            scratch_points: &mut self.scratch_points,
-            scratch_values: &mut self.scratch_values,
-        }
-    }
-
-    /// The difference frame of the last run.
-    pub fn diff(&self) -> &[P] {
-        &self.diff
-    }
-    /// The curve points of the last run (all planes; see `Profile::plane_points`).
-    pub fn curve(&self) -> &[CurvePoint] {
-        &self.curve
-    }
-    /// The 3-D points of the last run.
-    pub fn points(&self) -> &[Vec3] {
-        &self.points
     }
 }
 
@@ -355,15 +261,22 @@ fn run<P: Pixel>(
     calibration: &Calibration,
     config: &PipelineConfig,
     params: &CylinderParams,
-) -> (Result<StemMeasurement, PipelineError>, HostWorkspace<P>) {
+) -> (Result<StemMeasurement, PipelineError>, OwnedBuffers<P>) {
     let planes = calibration.planes.len();
-    let mut hw = HostWorkspace::<P>::new(pgm.width, pgm.height, pgm.bit_depth(), planes);
+    let mut hw = OwnedBuffers::<P>::for_frame(pgm.width, pgm.height, pgm.bit_depth(), planes);
     let result = (|| {
         let off =
             Frame::new(off, pgm.width, pgm.height, pgm.width)?.with_bit_depth(pgm.bit_depth())?;
         let on =
             Frame::new(on, pgm.width, pgm.height, pgm.width)?.with_bit_depth(pgm.bit_depth())?;
-        pipeline::measure_stem(&off, &on, calibration, config, params, &mut hw.workspace())
+        instrument::measure_with::<Stem, P>(
+            &off,
+            &on,
+            calibration,
+            config,
+            params,
+            &mut hw.workspace(),
+        )
     })();
     (result, hw)
 }
@@ -427,8 +340,13 @@ pub fn measure_loaded(
     config: &PipelineConfig,
     params: &CylinderParams,
 ) -> Result<Outcome, MeasureError> {
-    if capture.meta.mode != Mode::Cylinder {
-        return Err(MeasureError::UnsupportedMode(capture.meta.mode));
+    // The instruments the host reports on (the stem's detailed solution feeds the extra
+    // keys of `Reading`).
+    match capture.meta.mode {
+        Mode::Cylinder => {}
+        mode @ (Mode::Sphere | Mode::Wall | Mode::Road) => {
+            return Err(MeasureError::UnsupportedMode(mode))
+        }
     }
     let calibration = calibration
         .cloned()
@@ -439,14 +357,19 @@ pub fn measure_loaded(
             let (r, hw) = run(a, b, &on, &calibration, config, params);
             (
                 r,
-                hw.diff.iter().map(|&v| v as u16).collect(),
-                hw.curve,
-                hw.points,
+                hw.diff().iter().map(|&v| v as u16).collect(),
+                hw.curve().to_vec(),
+                hw.points().to_vec(),
             )
         }
         (PgmSamples::U16(a), PgmSamples::U16(b)) => {
             let (r, hw) = run(a, b, &on, &calibration, config, params);
-            (r, hw.diff, hw.curve, hw.points)
+            (
+                r,
+                hw.diff().to_vec(),
+                hw.curve().to_vec(),
+                hw.points().to_vec(),
+            )
         }
         _ => return Err(MeasureError::MixedDepth),
     };

@@ -68,13 +68,14 @@ pub enum PgmError {
     /// the maxval, or the maxval is 0.
     #[error("cannot write PGM: {0}")]
     InvalidImage(String),
-    /// Reading or writing the file failed.
-    #[error("PGM file {path}: {source}")]
+    /// Reading or writing the file failed. The message names the file and the cause once
+    /// (the cause is not also a `source()`, so an error chain does not print it twice).
+    #[error("{path}: {error}")]
     Io {
         /// The file.
         path: String,
         /// The I/O error.
-        source: std::io::Error,
+        error: std::io::Error,
     },
 }
 
@@ -296,9 +297,9 @@ impl Pgm {
 
     /// Reads and decodes a file.
     pub fn read(path: &Path) -> Result<Self, PgmError> {
-        let bytes = std::fs::read(path).map_err(|source| PgmError::Io {
+        let bytes = std::fs::read(path).map_err(|error| PgmError::Io {
             path: path.display().to_string(),
-            source,
+            error,
         })?;
         Self::decode(&bytes)
     }
@@ -306,9 +307,9 @@ impl Pgm {
     /// Encodes and writes a file.
     pub fn write(&self, path: &Path) -> Result<(), PgmError> {
         let bytes = self.encode()?;
-        let io = |source| PgmError::Io {
+        let io = |error| PgmError::Io {
             path: path.display().to_string(),
-            source,
+            error,
         };
         let mut f = std::fs::File::create(path).map_err(io)?;
         f.write_all(&bytes).map_err(io)

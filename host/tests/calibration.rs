@@ -591,14 +591,16 @@ fn stripe_pixels_on_gaussian_stripe() {
 // (`docs/calibration.md`, §10).
 
 use tangent_core::calibration::Calibration;
-use tangent_core::error_model::{predict_diameter_sigma, NoiseModel, StemGeometry};
+use tangent_core::error_model::{predict_diameter_sigma, StemGeometry};
+use tangent_core::noise::NoiseModel;
 use tangent_core::pipeline::PipelineConfig;
-use tangent_core::solvers::cylinder::CylinderParams;
+use tangent_core::solvers::stem::CylinderParams;
 use tangent_host::calibrate::laser::{board_capture, calibrate_lasers, BoardCapture};
 use tangent_host::calibration_file;
 use tangent_host::capture::{Capture, Mode};
 use tangent_host::measure::measure_capture;
-use tangent_host::simulate::{corpus, scene::Object};
+use tangent_host::simulate::corpus;
+use tangent_host::truth::Object;
 
 fn captures_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../tests/captures")

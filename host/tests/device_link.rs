@@ -1,18 +1,19 @@
-//! The serial link against a fake device on a pty (`fake_device`), with faults: bytes
-//! dropped and corrupted both ways, the link cut and restored, a reboot, another protocol
-//! version, a port that is not a Tangent. The invariant checked everywhere: the readings the
+//! The serial link against the firmware's application on a test board behind a pty
+//! (`test_device`), with faults: bytes dropped and corrupted both ways, the link cut and
+//! restored, a reboot, another protocol version, a port that is not a Tangent. The invariant checked everywhere: the readings the
 //! link delivers are exactly 1..=N, in order, each with its own content — none lost, none
 //! duplicated — unless they fell out of the device's 64-reading history, which the link must
 //! then count exactly.
 
-mod fake_device;
+mod test_device;
 
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use fake_device::{diameter_of, FakeDevice, Faults, Persona, HISTORY};
-use tangent_core::protocol::FrameSel;
+use tangent_core::measurement::Measurement;
+use tangent_core::protocol::{FrameSel, PROTOCOL_VERSION};
 use tangent_host::link::{Link, LinkConfig, LinkError, LinkEvent};
+use test_device::{diameter_of, test_frame, Faults, NotATangent, Setup, TestDevice, HISTORY};
 
 fn cfg() -> LinkConfig {
     LinkConfig {
@@ -23,8 +24,8 @@ fn cfg() -> LinkConfig {
     }
 }
 
-fn open(dev: &FakeDevice) -> Link {
-    Link::open(dev.path().to_str().unwrap(), cfg()).expect("open the fake device")
+fn open(dev: &TestDevice) -> Link {
+    Link::open(dev.path().to_str().unwrap(), cfg()).expect("open the test device")
 }
 
 /// Collects readings until `n` arrived (or `timeout`), checking order and content.
@@ -33,9 +34,10 @@ fn collect(link: &mut Link, n: u32, timeout: Duration) -> Vec<u32> {
     let mut seqs = Vec::new();
     while (seqs.len() as u32) < n && Instant::now() < end {
         if let Some(r) = link.next_reading(Duration::from_millis(100)).unwrap() {
+            let Measurement::Stem(stem) = r.measurement;
             assert_eq!(
-                r.diameter_m,
-                diameter_of(r.seq),
+                stem.diameter,
+                f64::from(diameter_of(r.seq)),
                 "content of reading {}",
                 r.seq
             );
@@ -54,9 +56,9 @@ fn one_to(n: u32) -> Vec<u32> {
 
 #[test]
 fn clean_link_delivers_every_reading_once() {
-    let dev = FakeDevice::start(Persona::Tangent);
+    let dev = TestDevice::start();
     let mut link = open(&dev);
-    assert_eq!(link.identity().fw_version, "fake-1.0");
+    assert_eq!(link.identity().fw_version, tangent_firmware::VERSION);
     dev.press(40, Duration::from_millis(5));
     assert_eq!(collect(&mut link, 40, Duration::from_secs(20)), one_to(40));
     let c = link.counters();
@@ -68,7 +70,7 @@ fn clean_link_delivers_every_reading_once() {
 
 #[test]
 fn dropped_and_corrupted_bytes_lose_and_duplicate_nothing() {
-    let dev = FakeDevice::start(Persona::Tangent);
+    let dev = TestDevice::start();
     let mut link = open(&dev);
     // 1 % of bytes dropped and 1 % corrupted in each direction: a reading frame (~30 bytes)
     // is damaged with probability ≈ 1 − 0.98^30 ≈ 45 %, so the recovery path runs often.
@@ -97,7 +99,7 @@ fn dropped_and_corrupted_bytes_lose_and_duplicate_nothing() {
 
 #[test]
 fn cut_and_restored_link_recovers_readings_made_meanwhile() {
-    let dev = FakeDevice::start(Persona::Tangent);
+    let dev = TestDevice::start();
     let mut link = open(&dev);
     let events = Arc::new(Mutex::new(Vec::new()));
     let e = events.clone();
@@ -129,7 +131,7 @@ fn cut_and_restored_link_recovers_readings_made_meanwhile() {
 
 #[test]
 fn readings_beyond_the_history_are_counted_exactly_as_lost() {
-    let dev = FakeDevice::start(Persona::Tangent);
+    let dev = TestDevice::start();
     let mut link = open(&dev);
     let events = Arc::new(Mutex::new(Vec::new()));
     let e = events.clone();
@@ -157,7 +159,7 @@ fn readings_beyond_the_history_are_counted_exactly_as_lost() {
 
 #[test]
 fn reboot_restarts_the_sequence_without_losing_new_readings() {
-    let dev = FakeDevice::start(Persona::Tangent);
+    let dev = TestDevice::start();
     let mut link = open(&dev);
     dev.press(10, Duration::from_millis(5));
     assert_eq!(collect(&mut link, 10, Duration::from_secs(10)), one_to(10));
@@ -170,7 +172,7 @@ fn reboot_restarts_the_sequence_without_losing_new_readings() {
 
 #[test]
 fn stream_and_measure_requests() {
-    let dev = FakeDevice::start(Persona::Tangent);
+    let dev = TestDevice::start();
     let mut link = open(&dev);
     link.measure().unwrap();
     link.measure().unwrap();
@@ -196,7 +198,10 @@ fn stream_and_measure_requests() {
 
 #[test]
 fn frame_dump_and_calibration_over_a_faulty_link() {
-    let dev = FakeDevice::start(Persona::Tangent);
+    let dev = TestDevice::start_with(Setup {
+        calibrated: false,
+        ..Setup::default()
+    });
     let mut link = open(&dev);
     dev.faults(Faults {
         drop_out: 2,
@@ -207,10 +212,18 @@ fn frame_dump_and_calibration_over_a_faulty_link() {
     let info = link.capture_frames().unwrap();
     for sel in [FrameSel::Off, FrameSel::On] {
         let got = link.read_frame(&info, sel, |_| {}).unwrap();
-        let want =
-            fake_device::fake_frame(info.capture, sel, info.width as usize, info.height as usize);
-        assert!(got == want, "{sel:?} frame differs");
+        assert!(
+            got == test_frame(info.capture, sel),
+            "{sel:?} frame differs"
+        );
     }
+    // The firmware lit both lasers for the laser-on frame only, and switched them off.
+    let switches = dev.laser_switches();
+    assert_eq!(switches.last(), Some(&0), "{switches:?}");
+    assert!(
+        switches.contains(&0b11) && switches.iter().all(|&m| m == 0 || m == 0b11),
+        "{switches:?}"
+    );
     let cal = tangent_core::protocol::WireCalibration::from(
         &tangent_core::calibration::Calibration::reference_design(),
     );
@@ -221,7 +234,10 @@ fn frame_dump_and_calibration_over_a_faulty_link() {
 
 #[test]
 fn another_protocol_version_is_named() {
-    let dev = FakeDevice::start(Persona::OtherVersion(2));
+    let dev = TestDevice::start_with(Setup {
+        protocol_version: PROTOCOL_VERSION + 1,
+        ..Setup::default()
+    });
     let err = Link::open(dev.path().to_str().unwrap(), cfg())
         .err()
         .expect("must fail");
@@ -229,23 +245,24 @@ fn another_protocol_version_is_named() {
         matches!(
             err,
             LinkError::VersionMismatch {
-                device: 2,
-                host: 1,
+                device,
+                host: PROTOCOL_VERSION,
                 ..
-            }
+            } if device == PROTOCOL_VERSION + 1
         ),
         "{err:?}"
     );
     let text = err.to_string();
     assert!(
-        text.contains("version 2") && text.contains("version 1"),
+        text.contains(&format!("version {}", PROTOCOL_VERSION + 1))
+            && text.contains(&format!("version {PROTOCOL_VERSION}")),
         "{text}"
     );
 }
 
 #[test]
 fn a_port_that_is_not_a_tangent_is_refused() {
-    let dev = FakeDevice::start(Persona::Noise);
+    let dev = NotATangent::start();
     let err = Link::open(dev.path().to_str().unwrap(), cfg())
         .err()
         .expect("must fail");
@@ -274,9 +291,9 @@ use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 
-use fake_device::Relay;
 use tangent_host::capture::Capture;
 use tangent_host::fieldlog::{FieldLog, Record};
+use test_device::Relay;
 
 fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
@@ -397,9 +414,21 @@ fn emulated_device_end_to_end() {
     // Calibration: push the capture's, pull it back, identical.
     let cal_in = dir.path().join("cal.toml");
     tangent_host::calibration_file::write(&cal_in, &src.calibration).unwrap();
-    tangent(&["calib", "push", "--port", &port, cal_in.to_str().unwrap()]);
+    tangent(&[
+        "device-calibration",
+        "push",
+        "--port",
+        &port,
+        cal_in.to_str().unwrap(),
+    ]);
     let cal_out = dir.path().join("pulled.toml");
-    tangent(&["calib", "pull", "--port", &port, cal_out.to_str().unwrap()]);
+    tangent(&[
+        "device-calibration",
+        "pull",
+        "--port",
+        &port,
+        cal_out.to_str().unwrap(),
+    ]);
     assert_eq!(
         tangent_host::calibration_file::read(&cal_out).unwrap(),
         src.calibration
@@ -477,7 +506,7 @@ fn emulated_device_through_a_faulty_cut_link() {
     let cal = dir.path().join("cal.toml");
     tangent_host::calibration_file::write(&cal, &src.calibration).unwrap();
     tangent(&[
-        "calib",
+        "device-calibration",
         "push",
         "--port",
         dev.pty.to_str().unwrap(),

@@ -13,6 +13,8 @@ use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
 use tangent_core::calibration::Calibration;
+use tangent_core::measurement::Measurement;
+use tangent_core::protocol::codes::Failure;
 use tangent_core::protocol::{
     self, calibration_record, DeviceError, ErrorCode, FrameSel, FromDevice, Request, Response,
     ToDevice, WireCalibration, FRAME_CHUNK_MAX, PROTOCOL_VERSION,
@@ -372,14 +374,14 @@ fn garbage_corruption_oversize_and_other_versions_are_counted_not_fatal() {
     // 3. An oversize frame (no delimiter for 5000 bytes).
     dev.send_raw(&vec![0x5Au8; 5000]);
     dev.send_raw(&[0x00]);
-    // 4. A frame of protocol version 2: answered with UnsupportedVersion.
+    // 4. A frame of another protocol version: answered with UnsupportedVersion.
     let mut scratch = [0u8; protocol::MAX_RAW_LEN];
     let raw = protocol::encode_raw(
         &ToDevice {
             tag: 7,
             request: Request::DeviceInfo,
         },
-        2,
+        PROTOCOL_VERSION + 1,
         &mut scratch,
     )
     .unwrap();
@@ -389,7 +391,7 @@ fn garbage_corruption_oversize_and_other_versions_are_counted_not_fatal() {
     dev.expect(protocol::UNSOLICITED, |r| match r {
         Response::Error(DeviceError { code, detail }) => {
             assert_eq!(code, ErrorCode::UnsupportedVersion);
-            assert_eq!(detail, 2);
+            assert_eq!(detail, u32::from(PROTOCOL_VERSION + 1));
         }
         other => panic!("{other:?}"),
     });
@@ -442,9 +444,9 @@ fn to_u8(pgm: &tangent_host::pgm::Pgm) -> Vec<u8> {
 /// decision (outlier rejection, method choice) flips, which the method comparison catches.
 #[test]
 fn on_device_measurements_equal_the_hosts() {
-    use tangent_core::pipeline::{self, PipelineConfig};
-    use tangent_core::solvers::cylinder::CylinderParams;
-    use tangent_host::measure::HostWorkspace;
+    use tangent_core::instrument::{measure_with, Stem};
+    use tangent_core::pipeline::{OwnedBuffers, PipelineConfig};
+    use tangent_core::solvers::stem::CylinderParams;
     use tangent_host::simulate::{corpus, simulate};
 
     let Some(elf) = firmware_elf() else { return };
@@ -485,8 +487,8 @@ fn on_device_measurements_equal_the_hosts() {
 
         let off_f = tangent_core::image::Frame::new(&off, w, h, w).unwrap();
         let on_f = tangent_core::image::Frame::new(&on, w, h, w).unwrap();
-        let mut ws = HostWorkspace::<u8>::new(w, h, 8, capture.calibration.planes.len());
-        let host = pipeline::measure_stem(
+        let mut ws = OwnedBuffers::<u8>::for_frame(w, h, 8, capture.calibration.planes.len());
+        let host = measure_with::<Stem, u8>(
             &off_f,
             &on_f,
             &capture.calibration,
@@ -506,24 +508,31 @@ fn on_device_measurements_equal_the_hosts() {
             assert_eq!(r, Response::Ack, "{name}")
         });
         dev.request(Request::Measure, |r| match (host, r) {
-            (Ok(h), Response::Reading(d)) => {
+            (Ok(h), Response::Reading(reading)) => {
                 let hs = &h.solution;
-                let rel = (d.diameter_m as f64 - hs.diameter).abs() / hs.diameter;
+                let Measurement::Stem(d) = reading.measurement;
+                let rel = (d.diameter - hs.diameter).abs() / hs.diameter;
                 eprintln!(
                     "{name}: host {:.4} mm {:?}, device {:.4} mm {:?}, relative difference {rel:.2e}",
                     hs.diameter * 1e3,
                     hs.method,
-                    d.diameter_m as f64 * 1e3,
+                    d.diameter * 1e3,
                     d.method
                 );
-                assert_eq!(d.method, protocol::Method::from(hs.method), "{name}: method");
-                assert!(rel <= 1e-4, "{name}: device {} m vs host {} m", d.diameter_m, hs.diameter);
-                assert_eq!(d.flags, hs.flags.0, "{name}: flags");
+                assert_eq!(d.method, hs.method, "{name}: method");
+                assert!(rel <= 1e-4, "{name}: device {} m vs host {} m", d.diameter, hs.diameter);
+                assert_eq!(d.flags, hs.flags, "{name}: flags");
                 compared += 1;
             }
-            (Err(e), Response::Error(DeviceError { code, .. })) => {
+            (Err(e), Response::Error(DeviceError { code, detail })) => {
                 eprintln!("{name}: host and device both fail ({e})");
                 assert_eq!(code, ErrorCode::MeasurementFailed, "{name}");
+                // The forester reads the same sentence from the caliper as from the file.
+                assert_eq!(
+                    Failure::from_detail(detail).to_string(),
+                    Failure::of(e).to_string(),
+                    "{name}"
+                );
             }
             (h, r) => panic!("{name}: host {h:?}, device {r:?}"),
         });

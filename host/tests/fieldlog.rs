@@ -5,18 +5,18 @@
 //! a damaged magic line or plot header, a copied record) read back with nothing lost
 //! unnamed, then property tests over random corruptions of k bytes and truncations.
 
-mod fake_device;
+mod test_device;
 
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use fake_device::{diameter_of, FakeDevice, Persona};
 use tangent_host::fieldlog::{
     self, encode_line, ExportFormat, FieldLog, FieldLogError, PlotHeader, Record, TreeRecord,
     MAGIC_LINE,
 };
+use test_device::{diameter_of, TestDevice};
 
 fn plot(id: &str) -> Record {
     Record::Plot(PlotHeader {
@@ -241,7 +241,7 @@ fn tree_seqs(path: &Path) -> Vec<u32> {
 /// so the final log holds readings 1..=N once each.
 #[test]
 fn killed_listener_loses_and_duplicates_nothing() {
-    let dev = FakeDevice::start(Persona::Tangent);
+    let dev = TestDevice::start();
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("field.log");
     let n = 50u32; // within the device's 64-reading history

@@ -5,18 +5,17 @@
 use rand::SeedableRng;
 use rand_pcg::Pcg64;
 use tangent_core::calibration::Calibration;
-use tangent_core::curve::CurvePoint;
 use tangent_core::image::Frame;
-use tangent_core::pipeline::{self, PipelineConfig, Workspace, WorkspaceSizes};
+use tangent_core::pipeline::{self, OwnedBuffers, PipelineConfig};
 use tangent_core::real::{Vec2, Vec3};
 use tangent_host::capture::{Capture, Mode};
 use tangent_host::pgm::PgmSamples;
 use tangent_host::simulate::corpus::{self, stem, tilted_axis};
 use tangent_host::simulate::laser::LaserParams;
 use tangent_host::simulate::render::{HandMotion, Lighting};
-use tangent_host::simulate::scene::{Object, Plane, Texture};
 use tangent_host::simulate::sensor::{self, SensorParams};
 use tangent_host::simulate::{simulate, Exposure, SimParams, SimSpec};
+use tangent_host::truth::{Object, Plane, Texture};
 
 fn wall(z: f64, texture: Texture) -> Object {
     Object::Plane(Plane {
@@ -287,27 +286,8 @@ fn extract(cap: &Capture) -> Vec<(u16, f64)> {
         .unwrap()
         .with_bit_depth(bits)
         .unwrap();
-    let sizes = WorkspaceSizes::new(w, h, bits, cap.calibration.planes.len());
-    let mut diff = vec![0u16; sizes.pixels];
-    let mut labels = vec![0u16; sizes.pixels];
-    let mut histogram = vec![0u32; sizes.histogram];
-    let mut label_table = vec![0u16; sizes.label_table];
-    let mut objects = vec![tangent_core::image::segment::ObjectFeatures::empty(0); sizes.objects];
-    let mut curve = vec![CurvePoint::ZERO; sizes.points];
-    let mut points = vec![Vec3::zeros(); sizes.points];
-    let mut scratch_points = vec![Vec2::zeros(); sizes.points];
-    let mut scratch_values = vec![0.0; sizes.points];
-    let mut ws = Workspace {
-        diff: &mut diff,
-        labels: &mut labels,
-        histogram: &mut histogram,
-        label_table: &mut label_table,
-        objects: &mut objects,
-        curve: &mut curve,
-        points: &mut points,
-        scratch_points: &mut scratch_points,
-        scratch_values: &mut scratch_values,
-    };
+    let mut buffers = OwnedBuffers::<u16>::for_frame(w, h, bits, cap.calibration.planes.len());
+    let mut ws = buffers.workspace();
     let mut config = PipelineConfig::default();
     config.smooth.half_window = 0; // compare the raw estimator with the truth
     let profile = pipeline::extract_profile(&off, &on, &cap.calibration, &config, &mut ws).unwrap();

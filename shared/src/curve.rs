@@ -163,8 +163,8 @@ impl From<FrameError> for CurveError {
 /// dominated by the scan of `height` labels per column. [`extract_window`] scans only a
 /// bounding box of the selected objects and gives the same points.
 pub fn extract<P: Pixel>(
-    diff: &Frame<'_, P>,
-    labels: &Frame<'_, u16>,
+    diff: &Frame<P, impl AsRef<[P]>>,
+    labels: &Frame<u16, impl AsRef<[u16]>>,
     selected: &[u16],
     params: &ExtractParams,
     out: &mut [CurvePoint],
@@ -191,8 +191,8 @@ pub fn extract<P: Pixel>(
 /// the window's area instead of the frame's (a few thousand pixels for a laser curve instead
 /// of the 360 k label reads of a 752 × 480 frame). Columns outside the window give no point.
 pub fn extract_window<P: Pixel>(
-    diff: &Frame<'_, P>,
-    labels: &Frame<'_, u16>,
+    diff: &Frame<P, impl AsRef<[P]>>,
+    labels: &Frame<u16, impl AsRef<[u16]>>,
     selected: &[u16],
     columns: core::ops::Range<usize>,
     rows: core::ops::Range<usize>,
@@ -444,7 +444,7 @@ mod tests {
         (diff, labels)
     }
 
-    fn frames<'a>(d: &'a [u16], l: &'a [u16]) -> (Frame<'a, u16>, Frame<'a, u16>) {
+    fn frames<'a>(d: &'a [u16], l: &'a [u16]) -> (Frame<u16, &'a [u16]>, Frame<u16, &'a [u16]>) {
         (
             Frame::new(d, W, H, W).unwrap().with_bit_depth(10).unwrap(),
             Frame::new(l, W, H, W).unwrap(),

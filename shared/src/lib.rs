@@ -12,14 +12,21 @@
 //! | camera model | [`camera`] | `docs/camera-model.md` |
 //! | laser planes, triangulation | [`laser_plane`] | `docs/laser-plane.md` |
 //! | calibration set | [`calibration`] | `docs/formats.md` |
-//! | frames, subtraction, thresholds, segmentation, speckle filter | [`image`] | `docs/image-processing.md` |
+//! | frames, subtraction, thresholds, segmentation | [`image`] | `docs/image-processing.md` |
 //! | subpixel peak estimators | [`peaks`] | `docs/subpixel.md` |
 //! | laser-curve extraction and smoothing | [`curve`] | `docs/subpixel.md` §8 |
+//! | noise of one point (stripe, speckle, calibration) | [`noise`] | `docs/error-model.md` |
 //! | solvers per object kind | [`solvers`] | `docs/cylinder.md`, … |
 //! | predicted uncertainty of a reading | [`error_model`] | `docs/error-model.md` |
 //! | one reading of any instrument | [`measurement`] | `docs/architecture.md` |
 //! | device ↔ host wire protocol | [`protocol`] | `docs/protocol.md` |
-//! | the whole chain, frame pair → result | [`pipeline`] | `docs/pipeline.md` |
+//! | the image chain, frame pair → 3-D points per plane | [`pipeline`] | `docs/pipeline.md` |
+//! | instruments: points → one [`Measurement`] per capture mode | [`instrument`] | `docs/pipeline.md` |
+//!
+//! The handful of types a library user needs are re-exported here: a [`Frame`] pair and a
+//! [`Calibration`] in, working memory from [`Buffers`] (static) or `OwnedBuffers` (heap,
+//! feature `alloc`), [`measure`] with the capture's [`Mode`], one [`Measurement`] or a
+//! [`PipelineError`] out. `examples/measure_pair.rs` shows it end to end.
 #![no_std]
 #![deny(missing_docs)]
 // No unsafe code, except three single instructions of the Cortex-M7 (feature `cortex-m7`, ARM
@@ -38,10 +45,20 @@ pub mod camera;
 pub mod curve;
 pub mod error_model;
 pub mod image;
+pub mod instrument;
 pub mod laser_plane;
 pub mod measurement;
+pub mod noise;
 pub mod peaks;
 pub mod pipeline;
 pub mod protocol;
 pub mod real;
 pub mod solvers;
+
+pub use calibration::Calibration;
+pub use image::Frame;
+pub use instrument::{measure, InstrumentParams};
+pub use measurement::{Measurement, Mode};
+#[cfg(any(test, feature = "alloc"))]
+pub use pipeline::OwnedBuffers;
+pub use pipeline::{Buffers, PipelineConfig, PipelineError, Workspace};

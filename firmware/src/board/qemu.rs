@@ -13,11 +13,13 @@
 //! * calibration store: RAM, initialised from a calibration record file (`--calib`).
 //!
 //! Command line (semihosting `SYS_GET_CMDLINE`, QEMU's `-append`):
-//! `[--calib FILE] [--bench] [--window ROW] OFF.pgm ON.pgm [OFF.pgm ON.pgm …]`.
+//! `[--calib FILE] [--bench] [--window ROW] OFF.pgm ON.pgm [OFF.pgm ON.pgm …]`; [`start`]
+//! reads it and brings the board up.
 
 use core::fmt::Write as _;
 use core::future::poll_fn;
-use core::sync::atomic::{AtomicU32, Ordering};
+use core::ptr::addr_of_mut;
+use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use core::task::Poll;
 
 use cortex_m::peripheral::syst::SystClkSource;
@@ -25,8 +27,29 @@ use cortex_m::peripheral::SYST;
 use cortex_m_semihosting::{nr, syscall};
 use tangent_core::protocol::{self, calibration_record, WireCalibration};
 
-use crate::hal::{self, CameraError, Geometry, LinkError, Strobe};
+use tangent_core::pipeline::{Workspace, WorkspaceSizes};
+
+use crate::app::Buffers;
+
 use crate::pgm;
+use crate::ports::{self, CameraError, Devices, Geometry, LinkError, Strobe};
+
+/// Largest frame the emulated board accepts (752 × 480 8-bit).
+pub const MAX_FRAME: usize = 752 * 480;
+/// Curve/point entries of the pipeline's workspace: 752 columns, two planes.
+pub const POINTS: usize = WorkspaceSizes::new(752, 480, 8, 2).points;
+/// Bytes of the semihosting command line the board reads.
+const MAX_COMMAND_LINE: usize = 4096;
+
+// Everything in .bss (the emulated RAM has no regions to choose from).
+crate::buffers::board_buffers! {
+    frame_bytes = MAX_FRAME, points = POINTS;
+    frames;
+    diff;
+    labels;
+    small;
+    objects;
+}
 
 /// SysTick input clock of mps2-an500 (Hz).
 pub const SYSCLK_HZ: u64 = 25_000_000;
@@ -64,7 +87,7 @@ pub fn ticks() -> u64 {
 /// SysTick-based clock.
 pub struct QemuClock;
 
-impl hal::Clock for QemuClock {
+impl ports::Clock for QemuClock {
     fn now_us(&self) -> u64 {
         ticks() * 1_000_000 / SYSCLK_HZ
     }
@@ -123,7 +146,7 @@ impl Uart {
     }
 }
 
-impl hal::Link for Uart {
+impl ports::Link for Uart {
     async fn read(&mut self, buf: &mut [u8]) -> Result<usize, LinkError> {
         poll_fn(|cx| {
             let mut n = 0;
@@ -173,7 +196,7 @@ impl Default for QemuLaser {
     }
 }
 
-impl hal::Laser for QemuLaser {
+impl ports::Laser for QemuLaser {
     fn count(&self) -> u8 {
         2
     }
@@ -185,7 +208,7 @@ impl hal::Laser for QemuLaser {
 /// No trigger on the emulated board: measurements come from the link.
 pub struct NoTrigger;
 
-impl hal::Trigger for NoTrigger {
+impl ports::Trigger for NoTrigger {
     fn is_pressed(&mut self) -> bool {
         false
     }
@@ -197,7 +220,7 @@ impl hal::Trigger for NoTrigger {
 /// No watchdog on the emulated board.
 pub struct NoWatchdog;
 
-impl hal::Watchdog for NoWatchdog {
+impl ports::Watchdog for NoWatchdog {
     fn feed(&mut self) {}
 }
 
@@ -213,7 +236,7 @@ impl RamStore {
     }
 }
 
-impl hal::CalibrationStore for RamStore {
+impl ports::CalibrationStore for RamStore {
     fn load(&mut self) -> Option<WireCalibration> {
         self.cal.clone()
     }
@@ -263,12 +286,12 @@ impl<'c> FileCamera<'c> {
     }
 }
 
-impl hal::Camera for FileCamera<'_> {
+impl ports::Camera for FileCamera<'_> {
     fn geometry(&self) -> Geometry {
         self.geometry
     }
 
-    async fn capture<L: hal::Laser, C: hal::Clock>(
+    async fn capture<L: ports::Laser, C: ports::Clock>(
         &mut self,
         _exposure_us: u32,
         strobe: &Strobe<'_, L, C>,
@@ -453,7 +476,7 @@ pub fn exit(success: bool) -> ! {
 /// The emulated board.
 pub struct Qemu<'c>(core::marker::PhantomData<&'c ()>);
 
-impl<'c> hal::Board for Qemu<'c> {
+impl<'c> ports::Board for Qemu<'c> {
     type Camera = FileCamera<'c>;
     type Laser = QemuLaser;
     type Trigger = NoTrigger;
@@ -464,5 +487,120 @@ impl<'c> hal::Board for Qemu<'c> {
     const KIND: protocol::Board = protocol::Board::Emulated;
     fn log(args: core::fmt::Arguments<'_>) {
         log(args)
+    }
+}
+
+/// The started board.
+pub struct Started {
+    /// The devices.
+    pub devices: Devices<Qemu<'static>>,
+    /// The application's buffers.
+    pub buffers: Buffers<'static>,
+    /// The pipeline's working memory, for the camera's frame size.
+    pub workspace: Workspace<'static, u8>,
+    /// `--bench`: measure every frame pair once, print the instruction counts and exit.
+    pub bench: bool,
+}
+
+/// Brings the board up from its command line: SysTick, the camera over the frame files, the
+/// calibration file, the UART, the buffers. A bad command line is logged and ends QEMU with
+/// a failure, as does a second call.
+pub fn start(syst: SYST) -> Started {
+    static STARTED: AtomicBool = AtomicBool::new(false);
+    static mut COMMAND_LINE: [u8; MAX_COMMAND_LINE] = [0; MAX_COMMAND_LINE];
+    if STARTED.swap(true, Ordering::AcqRel) {
+        log(format_args!("the emulated board is started once"));
+        exit(false)
+    }
+    start_systick(syst);
+    // SAFETY: `STARTED` lets this point be reached once: the only reference, for the
+    // program's life.
+    let buf = unsafe { &mut *addr_of_mut!(COMMAND_LINE) };
+    let Some(cmdline) = command_line(buf) else {
+        log(format_args!("no semihosting command line"));
+        exit(false)
+    };
+
+    let mut calib_path = None;
+    let mut bench = false;
+    let mut row_offset = 0u16;
+    let mut files: heapless::Vec<&str, { 2 * MAX_SCENES }> = heapless::Vec::new();
+    let mut args = cmdline.split_ascii_whitespace();
+    // The first word is the program (the -kernel file name).
+    let _ = args.next();
+    while let Some(a) = args.next() {
+        match a {
+            "--calib" => calib_path = args.next(),
+            "--bench" => bench = true,
+            "--window" => match args.next().and_then(|r| r.parse().ok()) {
+                Some(r) => row_offset = r,
+                None => {
+                    log(format_args!(
+                        "--window needs the sensor row of the files' first row"
+                    ));
+                    exit(false)
+                }
+            },
+            f => {
+                if files.push(f).is_err() {
+                    log(format_args!(
+                        "too many frame files (max {})",
+                        2 * MAX_SCENES
+                    ));
+                    exit(false)
+                }
+            }
+        }
+    }
+    let mut scenes = heapless::Vec::new();
+    for pair in files.chunks_exact(2) {
+        let _ = scenes.push((pair[0], pair[1]));
+    }
+    if scenes.is_empty() || !files.len().is_multiple_of(2) {
+        log(format_args!(
+            "usage: tangent-qemu [--calib FILE] [--bench] [--window ROW] OFF.pgm ON.pgm [OFF.pgm ON.pgm ...]"
+        ));
+        exit(false)
+    }
+    let camera = match FileCamera::new(scenes) {
+        Ok(c) => c.with_row_offset(row_offset),
+        Err(e) => {
+            log(format_args!("cannot read the first frame: {:?}", e));
+            exit(false)
+        }
+    };
+    // The workspace covers the camera's frame size (at most MAX_FRAME pixels).
+    let pixels = ports::Camera::geometry(&camera).frame_len();
+    let calibration = match calib_path {
+        Some(p) => match load_calibration(p) {
+            Some(c) => Some(c),
+            None => {
+                log(format_args!("{}: not a valid calibration record", p));
+                exit(false)
+            }
+        },
+        None => None,
+    };
+    let Some((buffers, workspace)) = take_buffers(pixels) else {
+        log(format_args!("the buffers are taken once"));
+        exit(false)
+    };
+
+    // SAFETY: UART0 is used by nothing else.
+    let link = unsafe { Uart::new(Uart::UART0) };
+    let devices = Devices {
+        camera,
+        laser: QemuLaser::new(),
+        trigger: NoTrigger,
+        link,
+        clock: QemuClock,
+        store: RamStore::new(calibration),
+        watchdog: NoWatchdog,
+    };
+    Started {
+        devices,
+        buffers,
+        workspace,
+        bench,
     }
 }

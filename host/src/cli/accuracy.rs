@@ -4,21 +4,23 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use anyhow::{anyhow, Context};
+use anyhow::anyhow;
 use plotters::prelude::*;
 use tangent_core::calibration::Calibration;
-use tangent_core::error_model::{predict_diameter_sigma, NoiseModel, StemGeometry};
+use tangent_core::error_model::{predict_diameter_sigma, StemGeometry};
+use tangent_core::noise::NoiseModel;
 use tangent_core::real::Vec2;
 use tangent_host::{calibration_file, plot};
 
-/// Arguments of `tangent accuracy`.
-#[derive(clap::Args, Debug)]
-#[command(
-    long_about = "Plots the error model's predicted 1-sigma diameter error (mm) of a \
+/// The long help of `tangent accuracy` (`main.rs` gives it to clap on the subcommand, where
+/// the short doc comment would otherwise replace it).
+pub const LONG_ABOUT: &str = "Plots the error model's predicted 1-sigma diameter error (mm) of a \
 transversal stem against its distance (m), for several diameters, for the three-tangent method \
 (solid) and the circle fit (dashed), with the reference noise model (subpixel noise, speckle, \
-calibration errors). Also prints the table of the plotted values."
-)]
+calibration errors). Also prints the table of the plotted values.";
+
+/// Arguments of `tangent accuracy`.
+#[derive(clap::Args, Debug)]
 pub struct Args {
     /// Calibration file (default: the reference design, one plane).
     #[arg(long, value_name = "FILE")]
@@ -80,7 +82,8 @@ fn parse_diameter_mm(text: &str) -> Result<f64, String> {
 /// Runs `tangent accuracy`.
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let cal = match &args.calib {
-        Some(p) => calibration_file::read(p).with_context(|| format!("reading {}", p.display()))?,
+        // The error names the file.
+        Some(p) => calibration_file::read(p)?,
         None => Calibration::reference_design(),
     };
     let mut scratch = vec![Vec2::zeros(); 2 * cal.camera.width as usize];
@@ -105,7 +108,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let y_max = y_max.min(20.0);
 
     plot::init_fonts();
-    let err = |e: &dyn std::fmt::Debug| anyhow!("plot: {e:?}");
+    // Plotters reports the file's failure without its name.
+    let err = |e: &dyn std::fmt::Display| anyhow!("{}: {e}", args.out.display());
     let root = BitMapBackend::new(&args.out, (1000, 650)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| err(&e))?;
     let mut chart = ChartBuilder::on(&root)

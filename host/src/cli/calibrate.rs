@@ -182,7 +182,8 @@ fn camera(
         .with_context(|| format!("writing {}", out.display()))?;
     eprintln!("wrote {}", out.display());
     if let Some(dir) = report_dir {
-        report::write_camera_report(dir, &cal, &grays, &skipped)?;
+        report::write_camera_report(dir, &cal, &grays, &skipped)
+            .with_context(|| format!("writing the report in {}", dir.display()))?;
         eprintln!("report in {}", dir.display());
     }
     Ok(ExitCode::SUCCESS)
@@ -197,8 +198,8 @@ fn laser_cmd(
     report_dir: Option<&Path>,
 ) -> anyhow::Result<ExitCode> {
     let board = Board::parse(board, square).map_err(anyhow::Error::msg)?;
-    let (id, camera, _) = calibration_file::read_camera(camera_file)
-        .with_context(|| format!("camera file {}", camera_file.display()))?;
+    // The error names the file.
+    let (id, camera, _) = calibration_file::read_camera(camera_file)?;
 
     let mut prepared = Vec::new();
     let mut skipped = Vec::new();
@@ -243,7 +244,8 @@ fn laser_cmd(
     calibration_file::write(out, &calibration)?;
     eprintln!("wrote {}", out.display());
     if let Some(dir) = report_dir {
-        report::write_laser_report(dir, &text, &prepared, &cals)?;
+        report::write_laser_report(dir, &text, &prepared, &cals)
+            .with_context(|| format!("writing the report in {}", dir.display()))?;
         eprintln!("report in {}", dir.display());
     }
     Ok(ExitCode::SUCCESS)

@@ -1,9 +1,11 @@
-//! `tangent devices`: the serial ports that look like a Tangent (USB VID/PID 1209:7A6E).
+//! `tangent devices`: the serial ports that look like a Tangent (its USB VID/PID,
+//! `protocol::codes::USB_VID`/`USB_PID`).
 
 use std::process::ExitCode;
 
 use anyhow::{bail, Context, Result};
-use tangent_host::link::{self, TANGENT_USB_PID, TANGENT_USB_VID};
+use tangent_core::protocol::codes::{USB_PID, USB_VID};
+use tangent_host::link;
 
 /// Arguments of `tangent devices`.
 #[derive(clap::Args, Debug)]
@@ -21,8 +23,8 @@ pub fn run(args: Args) -> Result<ExitCode> {
         println!(
             "{}\tTangent (USB {:04x}:{:04x}, serial {})",
             p.path,
-            TANGENT_USB_VID,
-            TANGENT_USB_PID,
+            USB_VID,
+            USB_PID,
             p.serial_number.as_deref().unwrap_or("unknown")
         );
     }
@@ -38,7 +40,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
     }
     if tangents.is_empty() {
         eprintln!(
-            "no Tangent found (looking for USB {TANGENT_USB_VID:04x}:{TANGENT_USB_PID:04x}): \
+            "no Tangent found (looking for USB {USB_VID:04x}:{USB_PID:04x}): \
              plug the caliper in and switch it on. The emulated device is not USB: \
              use the pty path `firmware/qemu/run.sh --serial pty` prints, with --port."
         );

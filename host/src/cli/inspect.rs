@@ -13,9 +13,8 @@ use std::process::ExitCode;
 use anyhow::Context;
 use image::{Rgb, RgbImage};
 use tangent_core::image::{Frame, Pixel};
-use tangent_core::pipeline::{self, PipelineConfig};
+use tangent_core::pipeline::{self, OwnedBuffers, PipelineConfig};
 use tangent_host::capture::Capture;
-use tangent_host::measure::HostWorkspace;
 use tangent_host::pgm::{Pgm, PgmSamples};
 
 /// Arguments of `tangent inspect`.
@@ -52,7 +51,7 @@ fn extract(capture: &Capture, on: &Pgm) -> Result<Vec<(usize, f64, f64)>, String
         let on = Frame::new(on, w, h, w)
             .and_then(|f| f.with_bit_depth(bits))
             .map_err(|e| e.to_string())?;
-        let mut hw = HostWorkspace::<P>::new(w, h, bits, c.calibration.planes.len());
+        let mut hw = OwnedBuffers::<P>::for_frame(w, h, bits, c.calibration.planes.len());
         let profile = pipeline::extract_profile(
             &off,
             &on,
@@ -95,8 +94,8 @@ fn put(img: &mut RgbImage, x: i64, y: i64, c: [u8; 3]) {
 
 /// Runs `tangent inspect`.
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
-    let c = Capture::read(&args.capture)
-        .with_context(|| format!("reading {}", args.capture.display()))?;
+    // A capture's errors name its files relative to it; put the directory in front.
+    let c = Capture::read(&args.capture).with_context(|| args.capture.display().to_string())?;
     let (w, h) = (c.meta.width, c.meta.height);
     let off = c.off_frame();
     let (lit, on) = c.on_frames().next().context("no laser-on frame")?;

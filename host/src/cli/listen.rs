@@ -89,8 +89,8 @@ fn parse_typed(line: &str) -> Vec<Typed> {
 
 /// Runs the listener.
 pub fn run(args: Args) -> Result<ExitCode> {
-    let mut log = FieldLog::open(&args.log)
-        .with_context(|| format!("cannot open the field log {}", args.log.display()))?;
+    // The error names the file.
+    let mut log = FieldLog::open(&args.log).context("cannot open the field log")?;
     if log.torn_bytes() > 0 {
         eprintln!(
             "recovered the field log: an incomplete last record ({} bytes, from a crash) was \
@@ -135,6 +135,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
         LinkEvent::Lost(why) => eprintln!("link lost ({why}); waiting for the device…"),
         LinkEvent::Reconnected { .. } => eprintln!("device back; catching up"),
         LinkEvent::Rebooted => eprintln!("the device restarted"),
+        LinkEvent::MeasurementFailed(error) => eprintln!("{error}"),
         LinkEvent::Unrecoverable { from, to } => eprintln!(
             "warning: readings {from}–{to} were made while disconnected and are no longer on the device"
         ),
@@ -154,7 +155,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
         id.fw_version,
         id.calib_id
             .map(|c| c.to_string())
-            .unwrap_or_else(|| "NONE — push one with `tangent calib push`".into()),
+            .unwrap_or_else(|| "NONE — push one with `tangent device-calibration push`".into()),
         args.log.display()
     );
 
@@ -231,7 +232,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
             }
         };
         last_tree = Some(tree_id);
-        let record = tree_record(&reading, &plot_id, tree_id, &species, &device_id);
+        let record = TreeRecord::from_reading(&reading, &plot_id, tree_id, &species, &device_id);
         // Write-ahead: on disk before it is shown.
         log.append(Record::Tree(record.clone()))?;
         println!("{}", describe(&record, &reading));
@@ -255,29 +256,6 @@ pub fn run(args: Args) -> Result<ExitCode> {
         c.lost
     );
     Ok(ExitCode::SUCCESS)
-}
-
-fn tree_record(
-    r: &Reading,
-    plot_id: &str,
-    tree_id: u32,
-    species: &str,
-    device_id: &str,
-) -> TreeRecord {
-    TreeRecord {
-        plot_id: plot_id.to_string(),
-        tree_id,
-        species: species.to_string(),
-        diameter_mm: r.diameter_m as f64 * 1e3,
-        uncertainty_mm: r.uncertainty_m as f64 * 1e3,
-        tilt_deg: (r.tilt_rad as f64).to_degrees(),
-        flags: r.flags,
-        time: fieldlog::now_rfc3339(),
-        device_id: device_id.to_string(),
-        calib_id: r.calib_id,
-        seq: r.seq,
-        device_time_ms: r.timestamp_ms,
-    }
 }
 
 fn describe(t: &TreeRecord, r: &Reading) -> String {

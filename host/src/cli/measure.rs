@@ -7,21 +7,25 @@ use std::process::ExitCode;
 use anyhow::Context;
 use indicatif::{ParallelProgressIterator, ProgressBar, ProgressStyle};
 use rayon::prelude::*;
+use tangent_core::calibration::Calibration;
 use tangent_core::pipeline::PipelineConfig;
-use tangent_core::solvers::cylinder::CylinderParams;
-use tangent_host::calibration_file;
-use tangent_host::measure::{expand_captures, measure_capture, Reading};
-use tangent_host::plot;
+use tangent_core::solvers::stem::CylinderParams;
+use tangent_host::measure::{measure_capture, Reading};
+use tangent_host::{calibration_file, capture, plot};
+
+/// The long help of `tangent measure` (`main.rs` gives it to clap on the subcommand, where
+/// the short doc comment would otherwise replace it).
+pub const LONG_ABOUT: &str =
+    "Replays recorded captures (a directory with capture.toml and its PGM frames, \
+or a directory of such directories) through the same measurement core the device runs, and prints \
+per capture the stem diameter in mm with its 1-sigma uncertainty, the method used, the tilt and \
+quality flags — or why no trustworthy reading exists. A path that cannot be read is reported \
+(with --json as {\"error\": …}) and the other captures are still measured.\n\nExit status: 0 when \
+every capture gave a reading, 1 when some gave none (the reason is printed), 2 when a capture, \
+a path given, or the --calib file could not be read (or a --plot image not written).";
 
 /// Arguments of `tangent measure`.
 #[derive(clap::Args, Debug)]
-#[command(
-    long_about = "Replays recorded captures (a directory with capture.toml and its PGM frames, \
-or a directory of such directories) through the same measurement core the device runs, and prints \
-per capture the stem diameter in mm with its 1-sigma uncertainty, the method used, the tilt and \
-quality flags — or why no trustworthy reading exists.\n\nExit status: 0 when every capture gave a \
-reading, 1 when some gave none (the reason is printed), 2 when a capture could not be read."
-)]
 pub struct Args {
     /// Capture directories (or directories of captures).
     #[arg(required = true)]
@@ -39,32 +43,55 @@ pub struct Args {
     plot: Option<PathBuf>,
 }
 
-/// Runs `tangent measure`.
+/// Runs `tangent measure`: every capture that can be read is measured; the others are
+/// reported (exit status in the command's help).
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
-    let dirs = expand_captures(&args.captures)?;
-    let calibration = match &args.calib {
-        Some(path) => Some(
-            calibration_file::read(path).with_context(|| format!("reading {}", path.display()))?,
-        ),
-        None => None,
+    // Each argument's captures, or why it names none: a bad argument is reported in its
+    // place and does not stop the others.
+    let targets: Vec<Result<PathBuf, String>> = args
+        .captures
+        .iter()
+        .flat_map(|arg| match capture::find_captures(arg) {
+            Ok(dirs) => dirs.into_iter().map(Ok).collect(),
+            Err(e) => vec![Err(format!("{}: {e}", arg.display()))],
+        })
+        .collect();
+    let mut out = std::io::stdout().lock();
+    let setup = || -> anyhow::Result<Option<Calibration>> {
+        if let Some(dir) = &args.plot {
+            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        }
+        // The error names the file.
+        Ok(args
+            .calib
+            .as_deref()
+            .map(calibration_file::read)
+            .transpose()?)
     };
-    if let Some(dir) = &args.plot {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    }
+    let calibration = match setup() {
+        Ok(c) => c,
+        Err(e) => {
+            // Nothing can be measured: one message for the whole run.
+            report_unreadable(&mut out, args.json, &super::error_text(&e))?;
+            return Ok(ExitCode::from(UNREADABLE));
+        }
+    };
     let config = PipelineConfig::default();
     let params = CylinderParams::default();
-    let bar = if dirs.len() > 1 && std::io::stderr().is_terminal() {
-        ProgressBar::new(dirs.len() as u64).with_style(
+    let bar = if targets.len() > 1 && std::io::stderr().is_terminal() {
+        ProgressBar::new(targets.len() as u64).with_style(
             ProgressStyle::with_template("{bar:40} {pos}/{len} captures {eta}")
                 .unwrap_or_else(|_| ProgressStyle::default_bar()),
         )
     } else {
         ProgressBar::hidden()
     };
-    let results: Vec<Result<Reading, String>> = dirs
+    let results: Vec<Result<Reading, String>> = targets
         .par_iter()
         .progress_with(bar)
-        .map(|dir| {
+        .map(|target| {
+            let dir = target.as_ref().map_err(Clone::clone)?;
+            // A capture's errors name its files relative to it; put the directory in front.
             let outcome = measure_capture(dir, calibration.as_ref(), &config, &params)
                 .map_err(|e| format!("{}: {e}", dir.display()))?;
             if let Some(plot_dir) = &args.plot {
@@ -84,7 +111,6 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         })
         .collect();
 
-    let mut out = std::io::stdout().lock();
     let (mut no_reading, mut unreadable) = (0, 0);
     for r in &results {
         match r {
@@ -98,19 +124,32 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             }
             Err(e) => {
                 unreadable += 1;
-                if args.json {
-                    writeln!(out, "{}", serde_json::json!({ "error": e }))?;
-                } else {
-                    eprintln!("error: {e}");
-                }
+                report_unreadable(&mut out, args.json, e)?;
             }
         }
     }
     Ok(if unreadable > 0 {
-        ExitCode::from(2)
+        ExitCode::from(UNREADABLE)
     } else if no_reading > 0 {
-        ExitCode::from(1)
+        ExitCode::from(NO_READING)
     } else {
         ExitCode::SUCCESS
     })
+}
+
+/// Exit status when some capture gave no reading (and every one was read).
+const NO_READING: u8 = 1;
+/// Exit status when a path, a capture or the `--calib` file could not be read (or a `--plot`
+/// image not written).
+const UNREADABLE: u8 = 2;
+
+/// Reports what could not be read: a JSON object `{"error": …}` on standard output with
+/// `--json` (one line per capture, like the readings), else `error: …` on standard error.
+fn report_unreadable(out: &mut impl Write, json: bool, message: &str) -> std::io::Result<()> {
+    if json {
+        writeln!(out, "{}", serde_json::json!({ "error": message }))
+    } else {
+        eprintln!("error: {message}");
+        Ok(())
+    }
 }

@@ -48,14 +48,14 @@ pub fn run(args: Args) -> Result<ExitCode> {
     let board = link.identity().board;
     let device_cal = link.read_calibration()?;
     let calibration = match (device_cal, &args.calib) {
-        (_, Some(file)) => calibration_file::read(file)
-            .with_context(|| format!("cannot use {}", file.display()))?,
+        // The error names the file.
+        (_, Some(file)) => calibration_file::read(file)?,
         (Some(w), None) => w
             .to_calibration()
             .map_err(|e| anyhow::anyhow!("the device's calibration is invalid: {e:?}"))?,
         (None, None) => bail!(
             "the device has no calibration and a capture needs one: push one \
-             (`tangent calib push`) or give --calib FILE"
+             (`tangent device-calibration push`) or give --calib FILE"
         ),
     };
     for i in 0..args.count {
@@ -78,6 +78,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
         })?;
         bar.finish_and_clear();
         let capture = build_capture(&info, off, on, &calibration, board, mode, &args.description)?;
+        // A capture's errors name its files relative to it.
         capture
             .write(&dir)
             .with_context(|| format!("cannot write the capture {}", dir.display()))?;

@@ -196,8 +196,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             })?;
         }
         What::Again { capture, seed, out } => {
-            let c = Capture::read(&capture)
-                .with_context(|| format!("reading {}", capture.display()))?;
+            // A capture's errors name its files relative to it; put the directory in front.
+            let c = Capture::read(&capture).with_context(|| capture.display().to_string())?;
             let mut spec = SimSpec::from_capture(&c)?;
             spec.params.seed = seed;
             write(&spec, &out)?;

@@ -3,7 +3,10 @@
 use serde::Serialize;
 
 use super::flag_names;
-use super::{Record, TreeRecord, FLAG_NAMES};
+use tangent_core::protocol::codes;
+use tangent_core::solvers::result::Flags;
+
+use super::{Record, TreeRecord};
 
 /// Export formats.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -159,10 +162,8 @@ fn export_json(plots: &[ExportPlot]) -> String {
                 .map(|t| {
                     let mut v = serde_json::to_value(t).unwrap_or_default();
                     if let Some(obj) = v.as_object_mut() {
-                        let names: Vec<&str> = FLAG_NAMES
-                            .iter()
-                            .filter(|(f, _)| t.flags & f.0 != 0)
-                            .map(|(_, n)| *n)
+                        let names: Vec<String> = codes::flag_names(Flags(t.flags))
+                            .map(str::to_ascii_uppercase)
                             .collect();
                         obj.insert("flag_names".into(), names.into());
                     }

@@ -13,9 +13,9 @@ use tangent_core::calibration::Calibration;
 use tangent_core::camera::Distortion;
 
 use super::render::{HandMotion, Lighting};
-use super::scene::{Board, Cylinder, Object, Plane, Road, Sphere, Texture, Wave};
 use super::{simulate, Exposure, SimError, SimParams, SimSpec};
 use crate::capture::Mode;
+use crate::truth::{Board, Cylinder, Object, Plane, Road, Sphere, Texture, Wave};
 
 /// One corpus capture: directory name and spec.
 #[derive(Debug, Clone)]
@@ -707,9 +707,11 @@ pub fn write_entries(entries: &[CorpusEntry], out: &Path) -> Result<Vec<String>,
     let mut names = Vec::new();
     for e in entries {
         let (capture, _) = simulate(&e.spec)?;
+        let dir = out.join(&e.name);
+        // A capture's errors name its files relative to it; put the directory in front.
         capture
-            .write(&out.join(&e.name))
-            .map_err(|err| SimError::Capture(err.to_string()))?;
+            .write(&dir)
+            .map_err(|err| SimError::Capture(format!("{}: {err}", dir.display())))?;
         names.push(e.name.clone());
     }
     Ok(names)

@@ -24,9 +24,10 @@ use tangent_core::calibration::{Calibration, MAX_PLANES};
 use crate::calibration_file::CalibrationToml;
 use crate::capture::{Capture, CaptureMeta, FrameEntry, Mode, Truth, FORMAT_VERSION};
 use crate::pgm::Pgm;
+use crate::truth::Object;
 use laser::LaserParams;
 use render::{HandMotion, Lighting, RenderSetup};
-use scene::{splitmix, Object, Scene, SceneError};
+use scene::{splitmix, Scene, SceneError};
 use sensor::{OpticsParams, SensorParams};
 
 /// How the exposure time is chosen.

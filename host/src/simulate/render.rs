@@ -15,7 +15,7 @@ use tangent_core::real::{Vec2, Vec3};
 
 use super::laser::LaserParams;
 use super::scene::{fbm, Scene};
-use crate::capture::TruthPoint;
+use crate::truth::TruthPoint;
 
 /// Ambient light (in the filter's band).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

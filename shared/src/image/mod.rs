@@ -1,13 +1,19 @@
 //! Frames and the image-processing chain (thesis chapter 5).
 //!
-//! A frame is a borrowed slice of 8-bit or 16-bit pixels with a width, a height and a row
-//! stride (in pixels), so that a DMA buffer, a window of a larger image or a host `Vec` can all
-//! be viewed without copying. Pixel `(x, y)` is at `data[y * stride + x]`; `x` is the column
+//! A [`Frame`] is 8-bit or 16-bit pixels in any storage (a borrowed slice, a mutable slice, a
+//! `Vec`, an array) with a width, a height and a row stride (in pixels), so that a DMA buffer, a
+//! window of a larger image or a host `Vec` can all be viewed without copying. Pixel `(x, y)` is at `data[y * stride + x]`; `x` is the column
 //! (right), `y` the row (down). The centre of pixel `(x, y)` has image coordinates `(x, y)`.
 
 use core::fmt;
+use core::marker::PhantomData;
 
-pub mod filter;
+// The speckle filter is kept for tests only: on the device it would cost ≈ 20 M instructions per
+// 752×480 frame (docs/image-processing.md, "Cost"), 4–7 times the whole measurement, while
+// `curve::smooth` already averages the speckle jitter along the curve at almost no cost
+// (docs/subpixel.md §8); the full-frame chain test (`select`) still exercises it.
+#[cfg(test)]
+pub(crate) mod filter;
 mod lanes;
 pub mod segment;
 pub mod select;
@@ -18,12 +24,15 @@ pub mod threshold;
 pub trait Pixel: Copy + Default + Ord + Into<u32> + fmt::Debug + 'static {
     /// Bits of the storage type (8 or 16).
     const STORAGE_BITS: u8;
+    /// The value 0 (usable in `const` buffer initialisers).
+    const ZERO: Self;
     /// Converts from `u32`, saturating at the storage type's maximum.
     fn saturate_from(v: u32) -> Self;
 }
 
 impl Pixel for u8 {
     const STORAGE_BITS: u8 = 8;
+    const ZERO: Self = 0;
     #[inline]
     fn saturate_from(v: u32) -> Self {
         if v > u8::MAX as u32 {
@@ -36,6 +45,7 @@ impl Pixel for u8 {
 
 impl Pixel for u16 {
     const STORAGE_BITS: u8 = 16;
+    const ZERO: Self = 0;
     #[inline]
     fn saturate_from(v: u32) -> Self {
         if v > u16::MAX as u32 {
@@ -132,35 +142,37 @@ fn check_bit_depth<P: Pixel>(bits: u8) -> Result<(), FrameError> {
     }
 }
 
-/// A read-only view of a frame.
+/// A frame: pixels in any storage `S` that can be viewed as a slice of `P` (a borrowed
+/// `&[P]`, a `&mut [P]` written in place, a `Vec<P>`, an array), with a width, a height, a row
+/// stride and a bit depth — smoltcp's `Packet<T: AsRef<[u8]>>` pattern. The read methods need
+/// `S: AsRef<[P]>`, the write methods `S: AsMut<[P]>`.
+///
+/// ```
+/// use tangent_core::image::Frame;
+///
+/// // A 3 × 2 frame of a 10-bit sensor stored in `u16`, rows 4 pixels apart.
+/// let pixels: [u16; 8] = [1, 2, 3, 0, 4, 5, 1023, 0];
+/// let frame = Frame::new(&pixels[..], 3, 2, 4)?.with_bit_depth(10)?;
+/// assert_eq!(frame.row(1), &[4, 5, 1023]);
+/// assert_eq!(frame.max_value(), 1023);
+///
+/// // Owned, mutable storage: written row by row.
+/// let mut out = Frame::new([0u8; 6], 3, 2, 3)?;
+/// out.row_mut(0).copy_from_slice(&[7, 8, 9]);
+/// assert_eq!(out.get(2, 0), Some(9));
+/// # Ok::<(), tangent_core::image::FrameError>(())
+/// ```
 #[derive(Debug, Clone, Copy)]
-pub struct Frame<'a, P: Pixel> {
-    data: &'a [P],
+pub struct Frame<P: Pixel, S> {
+    data: S,
     width: usize,
     height: usize,
     stride: usize,
     bit_depth: u8,
+    pixel: PhantomData<P>,
 }
 
-impl<'a, P: Pixel> Frame<'a, P> {
-    /// Views `data` as a `width × height` frame whose rows start every `stride` pixels.
-    /// The bit depth is that of the storage type; see [`Frame::with_bit_depth`].
-    pub fn new(
-        data: &'a [P],
-        width: usize,
-        height: usize,
-        stride: usize,
-    ) -> Result<Self, FrameError> {
-        check_layout(data.len(), width, height, stride)?;
-        Ok(Frame {
-            data,
-            width,
-            height,
-            stride,
-            bit_depth: P::STORAGE_BITS,
-        })
-    }
-
+impl<P: Pixel, S> Frame<P, S> {
     /// Declares the sensor's bit depth (e.g. 10 for a 10-bit sensor stored in `u16`), which sets
     /// the saturation level [`Frame::max_value`].
     pub fn with_bit_depth(mut self, bits: u8) -> Result<Self, FrameError> {
@@ -189,21 +201,8 @@ impl<'a, P: Pixel> Frame<'a, P> {
     pub fn max_value(&self) -> u32 {
         (1u32 << self.bit_depth) - 1
     }
-    /// Row `y` (`width` pixels). Panics if `y >= height` (a programming error, not bad data).
-    pub fn row(&self, y: usize) -> &'a [P] {
-        let start = y * self.stride;
-        &self.data[start..start + self.width]
-    }
-    /// Pixel `(x, y)`, or `None` outside the frame.
-    pub fn get(&self, x: usize, y: usize) -> Option<P> {
-        if x < self.width && y < self.height {
-            Some(self.data[y * self.stride + x])
-        } else {
-            None
-        }
-    }
     /// Checks that `other` has the same width and height.
-    pub fn check_same_size<Q: Pixel>(&self, other: &Frame<'_, Q>) -> Result<(), FrameError> {
+    pub fn check_same_size<Q: Pixel, T>(&self, other: &Frame<Q, T>) -> Result<(), FrameError> {
         if self.width == other.width && self.height == other.height {
             Ok(())
         } else {
@@ -215,51 +214,52 @@ impl<'a, P: Pixel> Frame<'a, P> {
     }
 }
 
-/// A mutable view of a frame (an output buffer owned by the caller).
-#[derive(Debug)]
-pub struct FrameMut<'a, P: Pixel> {
-    data: &'a mut [P],
-    width: usize,
-    height: usize,
-    stride: usize,
-    bit_depth: u8,
-}
-
-impl<'a, P: Pixel> FrameMut<'a, P> {
-    /// Views `data` as a mutable `width × height` frame with the given row stride.
-    pub fn new(
-        data: &'a mut [P],
-        width: usize,
-        height: usize,
-        stride: usize,
-    ) -> Result<Self, FrameError> {
-        check_layout(data.len(), width, height, stride)?;
-        Ok(FrameMut {
+impl<P: Pixel, S: AsRef<[P]>> Frame<P, S> {
+    /// Views `data` as a `width × height` frame whose rows start every `stride` pixels.
+    /// The bit depth is that of the storage type; see [`Frame::with_bit_depth`].
+    pub fn new(data: S, width: usize, height: usize, stride: usize) -> Result<Self, FrameError> {
+        check_layout(data.as_ref().len(), width, height, stride)?;
+        Ok(Frame {
             data,
             width,
             height,
             stride,
             bit_depth: P::STORAGE_BITS,
+            pixel: PhantomData,
         })
     }
-    /// Declares the bit depth of the values written (see [`Frame::with_bit_depth`]).
-    pub fn with_bit_depth(mut self, bits: u8) -> Result<Self, FrameError> {
-        check_bit_depth::<P>(bits)?;
-        self.bit_depth = bits;
-        Ok(self)
+
+    /// Row `y` (`width` pixels). Panics if `y >= height` (a programming error, not bad data).
+    pub fn row(&self, y: usize) -> &[P] {
+        let start = y * self.stride;
+        &self.data.as_ref()[start..start + self.width]
     }
-    /// Width in pixels.
-    pub fn width(&self) -> usize {
-        self.width
+    /// Pixel `(x, y)`, or `None` outside the frame.
+    pub fn get(&self, x: usize, y: usize) -> Option<P> {
+        if x < self.width && y < self.height {
+            Some(self.data.as_ref()[y * self.stride + x])
+        } else {
+            None
+        }
     }
-    /// Height in pixels.
-    pub fn height(&self) -> usize {
-        self.height
+    /// A borrowed, read-only view of the same pixels.
+    pub fn view(&self) -> Frame<P, &[P]> {
+        Frame {
+            data: self.data.as_ref(),
+            width: self.width,
+            height: self.height,
+            stride: self.stride,
+            bit_depth: self.bit_depth,
+            pixel: PhantomData,
+        }
     }
+}
+
+impl<P: Pixel, S: AsMut<[P]>> Frame<P, S> {
     /// Row `y`, mutable. Panics if `y >= height`.
     pub fn row_mut(&mut self, y: usize) -> &mut [P] {
         let start = y * self.stride;
-        &mut self.data[start..start + self.width]
+        &mut self.data.as_mut()[start..start + self.width]
     }
     /// Row `y - 1` (read-only) together with row `y` (mutable), for one-pass neighbourhood
     /// algorithms that write a row while reading the previous one (segmentation). `None` if
@@ -268,21 +268,11 @@ impl<'a, P: Pixel> FrameMut<'a, P> {
         if y == 0 || y >= self.height {
             return None;
         }
-        let (head, tail) = self.data.split_at_mut(y * self.stride);
+        let (head, tail) = self.data.as_mut().split_at_mut(y * self.stride);
         let prev_start = (y - 1) * self.stride;
         let prev = head.get(prev_start..prev_start + self.width)?;
         let cur = tail.get_mut(..self.width)?;
         Some((prev, cur))
-    }
-    /// A read-only view of the same pixels.
-    pub fn as_frame(&self) -> Frame<'_, P> {
-        Frame {
-            data: self.data,
-            width: self.width,
-            height: self.height,
-            stride: self.stride,
-            bit_depth: self.bit_depth,
-        }
     }
 }
 

@@ -280,7 +280,7 @@ mod tests {
         use crate::image::segment::{segment, worst_case_labels, Connectivity};
         use crate::image::subtract::subtract;
         use crate::image::threshold::{histogram, otsu_threshold};
-        use crate::image::{Frame, FrameMut};
+        use crate::image::Frame;
         use std::vec;
 
         let (w, h) = (752usize, 480usize);
@@ -316,7 +316,7 @@ mod tests {
         let fon = Frame::new(&on, w, h, w).unwrap();
         let foff = Frame::new(&off, w, h, w).unwrap();
         let mut diff = vec![0u8; w * h];
-        let mut fd = FrameMut::new(&mut diff, w, h, w).unwrap();
+        let mut fd = Frame::new(&mut diff, w, h, w).unwrap();
         let stats = subtract(&fon, &foff, &mut fd).unwrap();
         let t_sub = t0.elapsed();
         assert!(stats.max_difference >= 140);
@@ -330,7 +330,7 @@ mod tests {
         let t_thr = t0.elapsed();
 
         let mut labels = vec![0u16; w * h];
-        let mut lf = FrameMut::new(&mut labels, w, h, w).unwrap();
+        let mut lf = Frame::new(&mut labels, w, h, w).unwrap();
         let mut table = vec![0u16; 4096];
         let mut feats = [ObjectFeatures::empty(0); 256];
         let seg = segment(&fd, t, &mut lf, &mut table, &mut feats, Connectivity::Eight).unwrap();
@@ -352,7 +352,7 @@ mod tests {
         assert!(r.too_small >= 1 && r.bad_ratio >= 1, "{r:?}");
 
         let mut smooth = vec![0u8; w * h];
-        let mut fs = FrameMut::new(&mut smooth, w, h, w).unwrap();
+        let mut fs = Frame::new(&mut smooth, w, h, w).unwrap();
         let mut scratch = vec![0u32; scratch_len(w)];
         gaussian_filter(
             &fd,

@@ -10,7 +10,7 @@
 //! (laser too weak, scene too bright), so that no second pass over the frames is needed.
 
 use super::threshold::{histogram_len, ThresholdError};
-use super::{lanes, Frame, FrameError, FrameMut, Pixel};
+use super::{lanes, Frame, FrameError, Pixel};
 use crate::real::Real;
 
 /// Statistics gathered while subtracting a frame pair.
@@ -34,12 +34,12 @@ pub struct SubtractStats {
 /// Cost: one pass, a handful of integer operations per pixel, no floating point per pixel.
 /// [`subtract_with_histogram`] is the pipeline's faster form of the same.
 pub fn subtract<P: Pixel>(
-    on: &Frame<'_, P>,
-    off: &Frame<'_, P>,
-    out: &mut FrameMut<'_, P>,
+    on: &Frame<P, impl AsRef<[P]>>,
+    off: &Frame<P, impl AsRef<[P]>>,
+    out: &mut Frame<P, impl AsMut<[P]>>,
 ) -> Result<SubtractStats, FrameError> {
     on.check_same_size(off)?;
-    on.check_same_size(&out.as_frame())?;
+    on.check_same_size(out)?;
     let (max_difference, off_sum) = subtract_pixels(on, off, out, |_| {});
     Ok(SubtractStats {
         max_difference,
@@ -51,9 +51,9 @@ pub fn subtract<P: Pixel>(
 /// 8-bit frames): writes `out`, calls `each` with every difference, returns the largest
 /// difference and the laser-off sum. Sizes are checked by the callers.
 fn subtract_pixels<P: Pixel>(
-    on: &Frame<'_, P>,
-    off: &Frame<'_, P>,
-    out: &mut FrameMut<'_, P>,
+    on: &Frame<P, impl AsRef<[P]>>,
+    off: &Frame<P, impl AsRef<[P]>>,
+    out: &mut Frame<P, impl AsMut<[P]>>,
     mut each: impl FnMut(u32),
 ) -> (u32, u64) {
     let (mut max_difference, mut off_sum) = (0u32, 0u64);
@@ -72,7 +72,7 @@ fn subtract_pixels<P: Pixel>(
 }
 
 /// `sum / (width · height)` of `frame` (a Frame is never empty).
-fn mean<P: Pixel>(sum: u64, frame: &Frame<'_, P>) -> Real {
+fn mean<P: Pixel, S>(sum: u64, frame: &Frame<P, S>) -> Real {
     let pixels = (frame.width() as u64)
         .saturating_mul(frame.height() as u64)
         .max(1);
@@ -118,7 +118,7 @@ fn difference_word<P: Pixel>(
 /// [`subtract`] and the histogram of the difference
 /// ([`threshold::histogram`](super::threshold::histogram) of `out`) in one pass over the
 /// frames: `bins` is cleared and then holds the count of each grey level of `out`, exactly as
-/// if `threshold::histogram(&out.as_frame(), bins)` had been called after [`subtract`]; the
+/// if `threshold::histogram(&out, bins)` had been called after [`subtract`]; the
 /// returned statistics and `out` are those of [`subtract`].
 ///
 /// Errors: those of [`subtract`] (as [`ThresholdError::Frame`]) and of
@@ -134,25 +134,24 @@ fn difference_word<P: Pixel>(
 /// histogram at the end. The largest difference is then the highest non-empty bin. Other
 /// pixel types and bit depths take a plain per-pixel loop.
 pub fn subtract_with_histogram<P: Pixel>(
-    on: &Frame<'_, P>,
-    off: &Frame<'_, P>,
-    out: &mut FrameMut<'_, P>,
+    on: &Frame<P, impl AsRef<[P]>>,
+    off: &Frame<P, impl AsRef<[P]>>,
+    out: &mut Frame<P, impl AsMut<[P]>>,
     bins: &mut [u32],
 ) -> Result<SubtractStats, ThresholdError> {
     on.check_same_size(off)?;
-    on.check_same_size(&out.as_frame())?;
-    let out_frame = out.as_frame();
-    let levels = histogram_len(&out_frame);
+    on.check_same_size(out)?;
+    let levels = histogram_len(out);
     if bins.len() < levels {
         return Err(ThresholdError::HistogramTooSmall {
             needed: levels,
             actual: bins.len(),
         });
     }
-    let out_max = out_frame.max_value();
-    if out_frame
+    let out_max = out.max_value();
+    if out
         .width()
-        .checked_mul(out_frame.height())
+        .checked_mul(out.height())
         .and_then(|n| u32::try_from(n).ok())
         .is_none()
     {
@@ -249,7 +248,7 @@ mod tests {
         let mut out = [77u8; 6];
         let fon = Frame::new(&on, 3, 2, 3).unwrap();
         let foff = Frame::new(&off, 3, 2, 3).unwrap();
-        let mut fout = FrameMut::new(&mut out, 3, 2, 3).unwrap();
+        let mut fout = Frame::new(&mut out, 3, 2, 3).unwrap();
         let s = subtract(&fon, &foff, &mut fout).unwrap();
         assert_eq!(out, [6, 250, 0, 0, 0, 30]);
         assert_eq!(s.max_difference, 250);
@@ -271,7 +270,7 @@ mod tests {
             .unwrap()
             .with_bit_depth(10)
             .unwrap();
-        let mut fout = FrameMut::new(&mut out, 2, 2, 4).unwrap();
+        let mut fout = Frame::new(&mut out, 2, 2, 4).unwrap();
         let s = subtract(&fon, &foff, &mut fout).unwrap();
         assert_eq!(out, [1000, 0, 0, 0, 23, 0, 0, 0]);
         assert_eq!(s.max_difference, 1000);
@@ -325,13 +324,13 @@ mod tests {
             let mut out_b = std::vec![7u8; w * h];
             let mut bins_a = std::vec![0u32; 256];
             let mut bins_b = std::vec![5u32; 300];
-            let mut fa = FrameMut::new(&mut out_a, w, h, w)
+            let mut fa = Frame::new(&mut out_a, w, h, w)
                 .unwrap()
                 .with_bit_depth(bits)
                 .unwrap();
             let sa = subtract(&fon, &foff, &mut fa).unwrap();
-            let total = histogram(&fa.as_frame(), &mut bins_a).unwrap();
-            let mut fb = FrameMut::new(&mut out_b, w, h, w)
+            let total = histogram(&fa, &mut bins_a).unwrap();
+            let mut fb = Frame::new(&mut out_b, w, h, w)
                 .unwrap()
                 .with_bit_depth(bits)
                 .unwrap();
@@ -354,7 +353,7 @@ mod tests {
             .with_bit_depth(10)
             .unwrap();
         let mut out = [0u16; 4];
-        let mut fo = FrameMut::new(&mut out, 2, 2, 2)
+        let mut fo = Frame::new(&mut out, 2, 2, 2)
             .unwrap()
             .with_bit_depth(10)
             .unwrap();
@@ -379,7 +378,7 @@ mod tests {
         let mut o = [0u8; 12];
         let fa = Frame::new(&a, 4, 3, 4).unwrap();
         let fb = Frame::new(&b, 3, 4, 3).unwrap();
-        let mut fo = FrameMut::new(&mut o, 4, 3, 4).unwrap();
+        let mut fo = Frame::new(&mut o, 4, 3, 4).unwrap();
         assert_eq!(
             subtract(&fa, &fb, &mut fo).unwrap_err(),
             FrameError::SizeMismatch {
@@ -388,7 +387,7 @@ mod tests {
             }
         );
         let fb = Frame::new(&b, 4, 3, 4).unwrap();
-        let mut fo = FrameMut::new(&mut o, 6, 2, 6).unwrap();
+        let mut fo = Frame::new(&mut o, 6, 2, 6).unwrap();
         assert_eq!(
             subtract(&fa, &fb, &mut fo).unwrap_err(),
             FrameError::SizeMismatch {

@@ -13,7 +13,8 @@
 
 use core::fmt;
 
-use super::{Frame, FrameError, FrameMut, Pixel};
+use super::{Frame, FrameError, Pixel};
+use crate::real::Real;
 
 /// Value written by [`threshold_mask`] for a foreground pixel (background is `0`).
 pub const MASK_FOREGROUND: u8 = 1;
@@ -72,7 +73,7 @@ impl fmt::Display for ThresholdError {
 #[cfg(feature = "std")]
 impl std::error::Error for ThresholdError {}
 
-fn pixel_count<P: Pixel>(frame: &Frame<'_, P>) -> Result<u32, ThresholdError> {
+fn pixel_count<P: Pixel, S>(frame: &Frame<P, S>) -> Result<u32, ThresholdError> {
     frame
         .width()
         .checked_mul(frame.height())
@@ -81,7 +82,7 @@ fn pixel_count<P: Pixel>(frame: &Frame<'_, P>) -> Result<u32, ThresholdError> {
 }
 
 /// Number of histogram bins a frame needs: `2^bit_depth` (256 for 8-bit, 1024 for 10-bit).
-pub fn histogram_len<P: Pixel>(frame: &Frame<'_, P>) -> usize {
+pub fn histogram_len<P: Pixel, S>(frame: &Frame<P, S>) -> usize {
     frame.max_value() as usize + 1
 }
 
@@ -91,7 +92,10 @@ pub fn histogram_len<P: Pixel>(frame: &Frame<'_, P>) -> usize {
 /// `bins` needs at least [`histogram_len`] entries; extra entries are cleared and stay zero.
 /// Values above the frame's declared saturation level (bad data: a 10-bit frame holding 1100)
 /// are counted in the top bin `2^bit_depth - 1`, i.e. treated as saturated.
-pub fn histogram<P: Pixel>(frame: &Frame<'_, P>, bins: &mut [u32]) -> Result<u32, ThresholdError> {
+pub fn histogram<P: Pixel>(
+    frame: &Frame<P, impl AsRef<[P]>>,
+    bins: &mut [u32],
+) -> Result<u32, ThresholdError> {
     let levels = histogram_len(frame);
     if bins.len() < levels {
         return Err(ThresholdError::HistogramTooSmall {
@@ -273,14 +277,101 @@ impl ThresholdMethod {
     }
 }
 
+/// Noise σ (grey levels) of a difference image `max(on − off, 0)`, from its histogram.
+///
+/// With `on − off = X ~ N(0, σ²)` off the stripe, the clamped difference has
+/// `E[max(X, 0)] = σ/√(2π)`, so `σ̂ = √(2π)·mean`. The mean is taken over all pixels: the
+/// stripe's few hundred pixels inflate it slightly, which only makes the tests that use `σ̂`
+/// more conservative. Sensor noise, shot noise on bright ambient and the structure left by
+/// hand motion all count as noise here, as they should. Returns 0 for an empty histogram.
+pub fn difference_noise(histogram: &[u32]) -> Real {
+    let (mut n, mut sum) = (0u64, 0u64);
+    for (level, &count) in histogram.iter().enumerate() {
+        n += count as u64;
+        sum += count as u64 * level as u64;
+    }
+    if n == 0 {
+        return 0.0;
+    }
+    let two_pi: Real = 2.0 * crate::real::PI;
+    crate::real::sqrt(two_pi) * (sum as Real / n as Real)
+}
+
+/// The floors that keep sensor noise out of a difference image's darkness test and threshold
+/// (`docs/pipeline.md`, "Contrast and threshold"). `noise` below is the image's σ̂
+/// ([`difference_noise`]). [`Default`] suits the reference hardware.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Floors {
+    /// Lowest threshold the automatic methods may return (grey levels of the difference
+    /// image). Keeps sensor noise out of the segmentation when the laser is weak.
+    pub min_threshold: u32,
+    /// Fraction of the brightest difference below which a pixel never counts as laser: the
+    /// threshold is at least `relative_threshold × max_difference`.
+    pub relative_threshold: Real,
+    /// Noise-relative floor of the threshold: `threshold_snr × σ̂` (a Gaussian pixel exceeds
+    /// 5 σ with probability 3·10⁻⁷, i.e. < 1 false pixel per frame), so that dim stripe ends
+    /// are segmented as far as the noise allows.
+    pub threshold_snr: Real,
+    /// Absolute floor of the darkness test: the brightest difference must reach at least this
+    /// many grey levels, or the pair is "dark" (the laser did not reach anything in range).
+    pub min_contrast: u32,
+    /// Noise-relative darkness test: the brightest difference must also reach
+    /// `contrast_snr × σ̂`. The max of `N` ≈ 3.6·10⁵ noise pixels is ≈ 4.5 σ, so 8 σ is never
+    /// reached by noise alone while a stripe 10 grey levels high over σ ≈ 0.8 passes.
+    pub contrast_snr: Real,
+}
+
+impl Default for Floors {
+    fn default() -> Self {
+        Floors {
+            min_threshold: 6,
+            relative_threshold: 0.08,
+            // Off by default: σ̂ includes the stripe's own pixels, so on bright stripes it
+            // would raise the threshold and cut the stripe ends (measured: worse fits).
+            threshold_snr: 0.0,
+            // Kept at 20 DN: stripes peaking at 9–19 DN (far, dark bark) are well above the
+            // noise (σ̂ ≈ 0.7–1.2 DN) but their fits err by 10–50 mm (measured on the
+            // evaluation's development seeds); the noise-relative test still applies.
+            min_contrast: 20,
+            contrast_snr: 8.0,
+        }
+    }
+}
+
+impl Floors {
+    /// Whether a brightest difference of `max_difference` over noise `noise` is laser light:
+    /// at least `min_contrast` and `contrast_snr × noise`.
+    pub fn is_lit(&self, max_difference: u32, noise: Real) -> bool {
+        let floor = (self.min_contrast as Real).max(self.contrast_snr * noise);
+        // `floor` is finite: `difference_noise` of a histogram always is.
+        max_difference as Real >= floor
+    }
+
+    /// The threshold applied: `automatic` raised to `min_threshold`,
+    /// `relative_threshold × max_difference` and `threshold_snr × noise`.
+    pub fn apply(&self, automatic: u32, max_difference: u32, noise: Real) -> u32 {
+        let relative = (self.relative_threshold * max_difference as Real) as u32;
+        let noise_floor: Real = <Real as crate::real::Float>::ceil(self.threshold_snr * noise);
+        let noise_floor = if noise_floor.is_finite() && noise_floor > 0.0 {
+            noise_floor as u32
+        } else {
+            0
+        };
+        automatic
+            .max(self.min_threshold)
+            .max(relative)
+            .max(noise_floor)
+    }
+}
+
 /// Writes the binary mask of `frame`: [`MASK_FOREGROUND`] where `value > threshold`, `0`
 /// elsewhere. Returns the number of foreground pixels. `mask` must have the frame's size.
 pub fn threshold_mask<P: Pixel>(
-    frame: &Frame<'_, P>,
+    frame: &Frame<P, impl AsRef<[P]>>,
     threshold: u32,
-    mask: &mut FrameMut<'_, u8>,
+    mask: &mut Frame<u8, impl AsMut<[u8]>>,
 ) -> Result<u32, ThresholdError> {
-    frame.check_same_size(&mask.as_frame())?;
+    frame.check_same_size(mask)?;
     pixel_count(frame)?;
     let mut count = 0u32;
     for y in 0..frame.height() {
@@ -301,11 +392,11 @@ pub fn threshold_mask<P: Pixel>(
 /// 255 long ([`ThresholdError::BadThresholds`]). With one threshold this is
 /// [`threshold_mask`].
 pub fn classify<P: Pixel>(
-    frame: &Frame<'_, P>,
+    frame: &Frame<P, impl AsRef<[P]>>,
     thresholds: &[u32],
-    out: &mut FrameMut<'_, u8>,
+    out: &mut Frame<u8, impl AsMut<[u8]>>,
 ) -> Result<(), ThresholdError> {
-    frame.check_same_size(&out.as_frame())?;
+    frame.check_same_size(out)?;
     if thresholds.len() > 255 || thresholds.windows(2).any(|w| w[0] >= w[1]) {
         return Err(ThresholdError::BadThresholds);
     }
@@ -321,7 +412,44 @@ pub fn classify<P: Pixel>(
 
 #[cfg(test)]
 mod tests {
+    extern crate std;
     use super::*;
+
+    /// `difference_noise` recovers σ of Gaussian noise from the clamped difference's histogram
+    /// (E[max(X,0)] = σ/√(2π)); 1-DN rounding adds ≈ 1/12 DN² of variance, so the tolerance
+    /// is 5 % at σ = 3 DN.
+    #[test]
+    fn difference_noise_recovers_gaussian_sigma() {
+        let mut hist = std::vec![0u32; 256];
+        let mut rng = crate::solvers::circle::tests::Rng::new(7);
+        let sigma: f64 = 3.0;
+        for _ in 0..200_000 {
+            let x = (sigma * rng.gauss()).round().max(0.0) as usize;
+            hist[x.min(255)] += 1;
+        }
+        let est = difference_noise(&hist);
+        assert!((est as f64 / sigma - 1.0).abs() < 0.05, "σ̂ = {est}");
+        assert_eq!(difference_noise(&[0; 4]), 0.0);
+    }
+
+    /// The threshold is the largest of the automatic one and the three floors.
+    #[test]
+    fn floors_raise_the_threshold() {
+        let floors = Floors {
+            min_threshold: 6,
+            relative_threshold: 0.1,
+            threshold_snr: 5.0,
+            min_contrast: 20,
+            contrast_snr: 8.0,
+        };
+        assert_eq!(floors.apply(3, 40, 0.0), 6);
+        assert_eq!(floors.apply(3, 200, 0.0), 20);
+        assert_eq!(floors.apply(3, 40, 2.1), 11);
+        assert_eq!(floors.apply(30, 200, 2.1), 30);
+        assert!(floors.is_lit(20, 2.0));
+        assert!(!floors.is_lit(19, 0.0));
+        assert!(!floors.is_lit(30, 4.0));
+    }
 
     /// Between-class variance of the partition `[0, t]` / `[t+1, ..]`, computed from first
     /// principles (class weights and means by direct summation), independently of the
@@ -482,18 +610,18 @@ mod tests {
         let px: [u8; 6] = [0, 10, 11, 200, 50, 10];
         let f = Frame::new(&px, 3, 2, 3).unwrap();
         let mut m = [7u8; 6];
-        let mut fm = FrameMut::new(&mut m, 3, 2, 3).unwrap();
+        let mut fm = Frame::new(&mut m, 3, 2, 3).unwrap();
         assert_eq!(threshold_mask(&f, 10, &mut fm).unwrap(), 3);
         assert_eq!(m, [0, 0, 1, 1, 1, 0]);
-        let mut fm = FrameMut::new(&mut m, 3, 2, 3).unwrap();
+        let mut fm = Frame::new(&mut m, 3, 2, 3).unwrap();
         classify(&f, &[10, 60], &mut fm).unwrap();
         assert_eq!(m, [0, 0, 1, 2, 1, 0]);
-        let mut fm = FrameMut::new(&mut m, 3, 2, 3).unwrap();
+        let mut fm = Frame::new(&mut m, 3, 2, 3).unwrap();
         assert_eq!(
             classify(&f, &[60, 10], &mut fm).unwrap_err(),
             ThresholdError::BadThresholds
         );
-        let mut fm = FrameMut::new(&mut m, 2, 3, 2).unwrap();
+        let mut fm = Frame::new(&mut m, 2, 3, 2).unwrap();
         assert!(matches!(
             threshold_mask(&f, 10, &mut fm).unwrap_err(),
             ThresholdError::Frame(FrameError::SizeMismatch { .. })

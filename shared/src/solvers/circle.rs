@@ -1,14 +1,17 @@
 //! Circle fits on 2-D points (`docs/cylinder.md`, "Circle fits").
 //!
-//! * Algebraic fits — [`fit_kasa`], [`fit_taubin`], [`fit_hyper`] — minimise
-//!   `Σ (A·z + B·x + C·y + D)²` (`z = x² + y²`) under a normalisation constraint; they are
-//!   closed-form (one small polynomial root) and serve as initial values. Kåsa is biased
-//!   towards small radii on short arcs; Hyper (Al-Sharadqah & Chernov 2009) has no
-//!   second-order essential bias.
-//! * [`fit_geometric`]: Levenberg–Marquardt on the orthogonal distances `|p − c| − r`,
-//!   with the parameter covariance.
+//! * Algebraic fits — [`fit_hyper`], [`fit_kasa`] — minimise `Σ (A·z + B·x + C·y + D)²`
+//!   (`z = x² + y²`) under a normalisation constraint; they are closed-form (one small
+//!   polynomial root). Hyper (Al-Sharadqah & Chernov 2009) has no second-order essential bias
+//!   and is the initial value of the geometric fits; Kåsa, biased towards small radii on short
+//!   arcs, is kept as the naive baseline that evaluations compare against.
+//! * [`fit_geometric`]: Levenberg–Marquardt ([`super::lm`]) on the orthogonal distances
+//!   `|p − c| − r`, with the parameter covariance.
 //! * [`fit_robust`]: the same, iteratively reweighted with Tukey's biweight and a MAD scale,
 //!   for stripes with bark, branches or a second object.
+//! * The radius σ of a geometric fit beyond its equal-noise covariance: from each point's
+//!   noise vector ([`circle_radius_sigma`]) or from the residuals themselves
+//!   ([`circle_radius_sigma_residuals`]) (`docs/error-model.md`).
 //!
 //! Every fit first centres the data on its centroid and scales it to unit RMS distance from
 //! it, so that the moments are `O(1)` whatever the units — in `f32` the raw moments of
@@ -28,7 +31,8 @@
 use crate::real::Float;
 use crate::real::{self, sqrt, Mat3, Real, Vec2, Vec3};
 
-use super::{levenberg_step, SolveError};
+use super::lm::{self, Evaluated, LeastSquares, LmParams, NormalEquations};
+use super::SolveError;
 
 /// A circle: centre and radius (same units as the points).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -48,44 +52,6 @@ impl Circle {
     /// Signed orthogonal distance of `p` from the circle: `|p − c| − r` (positive outside).
     pub fn distance(&self, p: Vec2) -> Real {
         real::norm(&(p - self.centre)) - self.radius
-    }
-}
-
-/// Settings of the Levenberg–Marquardt iteration ([`fit_geometric`], [`fit_robust`], and the
-/// cylinder fit).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LmParams {
-    /// Most iterations (accepted or rejected steps).
-    pub max_iterations: u32,
-    /// Convergence when an accepted step is shorter than `tolerance·(1 + |θ|)`, in the
-    /// normalised coordinates (unit RMS spread of the data).
-    pub tolerance: Real,
-    /// Initial damping `λ` (relative to the diagonal of `JᵀJ`).
-    pub initial_lambda: Real,
-}
-
-impl Default for LmParams {
-    /// 100 iterations, `λ₀ = 1e-3`, tolerance `1000·ε` (f64: 2.2e-13, f32: 1.2e-4 of the
-    /// data's spread): a step below it changes the parameters by a few ulps of the rounding
-    /// noise the cost function itself carries (`n` terms each rounded to `ε`).
-    fn default() -> Self {
-        LmParams {
-            max_iterations: 100,
-            tolerance: 16.0 * Real::EPSILON,
-            initial_lambda: 1e-3,
-        }
-    }
-}
-
-impl LmParams {
-    fn validate(&self) -> Result<(), SolveError> {
-        if self.max_iterations == 0
-            || !(self.tolerance.is_finite() && self.tolerance >= 0.0)
-            || !(self.initial_lambda.is_finite() && self.initial_lambda >= 0.0)
-        {
-            return Err(SolveError::InvalidParameter);
-        }
-        Ok(())
     }
 }
 
@@ -195,7 +161,6 @@ fn moments(points: &[Vec2], norm: &Normalisation) -> Moments {
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Algebraic {
     Kasa,
-    Taubin,
     Hyper,
 }
 
@@ -205,12 +170,6 @@ enum Algebraic {
 /// radii on short arcs (`docs/cylinder.md`, "Circle fits"). Needs 3 non-collinear points.
 pub fn fit_kasa(points: &[Vec2]) -> Result<Circle, SolveError> {
     fit_algebraic(points, Algebraic::Kasa)
-}
-
-/// Taubin's fit: the algebraic distance normalised by its mean gradient
-/// (`docs/cylinder.md`, "Circle fits").
-pub fn fit_taubin(points: &[Vec2]) -> Result<Circle, SolveError> {
-    fit_algebraic(points, Algebraic::Taubin)
 }
 
 /// Al-Sharadqah & Chernov's "Hyper" fit (2009): the constraint `2·Taubin − Pratt`, which
@@ -233,16 +192,6 @@ fn fit_algebraic(points: &[Vec2], kind: Algebraic) -> Result<Circle, SolveError>
         - var_z * cov_xy;
     let eta = match kind {
         Algebraic::Kasa => 0.0,
-        Algebraic::Taubin => {
-            let a3 = 4.0 * m.mz;
-            let a2 = -3.0 * m.mz * m.mz - m.mzz;
-            smallest_root(|x| {
-                (
-                    a0 + x * (a1 + x * (a2 + x * a3)),
-                    a1 + x * (2.0 * a2 + 3.0 * a3 * x),
-                )
-            })?
-        }
         Algebraic::Hyper => {
             let a2 = 4.0 * cov_xy - 3.0 * m.mz * m.mz - m.mzz;
             smallest_root(|x| {
@@ -352,7 +301,37 @@ fn accumulate<W: Fn(Vec2) -> Real>(
     (jtj, jtd, cost, wsum, used)
 }
 
-/// Levenberg–Marquardt on normalised coordinates; returns `(θ, iterations)`.
+/// The (weighted) orthogonal-distance problem in normalised coordinates, parameters
+/// `θ = (a, b, r)`; fewer than 3 points of non-zero weight are out of the domain.
+struct CircleProblem<'a, W> {
+    points: &'a [Vec2],
+    norm: &'a Normalisation,
+    weight: &'a W,
+}
+
+impl<W: Fn(Vec2) -> Real> LeastSquares<3> for CircleProblem<'_, W> {
+    type Params = Vec3;
+    type Extra = ();
+
+    fn evaluate(&self, theta: &Vec3) -> Result<(NormalEquations<3>, ()), SolveError> {
+        let (jtj, jtr, cost, _, used) = accumulate(self.points, self.norm, *theta, self.weight);
+        if used < 3 {
+            return Err(SolveError::TooFewPoints);
+        }
+        Ok((NormalEquations { jtj, jtr, cost }, ()))
+    }
+
+    fn step(&self, theta: &Vec3, delta: &Vec3) -> Vec3 {
+        theta + delta
+    }
+
+    fn step_scale(&self, theta: &Vec3) -> Real {
+        1.0 + real::norm(theta)
+    }
+}
+
+/// Levenberg–Marquardt ([`lm::minimise`]) on normalised coordinates; returns
+/// `(θ, iterations)`.
 fn lm<W: Fn(Vec2) -> Real>(
     points: &[Vec2],
     norm: &Normalisation,
@@ -360,48 +339,17 @@ fn lm<W: Fn(Vec2) -> Real>(
     params: &LmParams,
     weight: &W,
 ) -> Result<(Vec3, u32), SolveError> {
-    let mut theta = start;
-    let mut lambda = params.initial_lambda;
-    let (mut jtj, mut jtd, mut cost, _, used) = accumulate(points, norm, theta, weight);
-    if used < 3 {
-        return Err(SolveError::TooFewPoints);
-    }
-    if !cost.is_finite() {
+    let problem = CircleProblem {
+        points,
+        norm,
+        weight,
+    };
+    let start = Evaluated::at(&problem, start)?;
+    if !start.normal.cost.is_finite() {
         return Err(SolveError::NonFinite);
     }
-    for it in 1..=params.max_iterations {
-        let Some(step) = levenberg_step(&jtj, &jtd, &mut lambda)? else {
-            continue;
-        };
-        let cand = theta + step;
-        let (jtj2, jtd2, cost2, _, used2) = accumulate(points, norm, cand, weight);
-        // Near the minimum of a flat valley the cost changes by less than its own rounding
-        // (ε·cost) while the gradient is still resolved (docs/cylinder.md, "Geometric
-        // fit"): accept a step that leaves the cost equal to rounding and lowers the
-        // gradient, which reaches ε/λ_min instead of √(ε/λ_min) — matters in f32.
-        let rounding = 8.0 * Real::EPSILON * cost;
-        let better =
-            cost2 < cost || (cost2 <= cost + rounding && real::norm(&jtd2) < real::norm(&jtd));
-        if cost2.is_finite() && better && used2 >= 3 {
-            let small = real::norm(&step) <= params.tolerance * (1.0 + real::norm(&theta));
-            theta = cand;
-            jtj = jtj2;
-            jtd = jtd2;
-            cost = cost2;
-            lambda = (lambda * 0.1).max(1e-12);
-            if small {
-                return Ok((theta, it));
-            }
-        } else {
-            lambda = (lambda * 10.0).max(Real::EPSILON);
-            // Every direction increases the cost even with a vanishing step: we are at the
-            // minimum to rounding (the cost cannot be lowered in this precision).
-            if lambda > 1e16 {
-                return Ok((theta, it));
-            }
-        }
-    }
-    Err(SolveError::NotConverged)
+    let (min, iterations) = lm::minimise(&problem, start, params)?;
+    Ok((min.params, iterations))
 }
 
 fn finish<W: Fn(Vec2) -> Real>(
@@ -486,7 +434,7 @@ pub struct RobustParams {
     pub tuning: Real,
     /// Floor of the robust scale (same units as the points): keeps exact or nearly exact
     /// data from getting a zero scale (which would reject every point). Set it to the
-    /// expected point noise (e.g. from [`crate::error_model`]).
+    /// expected point noise (e.g. from [`crate::noise`]).
     pub min_scale: Real,
     /// Most reweighting rounds.
     pub max_rounds: u32,
@@ -583,645 +531,76 @@ pub fn fit_robust(
     finish(points, &norm, next, it.max(last_it), &weight)
 }
 
-// ---------------------------------------------------------------------------------------
-// Ellipse fit (non-round sections)
-// ---------------------------------------------------------------------------------------
-
-/// Result of [`fit_ellipse`]: an ellipse fitted to the points a circle fit accepted, and the
-/// comparison of the two fits (`docs/cylinder.md`, "Elliptic stems").
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct EllipseFit {
-    /// Centre of the ellipse.
-    pub centre: Vec2,
-    /// Semi-axes `(major, minor)`.
-    pub semi_axes: (Real, Real),
-    /// Direction of the major axis (radians from the first coordinate axis, in `(−π/2, π/2]`).
-    pub angle: Real,
-    /// 1σ of the mean diameter `a + b` (semi-axes sum, i.e. the mean of the two diameters),
-    /// from the fit: the larger of the Gauss–Newton and the residual-sandwich estimates.
-    pub sigma_mean_diameter: Real,
-    /// Sum of squared radial residuals of the ellipse.
-    pub ssr: Real,
-    /// Sum of squared residuals of the starting circle over the same points.
-    pub ssr_circle: Real,
-    /// Points used (circle residual within the cutoff).
-    pub points: usize,
-    /// LM iterations.
-    pub iterations: u32,
-}
-
-impl EllipseFit {
-    /// Mean diameter `a + b` of the two semi-axes (what cross-calipering reports).
-    pub fn mean_diameter(&self) -> Real {
-        self.semi_axes.0 + self.semi_axes.1
-    }
-    /// Relative non-roundness `(a − b)/(a + b)`.
-    pub fn eccentricity(&self) -> Real {
-        let s = self.semi_axes.0 + self.semi_axes.1;
-        if s > 0.0 {
-            (self.semi_axes.0 - self.semi_axes.1) / s
-        } else {
-            0.0
-        }
-    }
-    /// F statistic of the circle against the ellipse (2 extra parameters):
-    /// `((SSR_c − SSR_e)/2) / (SSR_e/(n − 5))`. Large when the circle leaves a systematic
-    /// pattern the ellipse explains.
-    pub fn f_statistic(&self) -> Real {
-        if self.points <= 5 || !(self.ssr > 0.0) {
-            return Real::INFINITY;
-        }
-        0.5 * (self.ssr_circle - self.ssr) / (self.ssr / (self.points - 5) as Real)
-    }
-}
-
-/// Relative cost decrease below which [`fit_ellipse`] stops (1e-9, or 100·ε in `f32`).
-const COST_SETTLED: Real = if 100.0 * Real::EPSILON > 1e-9 {
-    100.0 * Real::EPSILON
-} else {
-    1e-9
-};
-
-type M5 = nalgebra::SMatrix<Real, 5, 5>;
-type V5 = nalgebra::SVector<Real, 5>;
-
-/// Polar equation of an ellipse about its centre: `1/r² = A + B cos 2θ + C sin 2θ`
-/// (`docs/cylinder.md`, "Elliptic stems"). Residual `|d| − r(θ)` and its gradient in
-/// `(c_x, c_y, A, B, C)`; `None` where `g = 1/r² ≤ 0` or at the centre.
-fn ellipse_residual(q: Vec2, p: &V5) -> Option<(Real, V5)> {
-    let d = q - Vec2::new(p[0], p[1]);
-    let l2 = d.norm_squared();
-    if !(l2 > 0.0) {
-        return None;
-    }
-    let l = sqrt(l2);
-    let (cth, sth) = (d.x / l, d.y / l);
-    let (c2, s2) = (cth * cth - sth * sth, 2.0 * sth * cth);
-    let g = p[2] + p[3] * c2 + p[4] * s2;
-    if !(g > 0.0) {
-        return None;
-    }
-    let r = 1.0 / sqrt(g);
-    let h = 0.5 * r * r * r; // −∂r/∂g
-                             // ∂r/∂θ = −½ g^(−3/2) ∂g/∂θ, ∂g/∂θ = −2B sin 2θ + 2C cos 2θ.
-    let dr_dth = -h * (-2.0 * p[3] * s2 + 2.0 * p[4] * c2);
-    // θ = atan2(d_y, d_x): ∂θ/∂c_x = d_y/|d|², ∂θ/∂c_y = −d_x/|d|².
-    let j = V5::new(
-        -cth - dr_dth * d.y / l2,
-        -sth + dr_dth * d.x / l2,
-        h,
-        h * c2,
-        h * s2,
-    );
-    Some((l - r, j))
-}
-
-fn ellipse_accumulate(
-    points: &[Vec2],
-    keep: impl Fn(Vec2) -> bool,
-    norm: &Normalisation,
-    p: &V5,
-) -> Option<(M5, V5, M5, Real, usize)> {
-    let mut jtj = M5::zeros();
-    let mut jtd = V5::zeros();
-    let mut meat = M5::zeros();
-    let mut cost = 0.0;
-    let mut n = 0;
+/// σ of the radius of a geometric circle fit estimated from the data's own residuals: the
+/// heteroscedasticity-consistent sandwich `A⁻¹BA⁻¹` with `B = Σ dᵢ²JᵢJᵢᵀ·n/(n − 3)`
+/// (`dᵢ = |qᵢ − c| − r`, `J = (−nᵢ, −1)`; White 1980, with the `n/(n − 3)` small-sample
+/// correction). Unlike `σ̂²(JᵀJ)⁻¹` it does not assume equal noise on every point, so the
+/// noisy, dim ends of a curve count with the noise they really have
+/// (`docs/error-model.md`, "Data-driven fit uncertainty"). Points with `|dᵢ| > cutoff`
+/// (the robust fit's rejected outliers) are left out. Infinite if `A` is singular or fewer
+/// than 4 points remain.
+pub fn circle_radius_sigma_residuals(c: &Circle, points: &[Vec2], cutoff: Real) -> Real {
+    let mut a = Mat3::zeros();
+    let mut b = Mat3::zeros();
+    let mut n = 0usize;
     for q in points {
-        if !keep(*q) {
+        let d = q - c.centre;
+        let len = real::norm(&d);
+        if !(len > 0.0) {
             continue;
         }
-        let (d, j) = ellipse_residual(norm.apply(*q), p)?;
+        let res = len - c.radius;
+        if !(res.abs() <= cutoff) {
+            continue;
+        }
+        let nn = d / len;
+        let j = Vec3::new(-nn.x, -nn.y, -1.0);
         let jj = j * j.transpose();
-        jtj += jj;
-        meat += jj * (d * d);
-        jtd += j * d;
-        cost += d * d;
+        a += jj;
+        b += jj * (res * res);
         n += 1;
     }
-    Some((jtj, jtd, meat, cost, n))
-}
-
-/// The ellipse model at `circle` (`B = C = 0`, in the points' normalised coordinates) and its
-/// normal equations over the points within `cutoff` of the circle: the start of
-/// [`fit_ellipse`] and the whole of [`ellipse_score_f`]. At least 8 points must be kept.
-#[allow(clippy::type_complexity)]
-fn ellipse_at_circle(
-    points: &[Vec2],
-    circle: &Circle,
-    cutoff: Real,
-) -> Result<(Normalisation, V5, (M5, V5, M5, Real, usize)), SolveError> {
-    if !(cutoff > 0.0 && circle.radius > 0.0 && circle.radius.is_finite()) {
-        return Err(SolveError::InvalidParameter);
+    if n < 4 {
+        return Real::INFINITY;
     }
-    let keep = |q: Vec2| circle.distance(q).abs() <= cutoff;
-    let norm = Normalisation::of(points, 8)?;
-    let c0 = norm.apply(circle.centre);
-    let r0 = circle.radius / norm.scale;
-    let p = V5::new(c0.x, c0.y, 1.0 / (r0 * r0), 0.0, 0.0);
-    let sums = ellipse_accumulate(points, keep, &norm, &p).ok_or(SolveError::Degenerate)?;
-    if sums.4 < 8 {
-        return Err(SolveError::TooFewPoints);
-    }
-    Ok((norm, p, sums))
-}
-
-/// Score-test (Lagrange-multiplier) form of [`EllipseFit::f_statistic`] at the circle, without
-/// fitting the ellipse (`docs/cylinder.md`, "Screening"): the cost decrease one Gauss–Newton
-/// step of the ellipse model predicts from `circle`, `Δ = gᵀ(JᵀJ)⁻¹g` (`g = Jᵀd` over the
-/// points within `cutoff` of the circle, the set [`fit_ellipse`] uses), as
-/// `(Δ/2) / ((SSR_c − Δ)/(n − 5))`. One pass over the points, where the ellipse fit needs up
-/// to hundreds (its valley is long and flat); close to the fitted `F` when the section is
-/// nearly round, and large whenever the circle leaves a pattern the ellipse explains.
-///
-/// Errors: as [`fit_ellipse`] for the data (fewer than 8 points kept, non-finite values,
-/// singular normal matrix).
-pub fn ellipse_score_f(points: &[Vec2], circle: &Circle, cutoff: Real) -> Result<Real, SolveError> {
-    let (_, _, (jtj, jtd, _, cost, n)) = ellipse_at_circle(points, circle, cutoff)?;
-    let inv = jtj.try_inverse().ok_or(SolveError::Degenerate)?;
-    let decrease = (jtd.transpose() * inv * jtd)[(0, 0)].clamp(0.0, cost);
-    let rest = cost - decrease;
-    if !(rest > 0.0) {
-        return Ok(Real::INFINITY);
-    }
-    let f = 0.5 * decrease / (rest / (n - 5) as Real);
-    if f.is_finite() {
-        Ok(f)
-    } else {
-        Err(SolveError::Degenerate)
+    let k = n as Real / (n - 3) as Real;
+    match a.try_inverse() {
+        Some(inv) => {
+            let cov = inv * b * inv;
+            sqrt((cov[(2, 2)] * k).max(0.0))
+        }
+        None => Real::INFINITY,
     }
 }
 
-/// Geometric ellipse fit (radial residuals about the centre) to the points whose orthogonal
-/// distance from `circle` is at most `cutoff` (the circle fit's inliers), started from that
-/// circle (`docs/cylinder.md`, "Elliptic stems").
-///
-/// The ellipse is `1/r(θ)² = A + B cos 2θ + C sin 2θ` about its centre `c` — exact for any
-/// ellipse, smooth through the circle (`B = C = 0`), so a Levenberg–Marquardt fit of
-/// `(c, A, B, C)` starts at the circle fit. Semi-axes `1/√(A ∓ √(B² + C²))`. The radial
-/// residual differs from the orthogonal one by the cosine of the angle between radius and
-/// normal (≥ 0.98 for axis ratios up to 1.5), which is second order for the comparison.
-///
-/// Errors: fewer than 8 points kept, non-finite data, a singular normal matrix or a
-/// parameter vector leaving the ellipses (`A ≤ √(B² + C²)`), no convergence.
-pub fn fit_ellipse(
-    points: &[Vec2],
-    circle: &Circle,
-    cutoff: Real,
-    params: &LmParams,
-) -> Result<EllipseFit, SolveError> {
-    params.validate()?;
-    let keep = |q: Vec2| circle.distance(q).abs() <= cutoff;
-    let (norm, mut p, (mut jtj, mut jtd, mut meat, mut cost, n)) =
-        ellipse_at_circle(points, circle, cutoff)?;
-    let ssr_circle = cost * norm.scale * norm.scale;
-    let mut lambda = params.initial_lambda;
-    let mut iterations = 0;
-    let mut converged = false;
-    for it in 1..=params.max_iterations {
-        iterations = it;
-        let Some(step) = levenberg_step(&jtj, &jtd, &mut lambda)? else {
+/// σ of the radius of a geometric circle fit (unweighted least squares, as
+/// [`fit_geometric`]) when each point `qᵢ` has an independent error along the
+/// vector `gᵢ` (1σ): the sandwich `A⁻¹BA⁻¹`, `A = ΣJJᵀ`, `B = Σ(nᵢ·gᵢ)²JJᵀ`,
+/// `J = (−nᵢ, −1)` (`docs/error-model.md`, "Circle fit"). Infinite if `A` is singular.
+pub fn circle_radius_sigma<I: Iterator<Item = (Vec2, Vec2)>>(c: &Circle, points: I) -> Real {
+    let mut a = Mat3::zeros();
+    let mut b = Mat3::zeros();
+    for (q, g) in points {
+        let d = q - c.centre;
+        let n = real::norm(&d);
+        if !(n > 0.0) {
             continue;
-        };
-        let cand = p + step;
-        let next = if cand[2] > sqrt(cand[3] * cand[3] + cand[4] * cand[4]) {
-            ellipse_accumulate(points, keep, &norm, &cand)
-        } else {
-            None
-        };
-        let accepted = match next {
-            Some((jtj2, jtd2, meat2, cost2, n2)) if n2 == n && cost2.is_finite() => {
-                let rounding = 8.0 * Real::EPSILON * cost;
-                if cost2 < cost
-                    || (cost2 <= cost + rounding && real::norm(&jtd2) < real::norm(&jtd))
-                {
-                    // Also stop when the cost has settled: the F statistic and the axes'
-                    // σ need it to far better than their own noise, not to the last ulp of
-                    // a valley that is flat along the unseen back's extrapolation.
-                    let settled = cost - cost2 <= COST_SETTLED * cost;
-                    let small =
-                        settled || real::norm(&step) <= params.tolerance * (1.0 + real::norm(&p));
-                    p = cand;
-                    jtj = jtj2;
-                    jtd = jtd2;
-                    meat = meat2;
-                    cost = cost2;
-                    lambda = (lambda * 0.1).max(1e-12);
-                    if small {
-                        converged = true;
-                    }
-                    true
-                } else {
-                    false
-                }
-            }
-            _ => false,
-        };
-        if converged {
-            break;
         }
-        if !accepted {
-            lambda = (lambda * 10.0).max(Real::EPSILON);
-            if lambda > 1e16 {
-                converged = true;
-                break;
-            }
+        let nn = d / n;
+        let j = Vec3::new(-nn.x, -nn.y, -1.0);
+        let jj = j * j.transpose();
+        let s = nn.dot(&g);
+        a += jj;
+        b += jj * (s * s);
+    }
+    match a.try_inverse() {
+        Some(inv) => {
+            let cov = inv * b * inv;
+            sqrt(cov[(2, 2)].max(0.0))
         }
+        None => Real::INFINITY,
     }
-    if !converged {
-        return Err(SolveError::NotConverged);
-    }
-    let (aa, m) = (p[2], sqrt(p[3] * p[3] + p[4] * p[4]));
-    if !(aa > m) {
-        return Err(SolveError::Degenerate);
-    }
-    let major = 1.0 / sqrt(aa - m);
-    let minor = 1.0 / sqrt(aa + m);
-    // Gradient of a + b in (A, B, C): ∂a/∂A = −a³/2, ∂a/∂m = a³/2, ∂b/∂A = ∂b/∂m = −b³/2,
-    // ∂m/∂(B, C) = (B, C)/m (the m-derivative of a + b vanishes at m = 0).
-    let (a3, b3) = (major * major * major, minor * minor * minor);
-    let dm = 0.5 * (a3 - b3);
-    let (mb, mc) = if m > 0.0 {
-        (p[3] / m, p[4] / m)
-    } else {
-        (0.0, 0.0)
-    };
-    let grad = V5::new(0.0, 0.0, -0.5 * (a3 + b3), dm * mb, dm * mc);
-    let inv = jtj.try_inverse().ok_or(SolveError::Degenerate)?;
-    let dof = (n - 5).max(1) as Real;
-    let gn = (grad.transpose() * inv * grad)[(0, 0)] * cost / dof;
-    let sandwich = (grad.transpose() * (inv * meat * inv) * grad)[(0, 0)] * n as Real / dof;
-    let sigma = sqrt(gn.max(sandwich).max(0.0)) * norm.scale;
-    // Major axis direction: 1/r² is smallest there, i.e. cos 2(θ − φ) = −(B, C)/m.
-    let angle = if m > 0.0 {
-        0.5 * (-p[4]).atan2(-p[3])
-    } else {
-        0.0
-    };
-    let centre = norm.mean + Vec2::new(p[0], p[1]) * norm.scale;
-    if !(sigma.is_finite() && centre.x.is_finite() && centre.y.is_finite()) {
-        return Err(SolveError::Degenerate);
-    }
-    Ok(EllipseFit {
-        centre,
-        semi_axes: (major * norm.scale, minor * norm.scale),
-        angle,
-        sigma_mean_diameter: sigma,
-        ssr: cost * norm.scale * norm.scale,
-        ssr_circle,
-        points: n,
-        iterations,
-    })
 }
 
 #[cfg(test)]
-// The casts to f64 are no-ops in f64 builds but needed with `--features f32`.
-#[allow(clippy::unnecessary_cast)]
-pub(crate) mod tests {
-    extern crate std;
-    use super::*;
-    use crate::real::PI;
-
-    /// xorshift64* — a tiny deterministic generator for test noise (no `rand` in `shared`).
-    pub(crate) struct Rng(u64);
-    impl Rng {
-        pub(crate) fn new(seed: u64) -> Self {
-            Rng(seed.max(1))
-        }
-        pub(crate) fn next_u64(&mut self) -> u64 {
-            let mut x = self.0;
-            x ^= x >> 12;
-            x ^= x << 25;
-            x ^= x >> 27;
-            self.0 = x;
-            x.wrapping_mul(0x2545_F491_4F6C_DD1D)
-        }
-        /// Uniform in [0, 1).
-        pub(crate) fn uniform(&mut self) -> f64 {
-            (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-        }
-        /// Standard normal (Box–Muller).
-        pub(crate) fn gauss(&mut self) -> f64 {
-            let u1 = self.uniform().max(1e-300);
-            let u2 = self.uniform();
-            (-2.0 * u1.ln()).sqrt() * (2.0 * core::f64::consts::PI * u2).cos()
-        }
-    }
-
-    /// The lit front of an ellipse (semi-axes `a ≥ b`, major axis at `phi`, centre `c`) seen
-    /// from the origin, `n` samples of the parametric angle, plus isotropic noise `sigma`.
-    fn ellipse_front(
-        c: Vec2,
-        (a, b): (Real, Real),
-        phi: Real,
-        n: usize,
-        sigma: Real,
-        rng: &mut Rng,
-    ) -> std::vec::Vec<Vec2> {
-        let (sp, cp) = phi.sin_cos();
-        let (ea, eb) = (Vec2::new(cp, sp), Vec2::new(-sp, cp));
-        let mut out = std::vec::Vec::new();
-        for i in 0..n {
-            let t = i as Real * 2.0 * PI / n as Real;
-            let q = c + ea * (a * t.cos()) + eb * (b * t.sin());
-            // Outward normal ∝ (cos t / a, sin t / b) in the ellipse frame; lit iff it faces
-            // the source at the origin.
-            let nrm = ea * (t.cos() / a) + eb * (t.sin() / b);
-            if nrm.dot(&q) < 0.0 {
-                let g = Vec2::new(rng.gauss() as Real, rng.gauss() as Real);
-                out.push(q + g * sigma);
-            }
-        }
-        out
-    }
-
-    #[test]
-    fn ellipse_fit_recovers_front_arc_and_tells_round_from_elliptic() {
-        let mut rng = Rng::new(77);
-        let lm = LmParams {
-            max_iterations: 1000,
-            ..LmParams::default()
-        };
-        let start = |pts: &[Vec2]| fit_geometric(pts, fit_hyper(pts).unwrap(), &lm).unwrap();
-        // Exact front arc (~half the ellipse): the polar model is exact, so only rounding and
-        // the stopping rule remain (cost settled to 1e-9 relative ⇒ parameters to ~3e-5 of
-        // the spread in the flattest direction): 1e-4 of the axes, plus 1e4·ε·|c| in f32.
-        let tol = 1e-4 + 1e4 * Real::EPSILON * 1.6;
-        for phi in [0.0, 0.25 * PI, 0.5 * PI] {
-            let pts = ellipse_front(Vec2::new(0.02, 1.6), (0.2, 0.15), phi, 2000, 0.0, &mut rng);
-            let c = start(&pts);
-            let e = fit_ellipse(&pts, &c.circle, 1.0, &lm).unwrap();
-            assert!((e.semi_axes.0 - 0.2).abs() < tol * 0.2, "{phi}: {e:?}");
-            assert!((e.semi_axes.1 - 0.15).abs() < tol * 0.2, "{phi}: {e:?}");
-            assert!(
-                (e.centre - Vec2::new(0.02, 1.6)).norm() < tol,
-                "{phi}: {e:?}"
-            );
-        }
-        // Noisy (0.3 mm, about the point noise at 1.5 m): the mean diameter within 4 of its
-        // stated σ, and the non-roundness test far above its threshold (F ≫ 30, e ≈ 0.14).
-        let pts = ellipse_front(Vec2::new(0.0, 1.6), (0.2, 0.15), 0.0, 600, 3e-4, &mut rng);
-        let c = start(&pts);
-        let e = fit_ellipse(&pts, &c.circle, 5e-3, &lm).unwrap();
-        assert!(
-            (e.mean_diameter() - 0.35).abs() < 4.0 * e.sigma_mean_diameter,
-            "{e:?}"
-        );
-        assert!(
-            e.f_statistic() > 100.0 && (e.eccentricity() - 1.0 / 7.0).abs() < 0.03,
-            "{e:?}"
-        );
-        // A round section with the same noise: the circle explains it; F follows F(2, n − 5),
-        // whose 1e-6 tail is below 14 for n ≈ 300 (a false alarm here would be a real bug).
-        let pts = ellipse_front(Vec2::new(0.0, 1.6), (0.17, 0.17), 0.0, 600, 3e-4, &mut rng);
-        let c = start(&pts);
-        let e = fit_ellipse(&pts, &c.circle, 5e-3, &lm).unwrap();
-        assert!(e.f_statistic() < 14.0, "{e:?}");
-    }
-
-    #[test]
-    fn ellipse_score_test_follows_the_f_distribution_and_the_fitted_f() {
-        let mut rng = Rng::new(4242);
-        let lm = LmParams {
-            max_iterations: 1000,
-            ..LmParams::default()
-        };
-        // Round sections, independent noise: the score statistic is F(2, n − 5) under the
-        // null, mean m/(m − 2) ≈ 1 and standard deviation ≈ 1, so the mean of 100 trials is
-        // 1 ± 0.1 (0.35 = 3.5 standard errors). The fitted F agrees with it closely where
-        // the ellipse model is nearly linear (near the circle).
-        let trials = 100;
-        let mut sum = 0.0;
-        for _ in 0..trials {
-            let pts = ellipse_front(Vec2::new(0.0, 1.6), (0.17, 0.17), 0.0, 600, 3e-4, &mut rng);
-            let c = fit_geometric(&pts, fit_hyper(&pts).unwrap(), &lm).unwrap();
-            let score = ellipse_score_f(&pts, &c.circle, 5e-3).unwrap();
-            let fitted = fit_ellipse(&pts, &c.circle, 5e-3, &lm)
-                .unwrap()
-                .f_statistic();
-            assert!(
-                (fitted - score).abs() <= 0.1 * score + 0.05,
-                "{score} {fitted}"
-            );
-            sum += score;
-        }
-        let mean = sum / trials as Real;
-        assert!((mean - 1.0).abs() < 0.35, "mean score F {mean}");
-        // An elliptic section (axes 0.2 × 0.15 m): far above any screening level.
-        let pts = ellipse_front(Vec2::new(0.0, 1.6), (0.2, 0.15), 0.0, 600, 3e-4, &mut rng);
-        let c = fit_geometric(&pts, fit_hyper(&pts).unwrap(), &lm).unwrap();
-        assert!(ellipse_score_f(&pts, &c.circle, 5e-3).unwrap() > 100.0);
-        assert_eq!(
-            ellipse_score_f(&pts[..7], &c.circle, 5e-3),
-            Err(SolveError::TooFewPoints)
-        );
-        assert_eq!(
-            ellipse_score_f(&pts, &c.circle, 0.0),
-            Err(SolveError::InvalidParameter)
-        );
-    }
-
-    fn ggs() -> [Vec2; 6] {
-        let x = [1.0, 2.0, 5.0, 7.0, 9.0, 3.0];
-        let y = [7.0, 6.0, 8.0, 7.0, 5.0, 7.0];
-        let mut p = [Vec2::zeros(); 6];
-        for i in 0..6 {
-            p[i] = Vec2::new(x[i], y[i]);
-        }
-        p
-    }
-
-    #[test]
-    fn gander_golub_strebel_geometric() {
-        let pts = ggs();
-        let init = fit_hyper(&pts).unwrap();
-        let fit = fit_geometric(&pts, init, &LmParams::default()).unwrap();
-        // Published to 4 decimals: the rounding of the last digit is ±5e-5.
-        assert!((fit.circle.centre.x - 4.7398).abs() < 5e-5, "{fit:?}");
-        assert!((fit.circle.centre.y - 2.9835).abs() < 5e-5, "{fit:?}");
-        assert!((fit.circle.radius - 4.7142).abs() < 5e-5, "{fit:?}");
-        // The same minimum from the (worse) Kåsa start.
-        let fit2 = fit_geometric(&pts, fit_kasa(&pts).unwrap(), &LmParams::default()).unwrap();
-        assert!((fit2.circle.radius - 4.7142).abs() < 5e-5);
-    }
-
-    /// Exact points on a circle far from the origin (as in-plane metres are).
-    fn exact_arc(c: Vec2, r: Real, a0: Real, a1: Real, n: usize, out: &mut [Vec2]) {
-        for (i, o) in out.iter_mut().take(n).enumerate() {
-            let t = a0 + (a1 - a0) * i as Real / (n - 1) as Real;
-            *o = c + Vec2::new(t.cos(), t.sin()) * r;
-        }
-    }
-
-    #[test]
-    fn exact_points_recovered() {
-        let c = Vec2::new(0.3, 1.7);
-        let r = 0.25;
-        let mut pts = [Vec2::zeros(); 40];
-        // A 120° arc: what a stem shows.
-        exact_arc(c, r, -2.2, -0.1, 40, &mut pts);
-        // Tolerance: rounding of the input coordinates (ε·|p| ≈ ε·2 m) amplified by the
-        // conditioning of a 120° arc (≲ 10 for centre and radius), with a factor 10 of
-        // margin: 200·ε·|p|.
-        let tol = 200.0 * Real::EPSILON * 2.0;
-        for fit in [fit_kasa(&pts), fit_taubin(&pts), fit_hyper(&pts)] {
-            let f = fit.unwrap();
-            assert!((f.centre - c).norm() < tol, "{f:?}");
-            assert!((f.radius - r).abs() < tol);
-        }
-        let g = fit_geometric(&pts, fit_hyper(&pts).unwrap(), &LmParams::default()).unwrap();
-        assert!((g.circle.centre - c).norm() < tol);
-        assert!((g.circle.radius - r).abs() < tol);
-        assert!(g.rms_residual < tol);
-        let mut scratch = [0.0; 40];
-        let rb = fit_robust(
-            &pts,
-            fit_hyper(&pts).unwrap(),
-            &RobustParams::default(),
-            &mut scratch,
-        )
-        .unwrap();
-        assert!((rb.circle.radius - r).abs() < tol);
-        assert_eq!(rb.inliers, 40);
-    }
-
-    #[test]
-    fn errors() {
-        let two = [Vec2::new(0.0, 0.0), Vec2::new(1.0, 0.0)];
-        assert_eq!(fit_hyper(&two), Err(SolveError::TooFewPoints));
-        let line = [
-            Vec2::new(0.0, 0.0),
-            Vec2::new(1.0, 1.0),
-            Vec2::new(2.0, 2.0),
-            Vec2::new(3.0, 3.0),
-        ];
-        for f in [fit_kasa(&line), fit_taubin(&line), fit_hyper(&line)] {
-            assert_eq!(f, Err(SolveError::Degenerate));
-        }
-        let same = [Vec2::new(1.0, 1.0); 5];
-        assert_eq!(fit_hyper(&same), Err(SolveError::Degenerate));
-        let nan = [
-            Vec2::new(0.0, 0.0),
-            Vec2::new(1.0, Real::NAN),
-            Vec2::new(0.0, 1.0),
-        ];
-        assert_eq!(fit_taubin(&nan), Err(SolveError::NonFinite));
-        let tri = [
-            Vec2::new(0.0, 0.0),
-            Vec2::new(1.0, 0.0),
-            Vec2::new(0.0, 1.0),
-        ];
-        let c = fit_hyper(&tri).unwrap();
-        let bad = LmParams {
-            max_iterations: 0,
-            ..LmParams::default()
-        };
-        assert_eq!(
-            fit_geometric(&tri, c, &bad).err(),
-            Some(SolveError::InvalidParameter)
-        );
-        let mut small = [0.0; 2];
-        assert_eq!(
-            fit_robust(&tri, c, &RobustParams::default(), &mut small).err(),
-            Some(SolveError::ScratchTooSmall)
-        );
-        // Three points on a circle: the circumcircle exactly.
-        let g = fit_geometric(&tri, c, &LmParams::default()).unwrap();
-        assert!((g.circle.centre - Vec2::new(0.5, 0.5)).norm() < 100.0 * Real::EPSILON);
-    }
-
-    #[test]
-    fn kasa_biased_small_on_short_arc_hyper_not() {
-        // 60° arc of a unit circle, 40 points, σ = 0.02 (2 % of r). Kåsa's bias on short
-        // arcs is O(σ²/(r·θ⁴))-large (docs/cylinder.md); Hyper's is O(σ⁴).
-        let mut rng = Rng::new(0x5eed_1234);
-        let trials = 400;
-        let (mut sk, mut sh, mut sh2, mut sd2) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-        let mut pts = [Vec2::zeros(); 40];
-        for _ in 0..trials {
-            exact_arc(Vec2::new(0.0, 0.0), 1.0, 1.0, 1.0 + PI / 3.0, 40, &mut pts);
-            for p in pts.iter_mut() {
-                p.x += (0.02 * rng.gauss()) as Real;
-                p.y += (0.02 * rng.gauss()) as Real;
-            }
-            let rk = fit_kasa(&pts).unwrap().radius as f64;
-            let rh = fit_hyper(&pts).unwrap().radius as f64;
-            sk += rk;
-            sh += rh;
-            sh2 += (rh - 1.0) * (rh - 1.0);
-            sd2 += (rh - rk) * (rh - rk);
-        }
-        let n = trials as f64;
-        let (mk, mh) = (sk / n, sh / n);
-        // Standard errors of the means from the samples themselves.
-        let se_h = (sh2 / n - (mh - 1.0) * (mh - 1.0)).sqrt() / n.sqrt();
-        let se_d = (sd2 / n - (mh - mk) * (mh - mk)).sqrt() / n.sqrt();
-        assert!(mh - mk > 5.0 * se_d, "kasa {mk} hyper {mh} se {se_d}");
-        assert!(mk < 1.0 - 5.0 * se_d);
-        // Hyper: unbiased to the statistical resolution (4 standard errors).
-        assert!((mh - 1.0).abs() < 4.0 * se_h, "hyper {mh} se {se_h}");
-    }
-
-    #[test]
-    fn geometric_covariance_matches_monte_carlo() {
-        // Half circle, 50 points, σ = 0.01: the reported std_dev of r must match the spread
-        // over trials within the sampling error of a standard deviation from 300 trials
-        // (≈ 1/√(2·300) = 4 %; allow 20 %).
-        let mut rng = Rng::new(77);
-        let mut pts = [Vec2::zeros(); 50];
-        let (mut s, mut s2, mut pred) = (0.0f64, 0.0f64, 0.0f64);
-        let trials = 300;
-        for _ in 0..trials {
-            exact_arc(Vec2::new(0.2, 1.5), 0.3, PI, 2.0 * PI, 50, &mut pts);
-            for p in pts.iter_mut() {
-                p.x += (0.01 * rng.gauss()) as Real;
-                p.y += (0.01 * rng.gauss()) as Real;
-            }
-            let f = fit_geometric(&pts, fit_hyper(&pts).unwrap(), &LmParams::default()).unwrap();
-            s += f.circle.radius as f64;
-            s2 += (f.circle.radius as f64).powi(2);
-            pred += f.std_dev.z as f64;
-        }
-        let n = trials as f64;
-        let sd = (s2 / n - (s / n).powi(2)).sqrt();
-        let p = pred / n;
-        assert!((sd / p - 1.0).abs() < 0.2, "observed {sd} predicted {p}");
-    }
-
-    #[test]
-    fn robust_rejects_gross_outliers() {
-        // 100° arc, 60 points with σ = 1 mm, plus 15 points (20 %) of a branch 5–15 cm in
-        // front. The robust fit must land within 4σ_r of the truth, σ_r from the clean
-        // fit's covariance (≈ 0.5 mm here); the plain geometric fit is pulled off.
-        let mut rng = Rng::new(99);
-        let c = Vec2::new(-0.1, 1.2);
-        let r = 0.2;
-        let mut pts = [Vec2::zeros(); 75];
-        exact_arc(c, r, -2.4, -0.65, 60, &mut pts);
-        for p in pts.iter_mut().take(60) {
-            p.x += (0.001 * rng.gauss()) as Real;
-            p.y += (0.001 * rng.gauss()) as Real;
-        }
-        for p in pts.iter_mut().skip(60) {
-            let t = -1.5 + 0.3 * rng.uniform() as Real;
-            *p = c + Vec2::new(t.cos(), t.sin()) * (r + 0.05 + 0.1 * rng.uniform() as Real);
-        }
-        let clean = fit_geometric(
-            &pts[..60],
-            fit_hyper(&pts[..60]).unwrap(),
-            &LmParams::default(),
-        )
-        .unwrap();
-        let sr = clean.std_dev.z;
-        let plain = fit_geometric(&pts, fit_hyper(&pts).unwrap(), &LmParams::default()).unwrap();
-        assert!((plain.circle.radius - r).abs() > 10.0 * sr);
-        let mut scratch = [0.0; 75];
-        let params = RobustParams {
-            min_scale: 1e-4,
-            ..RobustParams::default()
-        };
-        let rb = fit_robust(&pts, fit_hyper(&pts).unwrap(), &params, &mut scratch).unwrap();
-        assert!((rb.circle.radius - r).abs() < 4.0 * sr, "{rb:?} sr {sr}");
-        assert!(rb.inliers >= 55 && rb.inliers <= 62, "{}", rb.inliers);
-    }
-}
+pub(crate) mod tests;

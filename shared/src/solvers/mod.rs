@@ -1,10 +1,24 @@
 //! Solvers: from the 3-D points of one capture to a dimension (thesis chapter 9 onwards).
 //!
-//! * [`circle`]: algebraic (Kåsa, Taubin, Hyper) and geometric (Levenberg–Marquardt,
-//!   robust) circle fits on 2-D points (`docs/cylinder.md`, "Circle fits").
-//! * [`cylinder`]: the stem diameter — three-tangent method, full-arc fits, tilted
-//!   cylinders from two parallel planes, method choice
-//!   (`docs/cylinder.md`).
+//! Methods, lowest first (each module uses only those above it in this list):
+//!
+//! * [`lm`]: the one Levenberg–Marquardt minimiser every geometric fit states its problem to
+//!   (a [`lm::LeastSquares`] trait with a const-generic parameter count).
+//! * [`circle`]: algebraic (Hyper, and Kåsa as the naive baseline) and geometric (plain,
+//!   robust) circle fits on 2-D points, and their radius σ (`docs/cylinder.md`, "Circle fits").
+//! * [`ellipse`]: the ellipse fit and score test for non-round sections (`docs/cylinder.md`,
+//!   "Elliptic stems").
+//! * [`cylinder_fit`]: cylinder (axis and radius) fit to the curves of two or more planes, and
+//!   the projection along its axis (`docs/cylinder.md`, "Randomly tilted stem").
+//! * [`three_tangent`]: the three-tangent method, plain and generalised (`docs/cylinder.md`,
+//!   "Three-tangent method").
+//! * [`result`]: what every solver reports besides its number — [`result::Method`],
+//!   [`result::Flags`], [`result::Tilt`].
+//! * [`stem`]: the stem diameter of one capture — the methods' σ, the choice of the reported
+//!   diameter, the flags (`docs/cylinder.md`, "Choosing the method").
+//!
+//! Solvers read each point's 1σ beside the point (written by the pipeline from
+//! [`crate::noise`]); nothing here calls back up into the pipeline or the error model.
 //!
 //! Every solver works on caller-owned slices, never allocates and returns a [`SolveError`]
 //! instead of a made-up number when the data cannot support an answer.
@@ -15,11 +29,13 @@
 
 use core::fmt;
 
-use crate::real::Real;
-
 pub mod circle;
-pub mod cylinder;
+pub mod cylinder_fit;
+pub mod ellipse;
+pub mod lm;
 pub mod result;
+pub mod stem;
+pub mod three_tangent;
 
 /// Why a solver could not produce a trustworthy answer.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -70,30 +86,3 @@ impl fmt::Display for SolveError {
 
 #[cfg(feature = "std")]
 impl std::error::Error for SolveError {}
-
-/// One damped Gauss–Newton (Levenberg–Marquardt) step: solves
-/// `(JᵀJ + λ·(diag(JᵀJ) + ε))·δ = −Jᵀr` (Marquardt's diagonal scaling, with a floor so that a
-/// zero diagonal still gives a damped step). When the damped matrix is not positive definite,
-/// raises `λ` tenfold and returns `Ok(None)` (try again), or `Degenerate` once `λ > 10¹⁶`.
-/// Shared by the circle, ellipse and cylinder fits (`docs/cylinder.md`).
-pub(crate) fn levenberg_step<const N: usize>(
-    jtj: &nalgebra::SMatrix<Real, N, N>,
-    jtd: &nalgebra::SVector<Real, N>,
-    lambda: &mut Real,
-) -> Result<Option<nalgebra::SVector<Real, N>>, SolveError> {
-    let mut a = *jtj;
-    for k in 0..N {
-        a[(k, k)] += *lambda * (jtj[(k, k)] + Real::EPSILON);
-    }
-    match a.cholesky() {
-        Some(ch) => Ok(Some(ch.solve(&(-jtd)))),
-        None => {
-            *lambda = (*lambda * 10.0).max(Real::EPSILON);
-            if *lambda > 1e16 {
-                Err(SolveError::Degenerate)
-            } else {
-                Ok(None)
-            }
-        }
-    }
-}

@@ -35,7 +35,7 @@ impl Flags {
     /// rejected as outliers (bark, branches, a second object).
     pub const POOR_FIT: Flags = Flags(1 << 1);
     /// Only one plane: the stem is assumed transversal; a sideways lean `φ` inflates the
-    /// diameter by `1/cos φ` (see [`super::cylinder::tilt_error_ratio`]).
+    /// diameter by `1/cos φ` (`docs/cylinder.md`, "Error when the tilt is ignored").
     pub const TILT_IGNORED: Flags = Flags(1 << 2);
     /// The three-tangent and fit radii disagree by more than 3σ combined: an edge is
     /// probably occluded or lost in the dark; the fit was reported.
@@ -65,9 +65,9 @@ impl Flags {
     /// trunk, a branch); the one nearest the central column was measured (set by `pipeline`).
     pub const OTHER_OBJECTS: Flags = Flags(1 << 13);
     /// The section is not round: a circle fit leaves a systematic residual pattern that an
-    /// ellipse explains ([`super::circle::fit_ellipse`], `docs/cylinder.md`, "Elliptic stems"). The
+    /// ellipse explains ([`super::ellipse::fit_ellipse`], `docs/cylinder.md`, "Elliptic stems"). The
     /// diameter is the mean of the fitted axes (as cross-calipering), its σ covers the unseen
-    /// back, and [`super::cylinder::CylinderSolution::axes`] gives the two diameters.
+    /// back, and [`super::stem::CylinderSolution::axes`] gives the two diameters.
     pub const ELLIPTIC: Flags = Flags(1 << 14);
 
     /// Whether every flag of `other` is set.

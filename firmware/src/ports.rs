@@ -1,7 +1,9 @@
-//! The small hardware traits the application runs on, one per device the instrument has.
+//! The application's ports: one small trait per device the application uses (camera,
+//! lasers, trigger, host link, clock, calibration store, watchdog) and [`Board`] that
+//! bundles them. Not a HAL: they say what the application needs, not what the chip offers.
 //!
-//! Each board (`board::h743`, `board::qemu`) implements them; the application
-//! ([`crate::app`]) knows nothing else about the hardware. Async methods run on whatever
+//! Each board (`board::h743`, `board::qemu`, and the host tests' test board) implements
+//! them; the application ([`crate::app`]) knows nothing else about the hardware. Async methods run on whatever
 //! executor the board uses (embassy on the H743, a busy-polling `block_on` on QEMU), so the
 //! futures need not be `Send`.
 #![allow(async_fn_in_trait)]

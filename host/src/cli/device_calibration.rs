@@ -1,5 +1,6 @@
-//! `tangent calib push|pull`: store the calibration on the device, or read it back, as the
-//! calibration TOML file of `docs/formats.md`.
+//! `tangent device-calibration push|pull`: store a calibration file on the device, or read
+//! the device's back, as the calibration TOML file of `docs/formats.md`. (Computing a
+//! calibration is `tangent calibrate`.)
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -11,7 +12,7 @@ use tangent_host::link::{Link, LinkConfig};
 
 use super::devices::resolve_port;
 
-/// Arguments of `tangent calib`.
+/// Arguments of `tangent device-calibration`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
     #[command(subcommand)]
@@ -39,12 +40,12 @@ enum Command {
     },
 }
 
-/// Runs `tangent calib …`.
+/// Runs `tangent device-calibration …`.
 pub fn run(args: Args) -> Result<ExitCode> {
     match args.command {
         Command::Push { port, file } => {
-            let cal = calibration_file::read(&file)
-                .with_context(|| format!("cannot use {}", file.display()))?;
+            // The error names the file.
+            let cal = calibration_file::read(&file)?;
             let wire = WireCalibration::from(&cal);
             let path = resolve_port(port)?;
             let mut link = Link::open(&path, LinkConfig::default())?;
@@ -67,7 +68,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
             let mut link = Link::open(&path, LinkConfig::default())?;
             let Some(wire) = link.read_calibration()? else {
                 bail!(
-                    "the device at {path} has no calibration: push one with `tangent calib push`"
+                    "the device at {path} has no calibration: push one with `tangent device-calibration push`"
                 );
             };
             let cal = wire

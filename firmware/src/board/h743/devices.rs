@@ -1,0 +1,279 @@
+//! The H743 board's drivers: its implementations of the application's ports.
+
+use embassy_embedded_hal::adapter::BlockingAsync;
+use embassy_stm32::dcmi::{self, Dcmi};
+use embassy_stm32::exti::ExtiInput;
+use embassy_stm32::flash::{Blocking, Flash};
+use embassy_stm32::gpio::Output;
+use embassy_stm32::i2c::{I2c, Master};
+use embassy_stm32::mode::Blocking as BlockingMode;
+use embassy_stm32::peripherals::DCMI;
+use embassy_stm32::peripherals::USB_OTG_FS;
+use embassy_stm32::usb::Driver;
+use embassy_stm32::wdg::IndependentWatchdog;
+use embassy_time::{Duration, Instant, Timer};
+use embassy_usb::class::cdc_acm::CdcAcmClass;
+use embassy_usb::driver::EndpointError;
+use tangent_core::protocol::{self, calibration_record, WireCalibration};
+
+use super::{CALIB_OFFSET, CALIB_SECTOR, DEBOUNCE_US, FRAME_BYTES, PIXCLK_HZ, WIDTH, WINDOW};
+use crate::mt9v034::Mt9v034;
+use crate::ports::{self, CameraError, Geometry, LinkError, Strobe};
+
+/// embassy-time clock.
+pub struct EmbassyClock;
+
+impl ports::Clock for EmbassyClock {
+    fn now_us(&self) -> u64 {
+        Instant::now().as_micros()
+    }
+    async fn delay_us(&self, us: u32) {
+        Timer::after(Duration::from_micros(us as u64)).await
+    }
+}
+
+/// Two lasers on GPIOs (high = on).
+pub struct GpioLasers {
+    pins: [Output<'static>; 2],
+}
+
+impl GpioLasers {
+    /// Takes the two laser outputs (created low).
+    pub fn new(mut pins: [Output<'static>; 2]) -> Self {
+        for p in pins.iter_mut() {
+            p.set_low();
+        }
+        GpioLasers { pins }
+    }
+}
+
+impl ports::Laser for GpioLasers {
+    fn count(&self) -> u8 {
+        self.pins.len() as u8
+    }
+    fn set(&mut self, mask: u8) {
+        for (i, p) in self.pins.iter_mut().enumerate() {
+            if mask & (1 << i) != 0 {
+                p.set_high();
+            } else {
+                p.set_low();
+            }
+        }
+    }
+}
+
+/// Trigger button (active high, pull-down), debounced.
+pub struct Button {
+    input: ExtiInput<'static, embassy_stm32::mode::Async>,
+}
+
+impl Button {
+    /// Wraps an EXTI input.
+    pub fn new(input: ExtiInput<'static, embassy_stm32::mode::Async>) -> Self {
+        Button { input }
+    }
+}
+
+impl ports::Trigger for Button {
+    fn is_pressed(&mut self) -> bool {
+        self.input.is_high()
+    }
+    async fn wait_pressed(&mut self) {
+        loop {
+            self.input.wait_for_rising_edge().await;
+            // A press is a level that is still high after the bounce has died out.
+            Timer::after(Duration::from_micros(DEBOUNCE_US)).await;
+            if self.input.is_high() {
+                return;
+            }
+        }
+    }
+}
+
+/// USB CDC-ACM link.
+pub struct UsbLink {
+    class: CdcAcmClass<'static, Driver<'static, USB_OTG_FS>>,
+}
+
+impl UsbLink {
+    /// Wraps a CDC-ACM class.
+    pub fn new(class: CdcAcmClass<'static, Driver<'static, USB_OTG_FS>>) -> Self {
+        UsbLink { class }
+    }
+}
+
+fn link_err(_: EndpointError) -> LinkError {
+    LinkError::Disconnected
+}
+
+impl ports::Link for UsbLink {
+    async fn read(&mut self, buf: &mut [u8]) -> Result<usize, LinkError> {
+        self.class.wait_connection().await;
+        let max = self.class.max_packet_size() as usize;
+        let buf = buf.get_mut(..max).ok_or(LinkError::Disconnected)?;
+        self.class.read_packet(buf).await.map_err(link_err)
+    }
+
+    async fn write_all(&mut self, data: &[u8]) -> Result<(), LinkError> {
+        if !self.class.dtr() {
+            // Nobody has the port open: drop the message rather than block.
+            return Err(LinkError::Disconnected);
+        }
+        let max = self.class.max_packet_size() as usize;
+        for packet in data.chunks(max) {
+            self.class.write_packet(packet).await.map_err(link_err)?;
+        }
+        if data.len().is_multiple_of(max) {
+            // A full last packet needs a zero-length packet to end the transfer.
+            self.class.write_packet(&[]).await.map_err(link_err)?;
+        }
+        Ok(())
+    }
+}
+
+/// Independent watchdog.
+pub struct Iwdg {
+    wdg: IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG1>,
+}
+
+impl Iwdg {
+    /// Starts the watchdog (it cannot be stopped afterwards).
+    pub fn start(mut wdg: IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG1>) -> Self {
+        wdg.unleash();
+        Iwdg { wdg }
+    }
+}
+
+impl ports::Watchdog for Iwdg {
+    fn feed(&mut self) {
+        self.wdg.pet();
+    }
+}
+
+/// Flash programming granularity of the H7 (a 256-bit flash word).
+const FLASH_WORD: usize = 32;
+
+/// Calibration record in the last flash sector.
+pub struct FlashStore {
+    flash: Flash<'static, Blocking>,
+}
+
+impl FlashStore {
+    /// Wraps the flash driver.
+    pub fn new(flash: Flash<'static, Blocking>) -> Self {
+        FlashStore { flash }
+    }
+}
+
+impl ports::CalibrationStore for FlashStore {
+    fn load(&mut self) -> Option<WireCalibration> {
+        let mut buf = [0u8; calibration_record::MAX_RECORD];
+        self.flash.blocking_read(CALIB_OFFSET, &mut buf).ok()?;
+        calibration_record::decode(&buf)
+    }
+
+    fn save(&mut self, calibration: &WireCalibration) -> Result<(), u32> {
+        let mut buf = [0xFFu8; calibration_record::MAX_RECORD];
+        let n = calibration_record::encode(calibration, &mut buf).ok_or(1u32)?;
+        let padded = n.div_ceil(FLASH_WORD) * FLASH_WORD;
+        let data = buf.get(..padded).ok_or(2u32)?;
+        self.flash
+            .blocking_erase(CALIB_OFFSET, CALIB_OFFSET + CALIB_SECTOR)
+            .map_err(|_| 3u32)?;
+        self.flash
+            .blocking_write(CALIB_OFFSET, data)
+            .map_err(|_| 4u32)?;
+        // Read back: a record that does not verify is not stored.
+        match self.load() {
+            Some(ref c) if c == calibration => Ok(()),
+            _ => Err(5),
+        }
+    }
+}
+
+/// The sensor's I²C bus: I2C1 in blocking mode behind embassy's blocking-to-async adapter (a
+/// register write is 3 bytes, ≈ 80 µs at 400 kHz; the DMA-driven `I2c::new` would need two
+/// more DMA streams and the I2C1 interrupts for no gain).
+pub type SensorBus = BlockingAsync<I2c<'static, BlockingMode, Master>>;
+
+/// The camera: the MT9V034 (set up over I²C) with its EXPOSURE pin, frames by DCMI + DMA.
+pub struct Mt9v034Dcmi {
+    sensor: Mt9v034<SensorBus>,
+    dcmi: Dcmi<'static, DCMI>,
+    exposure_pin: Output<'static>,
+}
+
+impl Mt9v034Dcmi {
+    /// Takes the sensor's buses and sets it up; a sensor that does not answer now is set up
+    /// again before the next capture.
+    pub async fn new(
+        i2c: I2c<'static, BlockingMode, Master>,
+        dcmi: Dcmi<'static, DCMI>,
+        exposure_pin: Output<'static>,
+    ) -> Self {
+        let mut sensor = Mt9v034::new(BlockingAsync::new(i2c), WINDOW, PIXCLK_HZ);
+        if let Err(e) = sensor.init().await {
+            defmt::warn!("MT9V034 set-up failed: {}", e.code());
+        }
+        Mt9v034Dcmi {
+            sensor,
+            dcmi,
+            exposure_pin,
+        }
+    }
+}
+
+impl ports::Camera for Mt9v034Dcmi {
+    fn geometry(&self) -> Geometry {
+        Geometry {
+            width: WIDTH,
+            height: WINDOW.rows,
+            row_offset: WINDOW.first_row,
+        }
+    }
+
+    async fn capture<L: ports::Laser, C: ports::Clock>(
+        &mut self,
+        exposure_us: u32,
+        strobe: &Strobe<'_, L, C>,
+        buf: &mut [u8],
+    ) -> Result<(), CameraError> {
+        self.sensor.prepare(exposure_us).await?;
+        let words: &mut [u32] = bytemuck::try_cast_slice_mut(
+            buf.get_mut(..FRAME_BYTES).ok_or(CameraError::BufferSize)?,
+        )
+        .map_err(|_| CameraError::BufferSize)?;
+        let pin = &mut self.exposure_pin;
+        let expose = async {
+            // Snapshot: the rising edge of EXPOSURE starts integration, which lasts the
+            // programmed shutter width; the lasers follow (and LED_OUT gates them).
+            strobe.on();
+            pin.set_high();
+            Timer::after(Duration::from_micros(exposure_us as u64)).await;
+            pin.set_low();
+            strobe.off();
+        };
+        let (result, ()) = embassy_futures::join::join(self.dcmi.capture(words), expose).await;
+        result.map_err(|e| match e {
+            dcmi::Error::Overrun => CameraError::Transfer,
+            _ => CameraError::Transfer,
+        })
+    }
+}
+
+/// The instrument board.
+pub struct H743;
+
+impl ports::Board for H743 {
+    type Camera = Mt9v034Dcmi;
+    type Laser = GpioLasers;
+    type Trigger = Button;
+    type Link = UsbLink;
+    type Clock = EmbassyClock;
+    type Store = FlashStore;
+    type Watchdog = Iwdg;
+    const KIND: protocol::Board = protocol::Board::H743;
+    fn log(args: core::fmt::Arguments<'_>) {
+        defmt::info!("{}", defmt::Display2Format(&args));
+    }
+}

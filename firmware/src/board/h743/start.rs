@@ -1,0 +1,185 @@
+//! Bringing the H743 board up: the clock tree, the pin map (`docs/hardware.md`, "Wiring"),
+//! the USB descriptors, and the buffers' places in RAM.
+
+use embassy_stm32::dcmi::{self, Dcmi};
+use embassy_stm32::exti::{self, ExtiInput};
+use embassy_stm32::flash::Flash;
+use embassy_stm32::gpio::{Level, Output, Pull, Speed};
+use embassy_stm32::i2c::{self, I2c};
+use embassy_stm32::peripherals::USB_OTG_FS;
+use embassy_stm32::time::Hertz;
+use embassy_stm32::usb::Driver;
+use embassy_stm32::wdg::IndependentWatchdog;
+use embassy_stm32::{bind_interrupts, dma, interrupt, peripherals, usb};
+use embassy_usb::class::cdc_acm::{CdcAcmClass, State};
+use embassy_usb::{Builder, UsbDevice};
+use static_cell::StaticCell;
+use tangent_core::pipeline::Workspace;
+
+use super::devices::{
+    Button, EmbassyClock, FlashStore, GpioLasers, Iwdg, Mt9v034Dcmi, UsbLink, H743,
+};
+use super::{FRAME_BYTES, POINTS, USB_PID, USB_VID, WATCHDOG_US};
+use crate::app::Buffers;
+use crate::ports::Devices;
+
+bind_interrupts!(struct Irqs {
+    OTG_FS => usb::InterruptHandler<peripherals::USB_OTG_FS>;
+    DCMI => dcmi::InterruptHandler<peripherals::DCMI>;
+    DMA1_STREAM0 => dma::InterruptHandler<peripherals::DMA1_CH0>;
+    EXTI15_10 => exti::InterruptHandler<interrupt::typelevel::EXTI15_10>;
+});
+
+// Frames, difference frame and the small buffers in AXI SRAM (DMA1 cannot reach DTCM), the
+// labels in SRAM1–3 (240,640 of its 294,912 bytes), the object features in DTCM (.bss:
+// CPU-only, which the pipeline is). See `memory.x` and `docs/hardware.md`.
+crate::buffers::board_buffers! {
+    frame_bytes = FRAME_BYTES, points = POINTS;
+    #[link_section = ".axisram"] frames;
+    #[link_section = ".axisram"] diff;
+    #[link_section = ".sram123"] labels;
+    #[link_section = ".axisram"] small;
+    objects;
+}
+
+/// The clock tree: 64 MHz HSI → PLL1: 400 MHz core (voltage scale 1), 200 MHz AHB (DCMI
+/// kernel clock ≥ 2.5 × 26.66 MHz PIXCLK), APB 100 MHz, HSI48 trimmed from USB SOF for the
+/// OTG FS.
+pub fn clock_tree() -> embassy_stm32::Config {
+    use embassy_stm32::rcc::*;
+    let mut config = embassy_stm32::Config::default();
+    config.rcc.hsi = Some(HSIPrescaler::DIV1);
+    config.rcc.csi = true;
+    config.rcc.hsi48 = Some(Hsi48Config {
+        sync_from_usb: true,
+    });
+    config.rcc.pll1 = Some(Pll {
+        source: PllSource::HSI,
+        prediv: PllPreDiv::DIV4,
+        mul: PllMul::MUL50,
+        fracn: None,
+        divp: Some(PllDiv::DIV2),
+        divq: None,
+        divr: None,
+    });
+    config.rcc.sys = Sysclk::PLL1_P;
+    config.rcc.ahb_pre = AHBPrescaler::DIV2;
+    config.rcc.apb1_pre = APBPrescaler::DIV2;
+    config.rcc.apb2_pre = APBPrescaler::DIV2;
+    config.rcc.apb3_pre = APBPrescaler::DIV2;
+    config.rcc.apb4_pre = APBPrescaler::DIV2;
+    config.rcc.voltage_scale = VoltageScale::Scale1;
+    config.rcc.mux.usbsel = mux::Usbsel::HSI48;
+    config
+}
+
+/// The started board: what the application runs on, and the USB stack to run beside it.
+pub struct Started {
+    /// The devices.
+    pub devices: Devices<H743>,
+    /// The USB device (run it concurrently with the application).
+    pub usb: UsbDevice<'static, Driver<'static, USB_OTG_FS>>,
+    /// The application's buffers.
+    pub buffers: Buffers<'static>,
+    /// The pipeline's working memory.
+    pub workspace: Workspace<'static, u8>,
+}
+
+/// Brings the board up (once: the peripherals can be taken only once): clocks, the lasers
+/// off before anything that can fail, the watchdog, the camera, trigger, flash, USB and the
+/// buffers.
+pub async fn start() -> Started {
+    let p = embassy_stm32::init(clock_tree());
+
+    // Lasers first: driven low before anything else can fail.
+    let lasers = GpioLasers::new([
+        Output::new(p.PE2, Level::Low, Speed::Low),
+        Output::new(p.PE3, Level::Low, Speed::Low),
+    ]);
+    defmt::info!("Tangent firmware {} (H743)", crate::VERSION);
+
+    let mut wdg = IndependentWatchdog::new(p.IWDG1, WATCHDOG_US);
+    wdg.pet();
+
+    // Camera: I2C1 (PB8 SCL, PB9 SDA) for set-up, DCMI 8-bit on D9..D2 of the sensor.
+    let mut i2c_config = i2c::Config::default();
+    i2c_config.frequency = Hertz(400_000);
+    let i2c = I2c::new_blocking(p.I2C1, p.PB8, p.PB9, i2c_config);
+    let mut dcmi_config = dcmi::Config::default();
+    dcmi_config.pixclk_polarity = dcmi::PixelClockPolarity::RisingEdge;
+    dcmi_config.vsync_level = dcmi::VSyncDataInvalidLevel::Low;
+    dcmi_config.hsync_level = dcmi::HSyncDataInvalidLevel::Low;
+    let dcmi = Dcmi::new_8bit(
+        p.DCMI,
+        p.DMA1_CH0,
+        Irqs,
+        p.PC6,
+        p.PC7,
+        p.PE0,
+        p.PE1,
+        p.PE4,
+        p.PD3,
+        p.PE5,
+        p.PE6,
+        p.PB7,
+        p.PA4,
+        p.PA6,
+        dcmi_config,
+    );
+    let exposure_pin = Output::new(p.PD12, Level::Low, Speed::High);
+    let camera = Mt9v034Dcmi::new(i2c, dcmi, exposure_pin).await;
+
+    let trigger = Button::new(ExtiInput::new(p.PC13, p.EXTI13, Pull::Down, Irqs));
+    let store = FlashStore::new(Flash::new_blocking(p.FLASH));
+
+    // USB CDC-ACM.
+    static EP_OUT: StaticCell<[u8; 256]> = StaticCell::new();
+    static CONFIG_DESC: StaticCell<[u8; 256]> = StaticCell::new();
+    static BOS_DESC: StaticCell<[u8; 256]> = StaticCell::new();
+    static CONTROL: StaticCell<[u8; 64]> = StaticCell::new();
+    static CDC_STATE: StaticCell<State> = StaticCell::new();
+    let mut usb_config = usb::Config::default();
+    // Bus-powered from the host: no VBUS sensing needed.
+    usb_config.vbus_detection = false;
+    let driver = usb::Driver::new_fs(
+        p.USB_OTG_FS,
+        Irqs,
+        p.PA12,
+        p.PA11,
+        EP_OUT.init([0; 256]),
+        usb_config,
+    );
+    let mut dev_config = embassy_usb::Config::new(USB_VID, USB_PID);
+    dev_config.manufacturer = Some("Tangent");
+    dev_config.product = Some("Tangent caliper");
+    dev_config.serial_number = Some("H743-0001");
+    let mut builder = Builder::new(
+        driver,
+        dev_config,
+        CONFIG_DESC.init([0; 256]),
+        BOS_DESC.init([0; 256]),
+        &mut [],
+        CONTROL.init([0; 64]),
+    );
+    let class = CdcAcmClass::new(&mut builder, CDC_STATE.init(State::new()), 64);
+    let usb = builder.build();
+
+    let Some((buffers, workspace)) = take_buffers(FRAME_BYTES) else {
+        defmt::panic!("the H743 board is started once");
+    };
+    let devices = Devices {
+        camera,
+        laser: lasers,
+        trigger,
+        link: UsbLink::new(class),
+        clock: EmbassyClock,
+        store,
+        watchdog: Iwdg::start(wdg),
+    };
+    Started {
+        devices,
+        usb,
+        buffers,
+        workspace,
+    }
+}

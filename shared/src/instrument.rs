@@ -1,0 +1,211 @@
+//! The back half of the chain, generic over the instrument: the 3-D points of each laser
+//! plane's curve ([`crate::pipeline`]) → the solver of the capture's [`Mode`] → one
+//! [`Measurement`].
+//!
+//! An instrument is a solver ([`Instrument`]) on the points of every plane ([`PlanePoints`]).
+//! Adding one (sphere, wall, road) is: its solver module, an [`Instrument`] impl, a
+//! [`Measurement`] variant with a `From` of its solution, and an arm in [`measure`]; the image
+//! half and every other instrument stay as they are (see the toy instrument in this module's
+//! tests).
+//!
+//! * [`stem`]: [`Mode::Cylinder`], the stem's diameter.
+
+use crate::calibration::{Calibration, MAX_PLANES};
+use crate::image::{Frame, Pixel};
+use crate::laser_plane::LaserPlane;
+use crate::measurement::{Measurement, Mode};
+use crate::noise::NoiseModel;
+use crate::pipeline::{
+    extract_profile, point_sigmas, PipelineConfig, PipelineError, Profile, Workspace,
+};
+use crate::real::{Real, Vec2, Vec3};
+use crate::solvers::stem::CylinderParams;
+
+pub mod stem;
+
+pub use stem::Stem;
+
+/// What an instrument's solver reads: per laser plane, the 3-D points of its curve (camera
+/// frame, metres, ordered by image column), the planes themselves, and the image summary.
+#[derive(Debug, Clone, Copy)]
+pub struct PlanePoints<'a> {
+    all: &'a [Vec3],
+    curves: [&'a [Vec3]; MAX_PLANES],
+    planes: &'a [LaserPlane],
+    /// The image part of the chain (flags, saturation, frame-edge contact).
+    pub profile: &'a Profile,
+    /// The laser-on frame's [`Frame::max_value`] (for [`Profile::image_flags`]).
+    pub full_scale: u32,
+}
+
+impl<'a> PlanePoints<'a> {
+    /// The planes' points that [`extract_profile`] left in `points` (`Workspace::points`).
+    pub fn new(
+        profile: &'a Profile,
+        full_scale: u32,
+        calibration: &'a Calibration,
+        points: &'a [Vec3],
+    ) -> Self {
+        let n = profile.planes.min(MAX_PLANES).min(calibration.planes.len());
+        let mut curves: [&[Vec3]; MAX_PLANES] = [&[]; MAX_PLANES];
+        for (k, c) in curves.iter_mut().enumerate().take(n) {
+            *c = profile.points(points, k);
+        }
+        PlanePoints {
+            all: points,
+            curves,
+            planes: &calibration.planes[..n],
+            profile,
+            full_scale,
+        }
+    }
+
+    /// Each plane's points, in plane order.
+    pub fn curves(&self) -> &[&'a [Vec3]] {
+        &self.curves[..self.planes.len()]
+    }
+
+    /// The laser planes, in the order of [`PlanePoints::curves`].
+    pub fn planes(&self) -> &'a [LaserPlane] {
+        self.planes
+    }
+
+    /// Writes each point's 1σ into `sigmas` (the workspace's, lent in [`Scratch::sigmas`])
+    /// from the noise model ([`point_sigmas`]) and returns them per plane, in the order of
+    /// [`PlanePoints::curves`].
+    pub fn sigmas<'s>(
+        &self,
+        noise: &NoiseModel,
+        focal_px: Real,
+        sigmas: &'s mut [Real],
+    ) -> Result<[&'s [Real]; MAX_PLANES], PipelineError> {
+        point_sigmas(self.profile, self.planes, noise, focal_px, self.all, sigmas)?;
+        let sigmas: &'s [Real] = sigmas;
+        let mut per_plane: [&[Real]; MAX_PLANES] = [&[]; MAX_PLANES];
+        for (k, s) in per_plane.iter_mut().enumerate().take(self.planes.len()) {
+            *s = self.profile.points(sigmas, k);
+        }
+        Ok(per_plane)
+    }
+}
+
+/// Memory a solver is lent by the workspace, each as long as the points of all planes.
+#[derive(Debug)]
+pub struct Scratch<'a> {
+    /// `Workspace::sigmas`: the points' 1σ, for [`PlanePoints::sigmas`] (kept after the run).
+    pub sigmas: &'a mut [Real],
+    /// 2-D points (in-plane or projected).
+    pub points: &'a mut [Vec2],
+    /// Values (residuals, weights).
+    pub values: &'a mut [Real],
+}
+
+/// One instrument: a solver from the points of every plane to its solution.
+pub trait Instrument {
+    /// The capture mode it measures.
+    const MODE: Mode;
+    /// Its settings.
+    type Params;
+    /// Its detailed answer (a [`Measurement`] is made `From` it for the wire and the log).
+    type Solution;
+    /// Solves. Allocation-free: `scratch` is all the memory it may use.
+    fn solve(
+        points: &PlanePoints<'_>,
+        params: &Self::Params,
+        scratch: Scratch<'_>,
+    ) -> Result<Self::Solution, PipelineError>;
+}
+
+/// An instrument's solution together with the image summary it came from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Measured<S> {
+    /// The solver's answer.
+    pub solution: S,
+    /// The image part of the chain.
+    pub profile: Profile,
+}
+
+/// The settings of every instrument, for [`measure`].
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct InstrumentParams {
+    /// [`Mode::Cylinder`] ([`Stem`]).
+    pub cylinder: CylinderParams,
+}
+
+/// Measures a frame pair with the instrument of `mode`: [`extract_profile`], then its solver.
+/// A mode without a solver yet is [`PipelineError::UnsupportedMode`].
+///
+/// ```
+/// use tangent_core::pipeline::WorkspaceSizes;
+/// use tangent_core::{measure, Buffers, Calibration, Frame, InstrumentParams, Mode};
+/// use tangent_core::{PipelineConfig, PipelineError};
+///
+/// // The reference design: 752 × 480 8-bit frames, two laser planes.
+/// const SIZES: WorkspaceSizes = WorkspaceSizes::new(752, 480, 8, 2);
+/// let mut buffers = Box::new(Buffers::<u8, { SIZES.pixels }, { SIZES.points }>::new());
+/// let calibration = Calibration::reference_design();
+/// let dark = vec![12u8; 752 * 480];
+/// let frame = Frame::new(&dark[..], 752, 480, 752)?;
+/// let (config, params) = (PipelineConfig::default(), InstrumentParams::default());
+/// // Nothing lit: the laser-on frame equals the laser-off one.
+/// let reading =
+///     measure(Mode::Cylinder, &frame, &frame, &calibration, &config, &params, &mut buffers.workspace());
+/// assert_eq!(reading, Err(PipelineError::NoLaserLight { max_difference: 0 }));
+/// let reading =
+///     measure(Mode::Road, &frame, &frame, &calibration, &config, &params, &mut buffers.workspace());
+/// assert_eq!(reading, Err(PipelineError::UnsupportedMode(Mode::Road)));
+/// # Ok::<(), tangent_core::image::FrameError>(())
+/// ```
+pub fn measure<P: Pixel>(
+    mode: Mode,
+    off: &Frame<P, impl AsRef<[P]>>,
+    on: &Frame<P, impl AsRef<[P]>>,
+    calibration: &Calibration,
+    config: &PipelineConfig,
+    params: &InstrumentParams,
+    ws: &mut Workspace<'_, P>,
+) -> Result<Measurement, PipelineError> {
+    match mode {
+        Mode::Cylinder => {
+            measure_with::<Stem, P>(off, on, calibration, config, &params.cylinder, ws)
+                .map(|m| Measurement::from(&m.solution))
+        }
+        Mode::Sphere | Mode::Wall | Mode::Road => Err(PipelineError::UnsupportedMode(mode)),
+    }
+}
+
+/// [`measure`] with instrument `I`, keeping its detailed solution and the image summary.
+pub fn measure_with<I: Instrument, P: Pixel>(
+    off: &Frame<P, impl AsRef<[P]>>,
+    on: &Frame<P, impl AsRef<[P]>>,
+    calibration: &Calibration,
+    config: &PipelineConfig,
+    params: &I::Params,
+    ws: &mut Workspace<'_, P>,
+) -> Result<Measured<I::Solution>, PipelineError> {
+    let profile = extract_profile(off, on, calibration, config, ws)?;
+    let solution = solve_with::<I, P>(&profile, on.max_value(), calibration, params, ws)?;
+    Ok(Measured { solution, profile })
+}
+
+/// The solver half of [`measure_with`]: instrument `I` on the points of every plane that
+/// [`extract_profile`] left in `ws` (`full_scale`: the laser-on frame's
+/// [`Frame::max_value`]). Separate so that the two halves can be timed apart.
+pub fn solve_with<I: Instrument, P: Pixel>(
+    profile: &Profile,
+    full_scale: u32,
+    calibration: &Calibration,
+    params: &I::Params,
+    ws: &mut Workspace<'_, P>,
+) -> Result<I::Solution, PipelineError> {
+    let points = PlanePoints::new(profile, full_scale, calibration, ws.points);
+    let scratch = Scratch {
+        sigmas: ws.sigmas,
+        points: ws.scratch_points,
+        values: ws.scratch_values,
+    };
+    I::solve(&points, params, scratch)
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,70 @@
+//! The stem instrument ([`Mode::Cylinder`]): the cylinder solver
+//! ([`crate::solvers::stem::solve`]: three-tangent, circle or cylinder fit, chosen by the
+//! data) on the points of every plane, with the image's quality flags added.
+
+use crate::measurement::{Axes, Measurement, Mode, StemReading, TiltAngles};
+use crate::pipeline::PipelineError;
+use crate::solvers::stem::{self, CylinderInput, CylinderParams, CylinderSolution};
+
+use super::{Instrument, Measured, PlanePoints, Scratch};
+
+/// A stem measurement: the cylinder solution and the image summary.
+pub type StemMeasurement = Measured<CylinderSolution>;
+
+/// The stem instrument.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Stem;
+
+impl Instrument for Stem {
+    const MODE: Mode = Mode::Cylinder;
+    type Params = CylinderParams;
+    type Solution = CylinderSolution;
+
+    /// A curve that runs off the frame is [`PipelineError::OutsideFrame`]: the stem's
+    /// silhouette is not seen. The solution's flags include the [`Profile::image_flags`].
+    ///
+    /// [`Profile::image_flags`]: crate::pipeline::Profile::image_flags
+    fn solve(
+        points: &PlanePoints<'_>,
+        params: &CylinderParams,
+        scratch: Scratch<'_>,
+    ) -> Result<CylinderSolution, PipelineError> {
+        if points.profile.touches_edge {
+            return Err(PipelineError::OutsideFrame);
+        }
+        let sigmas = points.sigmas(&params.noise, params.focal_px, scratch.sigmas)?;
+        let curves = points.curves();
+        let input = CylinderInput {
+            curves,
+            sigmas: &sigmas[..curves.len()],
+            planes: points.planes(),
+        };
+        let scratch = stem::Scratch {
+            points: scratch.points,
+            values: scratch.values,
+        };
+        let mut solution = stem::solve(&input, params, scratch)?;
+        solution
+            .flags
+            .insert(points.profile.image_flags(points.full_scale));
+        Ok(solution)
+    }
+}
+
+impl From<&CylinderSolution> for Measurement {
+    fn from(s: &CylinderSolution) -> Self {
+        Measurement::Stem(StemReading {
+            diameter: s.diameter,
+            uncertainty: s.uncertainty,
+            method: s.method,
+            distance: s.distance,
+            tilt: s.tilt.map(|t| TiltAngles {
+                total: t.total,
+                theta: t.theta,
+                phi: t.phi,
+            }),
+            axes: s.axes.map(|(major, minor)| Axes { major, minor }),
+            flags: s.flags,
+        })
+    }
+}

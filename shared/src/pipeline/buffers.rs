@@ -1,0 +1,236 @@
+//! The pipeline's working memory, assembled once for everyone: a const-constructible set for
+//! statics ([`Buffers`], or its parts [`SmallBuffers`] and [`NO_OBJECTS`] for a board that
+//! spreads them over RAM regions) and, with the `alloc` feature, a heap set sized at run time
+//! ([`OwnedBuffers`]). Each lends the pipeline a [`Workspace`].
+
+use crate::curve::CurvePoint;
+use crate::image::segment::ObjectFeatures;
+use crate::image::Pixel;
+use crate::real::{Real, Vec2, Vec3};
+
+use super::Workspace;
+
+/// Entries of the segmentation's equivalence table ([`super::WorkspaceSizes::new`]).
+pub const LABEL_TABLE_LEN: usize = 4096;
+/// Object-feature entries ([`super::WorkspaceSizes::new`]).
+pub const MAX_OBJECTS: usize = 1024;
+/// Histogram bins of 8-bit frames (the default of the const sets' `BINS`).
+pub const BINS_8BIT: usize = 256;
+
+/// The object-feature buffer (≈ 57 KB).
+pub type Objects = [ObjectFeatures; MAX_OBJECTS];
+
+/// An all-zero [`Objects`] buffer: a static initialised with it lands in `.bss`, not in
+/// `.data` with a 57 KB image in flash (the segmentation initialises every entry it uses).
+#[allow(clippy::large_const_arrays)] // only used to initialise statics (zeroed, in .bss)
+pub const NO_OBJECTS: Objects = [ObjectFeatures::ZERO; MAX_OBJECTS];
+
+/// Every buffer but the two per-pixel ones and the object features: the histogram
+/// (`BINS` bins), the label table, and `POINTS` entries of curve points, 3-D points, their σ
+/// and solver scratch. All-zero and const-constructible, so a board can place it in a static of its
+/// choice (`#[link_section]`).
+#[derive(Debug)]
+pub struct SmallBuffers<const POINTS: usize, const BINS: usize = BINS_8BIT> {
+    histogram: [u32; BINS],
+    label_table: [u16; LABEL_TABLE_LEN],
+    curve: [CurvePoint; POINTS],
+    points: [Vec3; POINTS],
+    sigmas: [Real; POINTS],
+    scratch_points: [Vec2; POINTS],
+    scratch_values: [Real; POINTS],
+}
+
+impl<const POINTS: usize, const BINS: usize> SmallBuffers<POINTS, BINS> {
+    /// Zeroed buffers.
+    pub const fn new() -> Self {
+        SmallBuffers {
+            histogram: [0; BINS],
+            label_table: [0; LABEL_TABLE_LEN],
+            curve: [CurvePoint::ZERO; POINTS],
+            points: [Vec3::new(0.0, 0.0, 0.0); POINTS],
+            sigmas: [0.0; POINTS],
+            scratch_points: [Vec2::new(0.0, 0.0); POINTS],
+            scratch_values: [0.0; POINTS],
+        }
+    }
+}
+
+impl<const POINTS: usize, const BINS: usize> Default for SmallBuffers<POINTS, BINS> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<'a, P: Pixel> Workspace<'a, P> {
+    /// A workspace over buffers placed apart: the difference frame and the labels
+    /// (`width × height` each), the object features and the [`SmallBuffers`].
+    pub fn from_parts<const POINTS: usize, const BINS: usize>(
+        diff: &'a mut [P],
+        labels: &'a mut [u16],
+        objects: &'a mut [ObjectFeatures],
+        small: &'a mut SmallBuffers<POINTS, BINS>,
+    ) -> Self {
+        Workspace {
+            diff,
+            labels,
+            histogram: &mut small.histogram,
+            label_table: &mut small.label_table,
+            objects,
+            curve: &mut small.curve,
+            points: &mut small.points,
+            sigmas: &mut small.sigmas,
+            scratch_points: &mut small.scratch_points,
+            scratch_values: &mut small.scratch_values,
+        }
+    }
+}
+
+/// The whole working memory for frames of up to `PIXELS` pixels and `POINTS` curve points
+/// (size them with [`super::WorkspaceSizes::new`], which is `const`), const-constructible and
+/// all-zero: one `static` (in `.bss`) holds it on a device.
+///
+/// ```
+/// use tangent_core::pipeline::{Buffers, WorkspaceSizes};
+///
+/// const SIZES: WorkspaceSizes = WorkspaceSizes::new(64, 48, 8, 1);
+/// // In firmware: `static mut BUFFERS: Buffers<u8, …> = Buffers::new();` (or a `StaticCell`).
+/// let mut buffers = Box::new(Buffers::<u8, { SIZES.pixels }, { SIZES.points }>::new());
+/// let workspace = buffers.workspace();
+/// assert_eq!(workspace.diff.len(), 64 * 48);
+/// assert_eq!(workspace.points.len(), SIZES.points);
+/// ```
+#[derive(Debug)]
+pub struct Buffers<
+    P: Pixel,
+    const PIXELS: usize,
+    const POINTS: usize,
+    const BINS: usize = BINS_8BIT,
+> {
+    diff: [P; PIXELS],
+    labels: [u16; PIXELS],
+    objects: Objects,
+    small: SmallBuffers<POINTS, BINS>,
+}
+
+impl<P: Pixel, const PIXELS: usize, const POINTS: usize, const BINS: usize>
+    Buffers<P, PIXELS, POINTS, BINS>
+{
+    /// Zeroed buffers.
+    pub const fn new() -> Self {
+        Buffers {
+            diff: [P::ZERO; PIXELS],
+            labels: [0; PIXELS],
+            objects: NO_OBJECTS,
+            small: SmallBuffers::new(),
+        }
+    }
+
+    /// The pipeline's view of these buffers.
+    pub fn workspace(&mut self) -> Workspace<'_, P> {
+        Workspace::from_parts(
+            &mut self.diff,
+            &mut self.labels,
+            &mut self.objects,
+            &mut self.small,
+        )
+    }
+}
+
+impl<P: Pixel, const PIXELS: usize, const POINTS: usize, const BINS: usize> Default
+    for Buffers<P, PIXELS, POINTS, BINS>
+{
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+#[cfg(any(test, feature = "alloc"))]
+pub use owned::OwnedBuffers;
+
+#[cfg(any(test, feature = "alloc"))]
+mod owned {
+    extern crate alloc;
+    use alloc::vec;
+    use alloc::vec::Vec;
+
+    use super::super::{Workspace, WorkspaceSizes};
+    use crate::curve::CurvePoint;
+    use crate::image::segment::ObjectFeatures;
+    use crate::image::Pixel;
+    use crate::real::{Real, Vec2, Vec3};
+
+    /// The working memory on the heap, sized at run time for a frame (feature `alloc`): what a
+    /// host uses. After a run it still holds the intermediate results (for plots).
+    ///
+    /// ```
+    /// use tangent_core::pipeline::OwnedBuffers;
+    ///
+    /// let mut buffers = OwnedBuffers::<u16>::for_frame(752, 480, 10, 2);
+    /// assert_eq!(buffers.workspace().histogram.len(), 1024);
+    /// ```
+    #[derive(Debug)]
+    pub struct OwnedBuffers<P: Pixel> {
+        diff: Vec<P>,
+        labels: Vec<u16>,
+        histogram: Vec<u32>,
+        label_table: Vec<u16>,
+        objects: Vec<ObjectFeatures>,
+        curve: Vec<CurvePoint>,
+        points: Vec<Vec3>,
+        sigmas: Vec<Real>,
+        scratch_points: Vec<Vec2>,
+        scratch_values: Vec<Real>,
+    }
+
+    impl<P: Pixel> OwnedBuffers<P> {
+        /// Buffers of the given sizes.
+        pub fn new(sizes: WorkspaceSizes) -> Self {
+            OwnedBuffers {
+                diff: vec![P::ZERO; sizes.pixels],
+                labels: vec![0; sizes.pixels],
+                histogram: vec![0; sizes.histogram],
+                label_table: vec![0; sizes.label_table],
+                objects: vec![ObjectFeatures::ZERO; sizes.objects],
+                curve: vec![CurvePoint::ZERO; sizes.points],
+                points: vec![Vec3::zeros(); sizes.points],
+                sigmas: vec![0.0; sizes.points],
+                scratch_points: vec![Vec2::zeros(); sizes.points],
+                scratch_values: vec![0.0; sizes.points],
+            }
+        }
+
+        /// Buffers for a `width × height` frame of `bit_depth` bits and `planes` laser planes.
+        pub fn for_frame(width: usize, height: usize, bit_depth: u8, planes: usize) -> Self {
+            Self::new(WorkspaceSizes::new(width, height, bit_depth, planes))
+        }
+
+        /// The pipeline's view of these buffers.
+        pub fn workspace(&mut self) -> Workspace<'_, P> {
+            Workspace {
+                diff: &mut self.diff,
+                labels: &mut self.labels,
+                histogram: &mut self.histogram,
+                label_table: &mut self.label_table,
+                objects: &mut self.objects,
+                curve: &mut self.curve,
+                points: &mut self.points,
+                sigmas: &mut self.sigmas,
+                scratch_points: &mut self.scratch_points,
+                scratch_values: &mut self.scratch_values,
+            }
+        }
+
+        /// The difference frame of the last run.
+        pub fn diff(&self) -> &[P] {
+            &self.diff
+        }
+        /// The curve points of the last run (all planes; see `Profile::plane_points`).
+        pub fn curve(&self) -> &[CurvePoint] {
+            &self.curve
+        }
+        /// The 3-D points of the last run (all planes; see `Profile::plane_points`).
+        pub fn points(&self) -> &[Vec3] {
+            &self.points
+        }
+    }
+}

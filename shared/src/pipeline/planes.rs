@@ -1,0 +1,288 @@
+//! Which selected object is which laser plane's curve (`docs/pipeline.md`, "Assigning curves to
+//! laser planes").
+
+use crate::calibration::{Calibration, MAX_PLANES};
+use crate::curve::MAX_CURVES;
+use crate::image::segment::ObjectFeatures;
+use crate::image::select::{self, SelectionReport};
+use crate::real::{Real, Vec2, Vec3};
+
+use super::{PipelineConfig, PipelineError};
+
+/// One selected object and what the plane assignment needs of it.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Candidate {
+    pub label: u16,
+    pub min_x: u16,
+    pub max_x: u16,
+    pub mean_row: Real,
+    pub pixels: u32,
+    /// The plane whose curve it is, if any.
+    pub plane: Option<usize>,
+}
+
+impl Candidate {
+    const NONE: Candidate = Candidate {
+        label: 0,
+        min_x: 0,
+        max_x: 0,
+        mean_row: 0.0,
+        pixels: 0,
+        plane: None,
+    };
+}
+
+/// The selected objects, nearest to the central column first, each with its plane.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Candidates {
+    list: [Candidate; MAX_CURVES],
+    len: usize,
+    /// What the selection found.
+    pub report: SelectionReport,
+}
+
+/// The curves to extract: labels in extraction order (a curve point's `curve` index) and the
+/// plane of each.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct UsedCurves {
+    pub labels: [u16; MAX_CURVES],
+    pub planes: [usize; MAX_CURVES],
+    pub len: usize,
+}
+
+impl UsedCurves {
+    /// The plane of curve `curve` (a curve point's `curve` index).
+    pub fn plane(&self, curve: u8) -> Option<usize> {
+        let i = curve as usize;
+        (i < self.len).then(|| self.planes[i])
+    }
+}
+
+/// How the candidates were used, for the image flags ([`super::Profile`]).
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Usage {
+    /// Candidates not used for any plane.
+    pub unused: usize,
+    /// Pixel count of the largest unused candidate (0 if none).
+    pub largest_unused: u32,
+    /// Pixel count of the smallest used candidate.
+    pub smallest_used: u32,
+}
+
+impl Candidates {
+    fn as_slice(&self) -> &[Candidate] {
+        &self.list[..self.len]
+    }
+
+    fn used(&self) -> impl Iterator<Item = &Candidate> {
+        self.as_slice().iter().filter(|c| c.plane.is_some())
+    }
+
+    /// The curves to extract.
+    pub fn used_curves(&self) -> UsedCurves {
+        let mut used = UsedCurves {
+            labels: [0; MAX_CURVES],
+            planes: [0; MAX_CURVES],
+            len: 0,
+        };
+        for c in self.used() {
+            if let Some(plane) = c.plane {
+                used.labels[used.len] = c.label;
+                used.planes[used.len] = plane;
+                used.len += 1;
+            }
+        }
+        used
+    }
+
+    /// How many candidates were left out, the largest of them, the smallest used.
+    pub fn usage(&self) -> Usage {
+        let smallest_used = self.used().map(|c| c.pixels).min().unwrap_or(0);
+        let (unused, largest_unused) = self
+            .as_slice()
+            .iter()
+            .filter(|c| c.plane.is_none())
+            .fold((0, 0), |(k, m), c| (k + 1, m.max(c.pixels)));
+        Usage {
+            unused,
+            largest_unused,
+            smallest_used,
+        }
+    }
+}
+
+/// Selects the objects that look like laser curves (the per-object criteria, nearest to the
+/// central column first, `max_fragments` per plane) and assigns them to planes. The first
+/// candidate must get a plane, or there is no curve.
+pub(super) fn select_and_assign(
+    objects: &[ObjectFeatures],
+    width: usize,
+    calibration: &Calibration,
+    config: &PipelineConfig,
+) -> Result<Candidates, PipelineError> {
+    let n_planes = calibration.planes.len();
+    let mut params = config.selection;
+    params.max_objects = (config.max_fragments * n_planes).clamp(1, MAX_CURVES);
+    let mut selected = [0u16; MAX_CURVES];
+    let report = select::select(objects, width, &params, &mut selected);
+    if report.selected == 0 {
+        return Err(PipelineError::NoCurve);
+    }
+    let mut candidates = Candidates {
+        list: [Candidate::NONE; MAX_CURVES],
+        len: report.selected.min(MAX_CURVES),
+        report,
+    };
+    for (c, &label) in candidates.list.iter_mut().zip(&selected[..candidates.len]) {
+        if let Some(f) = objects.iter().find(|f| f.label == label) {
+            *c = Candidate {
+                label,
+                min_x: f.min_x,
+                max_x: f.max_x,
+                mean_row: f
+                    .geometric_centroid()
+                    .map(|(_, y)| y)
+                    .unwrap_or(f.min_y as Real),
+                pixels: f.pixel_count,
+                plane: None,
+            };
+        }
+    }
+    let len = candidates.len;
+    assign_planes(&mut candidates.list[..len], calibration, config);
+    if candidates.list[0].plane.is_none() {
+        return Err(PipelineError::NoCurve);
+    }
+    Ok(candidates)
+}
+
+/// Assigns candidates (sorted nearest to the central column first) to laser planes.
+///
+/// The first candidate is the aimed object's curve in some plane. With one plane it is that
+/// plane's. With several planes, the candidates overlapping it in columns are the other planes'
+/// curves on the same object; they are sorted by mean row and matched to the planes sorted by
+/// the row at which each plane is seen on the central column at mid range — parallel planes
+/// keep their image order at every depth (docs/pipeline.md). Then fragments: a remaining
+/// candidate whose column span continues an assigned curve's within `max_fragment_gap` columns
+/// and whose mean row is within `max_fragment_step` rows joins that plane.
+fn assign_planes(cands: &mut [Candidate], calibration: &Calibration, config: &PipelineConfig) {
+    let n_planes = calibration.planes.len();
+    let Some(first) = cands.first().copied() else {
+        return;
+    };
+    // Candidates that share columns with the first one (including itself), by mean row.
+    let mut group = [usize::MAX; MAX_PLANES];
+    let mut g = 0;
+    for (i, c) in cands.iter().enumerate() {
+        let overlap = c.min_x.max(first.min_x) <= c.max_x.min(first.max_x);
+        if overlap && g < n_planes && g < MAX_PLANES {
+            group[g] = i;
+            g += 1;
+        }
+    }
+    let group = &mut group[..g];
+    group.sort_unstable_by(|&a, &b| {
+        cands[a]
+            .mean_row
+            .partial_cmp(&cands[b].mean_row)
+            .unwrap_or(core::cmp::Ordering::Equal)
+    });
+    let (planes_order, rows) = planes_by_row(calibration, first.mean_row);
+    let planes_order = &planes_order[..n_planes.min(MAX_PLANES)];
+    if group.len() == n_planes {
+        for (&ci, &plane) in group.iter().zip(planes_order.iter()) {
+            cands[ci].plane = Some(plane);
+        }
+    } else if n_planes == 1 {
+        cands[0].plane = Some(0);
+    } else {
+        // Fewer curves than planes on the aimed object: each goes to the plane seen nearest
+        // its row; the plane left without a curve is reported as too short by the caller.
+        for &ci in group.iter() {
+            let mut best = 0;
+            let mut best_d = Real::INFINITY;
+            for &k in planes_order.iter() {
+                let d = (rows[k] - cands[ci].mean_row).abs();
+                if d < best_d {
+                    best_d = d;
+                    best = k;
+                }
+            }
+            cands[ci].plane = Some(best);
+        }
+    }
+    join_fragments(cands, config);
+}
+
+/// The planes sorted by the image row at which each is seen on the central column, at the
+/// depth where plane 0 sees a curve at row `row` (the order is the same at every depth for
+/// parallel planes), and those rows by plane.
+fn planes_by_row(
+    calibration: &Calibration,
+    row: Real,
+) -> ([usize; MAX_PLANES], [Real; MAX_PLANES]) {
+    let cam = &calibration.camera;
+    let depth = cam
+        .pixel_to_ray(Vec2::new(cam.cx, row))
+        .ok()
+        .and_then(|ray| {
+            calibration
+                .planes
+                .first()
+                .and_then(|p0| p0.intersect_ray(ray).ok())
+        })
+        .map(|p| p.z)
+        .unwrap_or(1.5);
+    let mut order = [0usize; MAX_PLANES];
+    let mut rows = [Real::INFINITY; MAX_PLANES];
+    for (k, plane) in calibration.planes.iter().enumerate().take(MAX_PLANES) {
+        order[k] = k;
+        // The point of plane k with x = 0 at that depth: n.y·y = offset − n.z·depth.
+        let n = plane.normal;
+        if n.y.abs() > 1e-6 {
+            let y = (plane.offset - n.z * depth) / n.y;
+            if let Ok(px) = cam.project(Vec3::new(0.0, y, depth)) {
+                rows[k] = px.y;
+            }
+        }
+    }
+    let n = calibration.planes.len().min(MAX_PLANES);
+    order[..n].sort_unstable_by(|&a, &b| {
+        rows[a]
+            .partial_cmp(&rows[b])
+            .unwrap_or(core::cmp::Ordering::Equal)
+    });
+    (order, rows)
+}
+
+/// Joins the candidates left without a plane that continue an assigned curve: a column gap
+/// of at most `max_fragment_gap` and a mean-row step of at most `max_fragment_step`.
+fn join_fragments(cands: &mut [Candidate], config: &PipelineConfig) {
+    let mut changed = true;
+    while changed {
+        changed = false;
+        for i in 0..cands.len() {
+            if cands[i].plane.is_some() {
+                continue;
+            }
+            let c = cands[i];
+            let join = cands.iter().find_map(|a| {
+                let plane = a.plane?;
+                let gap = if c.min_x > a.max_x {
+                    c.min_x - a.max_x
+                } else if a.min_x > c.max_x {
+                    a.min_x - c.max_x
+                } else {
+                    u16::MAX // overlapping columns: another object, not a fragment
+                };
+                (gap <= config.max_fragment_gap
+                    && (c.mean_row - a.mean_row).abs() <= config.max_fragment_step)
+                    .then_some(plane)
+            });
+            if let Some(plane) = join {
+                cands[i].plane = Some(plane);
+                changed = true;
+            }
+        }
+    }
+}

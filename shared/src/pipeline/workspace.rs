@@ -1,0 +1,95 @@
+//! The pipeline's working memory as it sees it: borrowed slices, and the lengths they need.
+
+use crate::calibration::MAX_PLANES;
+use crate::curve::CurvePoint;
+use crate::image::segment::ObjectFeatures;
+use crate::image::Pixel;
+use crate::real::{Real, Vec2, Vec3};
+
+use super::buffers::{LABEL_TABLE_LEN, MAX_OBJECTS};
+use super::PipelineError;
+
+/// Caller-owned working memory of the pipeline: borrowed from a [`Buffers`] (static),
+/// an `OwnedBuffers` (heap, feature `alloc`), or any slices of the [`WorkspaceSizes`].
+#[derive(Debug)]
+pub struct Workspace<'a, P: Pixel> {
+    /// Difference frame (`width × height`).
+    pub diff: &'a mut [P],
+    /// Segmentation labels (`width × height`).
+    pub labels: &'a mut [u16],
+    /// Histogram bins (`2^bit_depth`).
+    pub histogram: &'a mut [u32],
+    /// Equivalence table of the segmentation.
+    pub label_table: &'a mut [u16],
+    /// Features of the objects found.
+    pub objects: &'a mut [ObjectFeatures],
+    /// Curve points, all planes (about `width × planes`).
+    pub curve: &'a mut [CurvePoint],
+    /// 3-D points, grouped by plane in [`Profile::plane_points`] order (same length as `curve`).
+    pub points: &'a mut [Vec3],
+    /// 1σ of each 3-D point (metres, along its noise direction; same indexing as `points`),
+    /// from [`super::point_sigmas`]: what the solvers weigh the points by.
+    pub sigmas: &'a mut [Real],
+    /// Solver scratch: 2-D points (same length as `curve`).
+    pub scratch_points: &'a mut [Vec2],
+    /// Solver scratch: residuals (same length as `curve`).
+    pub scratch_values: &'a mut [Real],
+}
+
+/// Buffer lengths a [`Workspace`] needs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct WorkspaceSizes {
+    /// Pixels of `diff` and `labels`.
+    pub pixels: usize,
+    /// Histogram bins.
+    pub histogram: usize,
+    /// Equivalence-table entries.
+    pub label_table: usize,
+    /// Object-feature entries.
+    pub objects: usize,
+    /// Curve, 3-D point, point-σ and solver-scratch entries.
+    pub points: usize,
+}
+
+impl WorkspaceSizes {
+    /// Sizes for a `width × height` frame of `bit_depth` bits with `planes` laser planes.
+    ///
+    /// The label table is sized for a cluttered scene (4096 provisional labels), not for the
+    /// pathological worst case (a checkerboard needs `width × height / 2`): a scene with more
+    /// blobs than that is reported as `Segment(TooManyLabels)` instead of being measured.
+    pub const fn new(width: usize, height: usize, bit_depth: u8, planes: usize) -> Self {
+        // `Ord::min`/`clamp` are not `const`.
+        let bits = if bit_depth > 16 { 16 } else { bit_depth };
+        let planes = if planes < 1 {
+            1
+        } else if planes > MAX_PLANES {
+            MAX_PLANES
+        } else {
+            planes
+        };
+        WorkspaceSizes {
+            pixels: width * height,
+            histogram: 1usize << bits,
+            label_table: LABEL_TABLE_LEN,
+            objects: MAX_OBJECTS,
+            points: width * planes * 2,
+        }
+    }
+}
+
+/// `Err(WorkspaceTooSmall)` unless `actual ≥ needed`.
+pub(crate) fn need(
+    buffer: &'static str,
+    needed: usize,
+    actual: usize,
+) -> Result<(), PipelineError> {
+    if actual < needed {
+        Err(PipelineError::WorkspaceTooSmall {
+            buffer,
+            needed,
+            actual,
+        })
+    } else {
+        Ok(())
+    }
+}

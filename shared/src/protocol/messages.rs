@@ -1,0 +1,394 @@
+//! The messages of the protocol: what the host asks, what the device answers, and the
+//! calibration on the wire (in `f64` whatever either side computes in).
+
+use serde::{Deserialize, Serialize};
+
+use crate::calibration::{Calibration, CalibrationError, MAX_PLANES};
+use crate::camera::{Camera, Distortion};
+use crate::laser_plane::LaserPlane;
+use crate::measurement::Measurement;
+use crate::real::{Real, Vec3};
+
+/// A host → device frame: a request and the tag its response will echo.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ToDevice {
+    /// Chosen by the host (non-zero), echoed in every response to this request.
+    pub tag: u16,
+    /// What the host asks for.
+    pub request: Request,
+}
+
+/// A device → host frame.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FromDevice<'a> {
+    /// The tag of the request this answers, or [`UNSOLICITED`].
+    pub tag: u16,
+    /// The message.
+    #[serde(borrow)]
+    pub response: Response<'a>,
+}
+
+/// Tag of device messages that answer no request (trigger readings, the boot banner).
+pub const UNSOLICITED: u16 = 0;
+
+/// What the host asks the device.
+// The calibration variant is large, but messages live briefly on the stack and `no_std` has
+// no `Box`: the size difference is accepted.
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum Request {
+    /// Device identity and health → [`Response::Info`].
+    DeviceInfo,
+    /// One measurement, as one trigger press → [`Response::Reading`] or [`Response::Error`].
+    Measure,
+    /// Measure continuously, as if the trigger were held: readings (with running
+    /// statistics) are sent with this request's tag until [`Request::StopStream`].
+    /// Answered first by [`Response::Ack`].
+    StartStream,
+    /// Ends a stream → [`Response::Ack`] (also when no stream was running).
+    StopStream,
+    /// Re-sends the readings kept in the device's history whose sequence number is
+    /// greater than `after_seq` (as [`Response::Reading`]s), then [`Response::HistoryEnd`].
+    /// This is how a host that lost the link recovers readings without duplicates.
+    History {
+        /// Last sequence number the host already has (0 = all).
+        after_seq: u32,
+    },
+    /// Captures a raw frame pair (laser off, laser on) into the device's frame buffers
+    /// → [`Response::FramesReady`]. Read it with [`Request::ReadFrameChunk`].
+    CaptureFrames,
+    /// Reads part of the last captured pair → [`Response::FrameChunk`]. The host pulls
+    /// chunks at its own pace and asks again for any chunk it lost.
+    ReadFrameChunk {
+        /// The capture the host is reading (from [`FrameSetInfo::capture`]); a
+        /// [`ErrorCode::StaleCapture`] error says a newer capture has replaced it.
+        capture: u32,
+        /// Which frame of the pair.
+        frame: FrameSel,
+        /// Byte offset into the frame (row-major, `width` bytes per row).
+        offset: u32,
+        /// Most bytes wanted (the device sends at most [`FRAME_CHUNK_MAX`](super::FRAME_CHUNK_MAX)).
+        max_len: u16,
+    },
+    /// The stored calibration → [`Response::Calibration`] (or an error when none).
+    ReadCalibration,
+    /// Validates, stores (non-volatile where the board has storage) and activates a
+    /// calibration → [`Response::Ack`].
+    WriteCalibration(WireCalibration),
+    /// Fixes the exposure (µs), or returns to auto-exposure with `None` → [`Response::Ack`].
+    SetExposure(Option<u32>),
+    /// Runs the self-test → [`Response::SelfTest`].
+    SelfTest,
+}
+
+/// One frame of a captured pair.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum FrameSel {
+    /// Exposed with every laser off (ambient light).
+    Off,
+    /// Exposed with the lasers on.
+    On,
+}
+
+/// What the device sends.
+#[allow(clippy::large_enum_variant)] // as for `Request`
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum Response<'a> {
+    /// Device identity and health.
+    Info(DeviceInfo<'a>),
+    /// A measurement (trigger press, [`Request::Measure`], a stream or the history).
+    Reading(Reading),
+    /// The request failed, or a trigger press could not be measured.
+    Error(DeviceError),
+    /// The request was carried out.
+    Ack,
+    /// End of a [`Request::History`] replay.
+    HistoryEnd {
+        /// Highest sequence number the device has issued (0 = none yet).
+        last_seq: u32,
+    },
+    /// A frame pair was captured.
+    FramesReady(FrameSetInfo),
+    /// Part of a captured frame.
+    FrameChunk {
+        /// Capture this chunk belongs to.
+        capture: u32,
+        /// Which frame of the pair.
+        frame: FrameSel,
+        /// Byte offset of `data` in the frame.
+        offset: u32,
+        /// The frame's total size in bytes.
+        total: u32,
+        /// The pixels (8-bit, row-major).
+        #[serde(borrow)]
+        data: &'a [u8],
+    },
+    /// The stored calibration.
+    Calibration(WireCalibration),
+    /// Result of [`Request::SelfTest`].
+    SelfTest(SelfTestReport),
+}
+
+/// Device identity, sent for [`Request::DeviceInfo`] and unsolicited at boot.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DeviceInfo<'a> {
+    /// [`PROTOCOL_VERSION`](super::PROTOCOL_VERSION) of the firmware (also in every frame's first byte).
+    pub protocol_version: u8,
+    /// Firmware version (semver of the firmware crate).
+    pub fw_version: &'a str,
+    /// Which board this is.
+    pub board: Board,
+    /// Id of the active calibration, `None` when the device has none.
+    pub calib_id: Option<u32>,
+    /// Size of the frames the camera delivers (pixels).
+    pub frame_width: u16,
+    /// Size of the frames the camera delivers (pixels).
+    pub frame_height: u16,
+    /// Milliseconds since boot.
+    pub uptime_ms: u64,
+    /// Highest reading sequence number issued (0 = none).
+    pub last_seq: u32,
+    /// Link health since boot.
+    pub link: LinkStats,
+}
+
+/// Hardware the firmware runs on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Board {
+    /// STM32H743 + MT9V034 (the instrument).
+    H743,
+    /// The emulated board (QEMU mps2-an500, frames from capture files).
+    Emulated,
+}
+
+/// Counters of a [`Decoder`](super::Decoder): what arrived on the link and what was rejected.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct LinkStats {
+    /// Frames decoded and accepted.
+    pub frames_ok: u32,
+    /// Frames rejected: COBS error, bad CRC, too short, undecodable message.
+    pub malformed: u32,
+    /// Frames longer than the receive buffer (discarded up to the next delimiter).
+    pub oversize: u32,
+    /// Well-formed frames of another protocol version.
+    pub version_mismatch: u32,
+}
+
+/// A reading as sent on the wire: what was measured ([`Measurement`], its scalars as `f32`)
+/// and when, with what calibration and exposure.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Reading {
+    /// Sequence number, from 1, incremented for every reading the device makes (a gap
+    /// means a lost reading, a repeat a duplicate).
+    pub seq: u32,
+    /// Device time of the laser-on exposure (ms since boot).
+    pub timestamp_ms: u64,
+    /// Calibration the reading was computed with.
+    pub calib_id: u32,
+    /// Exposure used (µs).
+    pub exposure_us: u32,
+    /// What the instrument measured: the same type the pipeline returns and the host prints
+    /// and logs (flag and method names in [`codes`](super::codes)).
+    pub measurement: Measurement,
+    /// Running statistics of a held trigger or stream (`None` for a single reading).
+    pub stats: Option<RunningStats>,
+}
+
+/// Running statistics of the readings of one held trigger or stream.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct RunningStats {
+    /// Readings so far (this one included).
+    pub count: u32,
+    /// Mean diameter (metres).
+    pub mean_m: f32,
+    /// Sample standard deviation of the diameters (metres; 0 for one reading).
+    pub spread_m: f32,
+}
+
+/// Which solver produced a reading: the solvers' own type, serialised as it is.
+pub use crate::solvers::result::Method;
+
+/// An error reported by the device.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct DeviceError {
+    /// What went wrong.
+    pub code: ErrorCode,
+    /// Code-specific detail (e.g. the peer's protocol version, a driver error number).
+    pub detail: u32,
+}
+
+/// Device error codes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum ErrorCode {
+    /// A request frame of another protocol version (`detail` = its version).
+    UnsupportedVersion,
+    /// The device has no valid calibration: push one (`tangent device-calibration push`).
+    NoCalibration,
+    /// The calibration sent is invalid (`detail` = which check failed).
+    InvalidCalibration,
+    /// The calibration could not be written to storage.
+    StorageFailure,
+    /// The camera did not deliver a frame in time.
+    CameraTimeout,
+    /// The camera reported an error (`detail` = driver code).
+    CameraFailure,
+    /// The laser was on for longer than the hard limit and was forced off.
+    LaserTimeout,
+    /// The measurement pipeline found no valid result (`detail` = the failure, packed as
+    /// [`Failure::detail`](super::codes::Failure::detail)).
+    MeasurementFailed,
+    /// No frame pair has been captured yet.
+    NoFrames,
+    /// [`Request::ReadFrameChunk`] asked for a capture that has been replaced.
+    StaleCapture,
+    /// [`Request::ReadFrameChunk`] asked beyond the end of the frame.
+    OutOfRange,
+    /// The device is busy (e.g. streaming) and cannot do this now.
+    Busy,
+}
+
+/// Description of a captured frame pair.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FrameSetInfo {
+    /// Capture number (increments with every captured pair, measurement or dump).
+    pub capture: u32,
+    /// Frame width (pixels).
+    pub width: u16,
+    /// Frame height (pixels).
+    pub height: u16,
+    /// First sensor row of the frame (non-zero when the device reads a window of rows).
+    pub row_offset: u16,
+    /// Bits per pixel of the data (8).
+    pub bit_depth: u8,
+    /// Exposure of both frames (µs).
+    pub exposure_us: u32,
+    /// Device time of the laser-on exposure (ms since boot).
+    pub timestamp_ms: u64,
+    /// Bitmask of the lasers lit in the on frame (bit i = plane i).
+    pub laser_mask: u8,
+    /// Calibration active when captured, if any.
+    pub calib_id: Option<u32>,
+}
+
+/// Result of the device self-test: each bit of `failed` a failed check.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SelfTestReport {
+    /// Bitmask of failed [`self_test`] checks (0 = all passed).
+    pub failed: u32,
+    /// Checks that were run (bitmask).
+    pub ran: u32,
+}
+
+/// Self-test check bits ([`SelfTestReport`]).
+pub mod self_test {
+    /// The camera answered and delivered a frame.
+    pub const CAMERA: u32 = 1 << 0;
+    /// The stored calibration is present and valid.
+    pub const CALIBRATION: u32 = 1 << 1;
+    /// The laser frame is brighter than the dark frame (lasers and filter work).
+    pub const LASER_CONTRAST: u32 = 1 << 2;
+    /// The dark frame is not saturated (exposure/ambient light sane).
+    pub const DARK_LEVEL: u32 = 1 << 3;
+}
+
+/// A calibration on the wire, in `f64` whatever the sender's [`Real`] is.
+///
+/// Mirrors [`Calibration`] field by field (camera intrinsics, Brown–Conrady coefficients,
+/// each laser plane's unit normal, offset and source point) so that its bytes do not
+/// depend on the precision either side computes in.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WireCalibration {
+    /// [`Calibration::id`].
+    pub id: u32,
+    /// Image width (pixels).
+    pub width: u32,
+    /// Image height (pixels).
+    pub height: u32,
+    /// `[fx, fy, cx, cy]` (pixels).
+    pub intrinsics: [f64; 4],
+    /// `[k1, k2, k3, p1, p2]`.
+    pub distortion: [f64; 5],
+    /// The laser planes.
+    pub planes: heapless::Vec<WirePlane, MAX_PLANES>,
+}
+
+/// A laser plane on the wire: `normal · X = offset`, emission point `source`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct WirePlane {
+    /// Unit normal (camera frame).
+    pub normal: [f64; 3],
+    /// Distance from the camera centre to the plane (metres).
+    pub offset: f64,
+    /// Laser emission point (metres, camera frame).
+    pub source: [f64; 3],
+}
+
+impl From<&Calibration> for WireCalibration {
+    fn from(c: &Calibration) -> Self {
+        let cam = &c.camera;
+        let d = &cam.distortion;
+        let mut planes = heapless::Vec::new();
+        for p in c.planes.iter() {
+            // Both vectors hold at most MAX_PLANES, so this push cannot fail.
+            let _ = planes.push(WirePlane {
+                normal: [p.normal.x as f64, p.normal.y as f64, p.normal.z as f64],
+                offset: p.offset as f64,
+                source: [p.source.x as f64, p.source.y as f64, p.source.z as f64],
+            });
+        }
+        WireCalibration {
+            id: c.id,
+            width: cam.width,
+            height: cam.height,
+            intrinsics: [cam.fx as f64, cam.fy as f64, cam.cx as f64, cam.cy as f64],
+            distortion: [
+                d.k1 as f64,
+                d.k2 as f64,
+                d.k3 as f64,
+                d.p1 as f64,
+                d.p2 as f64,
+            ],
+            planes,
+        }
+    }
+}
+
+impl WireCalibration {
+    /// The calibration in the local precision, validated ([`Calibration::validate`]).
+    pub fn to_calibration(&self) -> Result<Calibration, CalibrationError> {
+        let [fx, fy, cx, cy] = self.intrinsics;
+        let [k1, k2, k3, p1, p2] = self.distortion;
+        let camera = Camera {
+            width: self.width,
+            height: self.height,
+            fx: fx as Real,
+            fy: fy as Real,
+            cx: cx as Real,
+            cy: cy as Real,
+            distortion: Distortion {
+                k1: k1 as Real,
+                k2: k2 as Real,
+                k3: k3 as Real,
+                p1: p1 as Real,
+                p2: p2 as Real,
+            },
+        };
+        let v = |a: [f64; 3]| Vec3::new(a[0] as Real, a[1] as Real, a[2] as Real);
+        let mut planes = heapless::Vec::new();
+        for p in self.planes.iter() {
+            // Same capacity on both sides: cannot fail.
+            let _ = planes.push(LaserPlane {
+                normal: v(p.normal),
+                offset: p.offset as Real,
+                source: v(p.source),
+            });
+        }
+        let calibration = Calibration {
+            id: self.id,
+            camera,
+            planes,
+        };
+        calibration.validate()?;
+        Ok(calibration)
+    }
+}

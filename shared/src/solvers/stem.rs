@@ -1,0 +1,638 @@
+//! The stem diameter of one capture (thesis chapter 9; `docs/cylinder.md`, "Choosing the
+//! method"): [`solve`] runs the methods — three-tangent and robust circle fit in one plane,
+//! cylinder fit and generalised three-tangent over two or more — gives each its 1σ from the
+//! points' stored σ and the noise model, chooses the reported diameter, sets
+//! the quality [`Flags`], and returns a specific [`SolveError`] when nothing is trustworthy.
+
+// `!(x > 0.0)` is deliberate throughout: it also rejects NaN, which `x <= 0.0` would let
+// through (no panics or made-up numbers on bad data).
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+#[allow(unused_imports)]
+use crate::real::Float;
+use crate::real::{norm, sqrt, Real, Vec2, Vec3, PI};
+
+use super::circle::{self, RobustParams};
+use super::cylinder_fit::{fit_cylinder, initial_cylinder, project_along_axis, to_plane};
+use super::ellipse::{self, EllipseFit};
+use super::lm::LmParams;
+use super::result::{Flags, Method, Tilt};
+use super::three_tangent::{
+    generalised_three_tangent, three_tangent, ThreeTangent, ThreeTangentParams,
+};
+use super::SolveError;
+use crate::laser_plane::LaserPlane;
+use crate::noise::{self, NoiseModel};
+
+mod sigma;
+use sigma::{
+    arc_angle, elliptic_diameter, noise_vector, one_point_sigma, projected_data_sigma,
+    robust_circle, three_tangent_variance,
+};
+pub use sigma::{edge_bias_sigma, BENDING_FRACTION};
+
+/// Input of [`solve`]: the laser curves of one capture.
+#[derive(Debug, Clone, Copy)]
+pub struct CylinderInput<'a> {
+    /// Per plane, the triangulated points (metres, camera frame), in image-column order.
+    pub curves: &'a [&'a [Vec3]],
+    /// Per plane, each point's 1σ (metres, along its noise direction
+    /// [`noise::DisplacementField`]), same indexing as `curves` (the pipeline writes them
+    /// beside the points: [`crate::pipeline::point_sigmas`]).
+    pub sigmas: &'a [&'a [Real]],
+    /// The laser planes, same order as `curves`.
+    pub planes: &'a [LaserPlane],
+}
+
+/// Settings of [`solve`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CylinderParams {
+    /// Smallest plausible radius (metres).
+    pub min_radius: Real,
+    /// Largest plausible radius (metres).
+    pub max_radius: Real,
+    /// Working range: nearest distance from the source (metres), min and max.
+    pub range: (Real, Real),
+    /// Arc angle (radians, seen from the centre) below which the fit is flagged
+    /// [`Flags::ARC_TOO_SHORT`] and not preferred.
+    pub min_arc_angle: Real,
+    /// Largest tilt (radians) before [`Flags::LARGE_TILT`].
+    pub max_tilt: Real,
+    /// Fraction of rejected points above which [`Flags::SEVERAL_OBJECTS`] is set.
+    pub max_outlier_fraction: Real,
+    /// Three-tangent settings.
+    pub three_tangent: ThreeTangentParams,
+    /// Robust circle fit settings (its `min_scale` is raised to the predicted point noise).
+    pub robust: RobustParams,
+    /// Cylinder fit settings.
+    pub lm: LmParams,
+    /// Image and calibration noise (for the uncertainties).
+    pub noise: NoiseModel,
+    /// Focal length along the image rows' normal (`fy`, pixels), for the noise model.
+    pub focal_px: Real,
+    /// Non-roundness test: smallest F statistic of circle against ellipse
+    /// ([`EllipseFit::f_statistic`]) for [`Flags::ELLIPTIC`].
+    pub elliptic_min_f: Real,
+    /// Non-roundness test: smallest relative axis difference `(a − b)/(a + b)` for
+    /// [`Flags::ELLIPTIC`] (smaller ones are within what a round stem's bark and the stripe
+    /// extraction's coherent bending produce; `docs/cylinder.md`, "Elliptic stems").
+    pub elliptic_min_eccentricity: Real,
+}
+
+/// Default [`CylinderParams::elliptic_min_f`]: far above the 1e-6 tail of `F(2, n − 5)`
+/// (≈ 14 for n ≥ 100) because the residuals are not independent (coherent bending, bark): the
+/// statistic only screens, the eccentricity decides (`docs/cylinder.md`, "Elliptic stems").
+pub const ELLIPTIC_MIN_F: Real = 30.0;
+
+/// Fraction of [`CylinderParams::elliptic_min_f`] below which the score-test F
+/// ([`ellipse::ellipse_score_f`]) settles the non-roundness test without fitting the ellipse.
+const ELLIPTIC_SCREEN: Real = 0.5;
+
+/// Iteration budget of the ellipse fit in the non-roundness test.
+const ELLIPSE_MAX_ITERATIONS: u32 = 1000;
+
+/// Default [`CylinderParams::elliptic_min_eccentricity`]: 4 % (axis ratio 1.08).
+pub const ELLIPTIC_MIN_ECCENTRICITY: Real = 0.04;
+
+impl Default for CylinderParams {
+    /// The reference caliper: radii 1–60 cm, range 0.3–3.5 m, min arc 40°, max tilt 35°,
+    /// f = 1000 px, [`NoiseModel::reference`].
+    fn default() -> Self {
+        CylinderParams {
+            min_radius: 0.01,
+            max_radius: 0.6,
+            range: (0.3, 3.5),
+            min_arc_angle: 40.0 * PI / 180.0,
+            max_tilt: 35.0 * PI / 180.0,
+            max_outlier_fraction: 0.3,
+            three_tangent: ThreeTangentParams::default(),
+            robust: RobustParams::default(),
+            lm: LmParams::default(),
+            noise: NoiseModel::reference(),
+            focal_px: 1000.0,
+            elliptic_min_f: ELLIPTIC_MIN_F,
+            elliptic_min_eccentricity: ELLIPTIC_MIN_ECCENTRICITY,
+        }
+    }
+}
+
+/// Caller-owned working memory of [`solve`]: both at least as long as the longest curve.
+pub struct Scratch<'a> {
+    /// In-plane / projected points.
+    pub points: &'a mut [Vec2],
+    /// Residual magnitudes (robust scale).
+    pub values: &'a mut [Real],
+}
+
+/// The diameter of one capture, with how it was obtained and how far to trust it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CylinderSolution {
+    /// Reported diameter (metres).
+    pub diameter: Real,
+    /// Method of the reported diameter.
+    pub method: Method,
+    /// 1σ uncertainty of `diameter` (metres): random (point noise, edges) and calibration,
+    /// from the points' σ, the noise model ([`crate::noise`]) and the data.
+    pub uncertainty: Real,
+    /// Stem tilt, when two planes measured it.
+    pub tilt: Option<Tilt>,
+    /// Quality flags.
+    pub flags: Flags,
+    /// RMS residual of the fit (metres), 0 if it failed.
+    pub fit_rms: Real,
+    /// Points used (all curves).
+    pub n_points: usize,
+    /// Three-tangent diameter (plane 0, or generalised), if it succeeded.
+    pub three_tangent_diameter: Option<Real>,
+    /// Its 1σ.
+    pub three_tangent_uncertainty: Option<Real>,
+    /// Fit diameter (circle or cylinder), if it succeeded.
+    pub fit_diameter: Option<Real>,
+    /// Its 1σ.
+    pub fit_uncertainty: Option<Real>,
+    /// Distance from the source of plane 0 to the stem (nearest point, metres).
+    pub distance: Real,
+    /// Centre of the section in plane 0 (camera frame, metres).
+    pub centre: Vec3,
+    /// Major and minor diameters (metres) of an elliptic section ([`Flags::ELLIPTIC`]).
+    pub axes: Option<(Real, Real)>,
+}
+
+/// One-plane result (internal): both methods with their σ.
+struct PlaneResult {
+    tt: Option<(ThreeTangent, Real)>,
+    fit: Option<(circle::CircleFit, Real, Real)>, // fit, σ_r, arc angle
+    ellipse: Option<EllipseFit>,
+    flags: Flags,
+    n: usize,
+}
+
+fn solve_plane(
+    curve: &[Vec3],
+    sigmas: &[Real],
+    plane: &LaserPlane,
+    params: &CylinderParams,
+    scratch: &mut Scratch<'_>,
+) -> Result<PlaneResult, SolveError> {
+    let pts = to_plane(curve, plane, scratch.points)?;
+    let mut flags = Flags::default();
+    let cal = |r: Real, centre: Vec2| {
+        noise::calibration_relative_sigma(
+            plane,
+            plane.from_plane_coords(centre),
+            &params.noise,
+            params.focal_px,
+        ) * r
+    };
+    // Three-tangent with σ from the edges (model) and from D (max of model and data).
+    let tt = match three_tangent(pts, &params.three_tangent) {
+        Ok(t) => {
+            let near = t.bisector * t.nearest_distance;
+            let s_point = noise_vector(plane, near, params).dot(&t.bisector).abs();
+            let random = sqrt(three_tangent_variance(&t, s_point, params));
+            let s = sqrt(random * random + cal(t.radius, t.centre).powi(2));
+            Some((t, s))
+        }
+        Err(_) => {
+            flags.insert(Flags::THREE_TANGENT_FAILED);
+            None
+        }
+    };
+    // Robust fit, scale floor = predicted point noise at the arc's nearest point; each data
+    // point's noise vector is its stored σ along the field's direction.
+    let mut ellipse = None;
+    let field = noise::DisplacementField::of(plane);
+    let noise_of = |i: usize| field.direction_in_plane(pts[i]) * sigmas[i];
+    let near_sigma = |q: Vec2| norm(&noise_vector(plane, q, params));
+    let fit = robust_circle(pts, near_sigma, noise_of, params, scratch.values).map(|rc| {
+        let f = rc.fit;
+        let model =
+            circle::circle_radius_sigma(&f.circle, (0..pts.len()).map(|i| (pts[i], noise_of(i))));
+        let random = rc.data_sigma.max(model).hypot(rc.bending);
+        let s = sqrt(random * random + cal(f.circle.radius, f.circle.centre).powi(2));
+        let arc = arc_angle(pts, f.circle.centre);
+        let rejected = 1.0 - f.inliers as Real / pts.len() as Real;
+        if rejected > params.max_outlier_fraction {
+            flags.insert(Flags::SEVERAL_OBJECTS);
+        }
+        if f.rms_residual > 3.0 * rc.near_sigma.max(params.robust.min_scale) || rejected > 0.2 {
+            flags.insert(Flags::POOR_FIT);
+        }
+        if arc < params.min_arc_angle {
+            flags.insert(Flags::ARC_TOO_SHORT);
+        }
+        ellipse = non_round(pts, &f, rc.cutoff, params);
+        (f, s, arc)
+    });
+    if fit.is_none() {
+        flags.insert(Flags::FIT_FAILED);
+    }
+    // Edge bias of the three-tangent method (docs/cylinder.md, "Stripe fade-out"): the
+    // stripe fades as cos ι → 0 towards the silhouette and the last extracted column lies
+    // inside it, so `α` is biased low by an amount the image noise model does not contain.
+    // The fit does not need the ends; its grazing half-aperture `asin(R/|C|)` estimates the
+    // true one, and the difference (with the fit's own σ on it) is added to the
+    // three-tangent's σ as a bias term.
+    let tt = match (tt, fit.as_ref()) {
+        (Some((t, s)), Some((f, sf, _))) => Some((t, s.hypot(edge_bias_sigma(&t, &f.circle, *sf)))),
+        (tt, _) => tt,
+    };
+    Ok(PlaneResult {
+        tt,
+        fit,
+        ellipse,
+        flags,
+        n: pts.len(),
+    })
+}
+
+/// The ellipse fitted to the circle fit's inliers when the section is detectably not round
+/// (`docs/cylinder.md`, "Elliptic stems"): F statistic above `elliptic_min_f` and relative
+/// axis difference above `elliptic_min_eccentricity`. `None` for a round section or when the
+/// ellipse fit fails (then the circle stands).
+fn non_round(
+    pts: &[Vec2],
+    fit: &circle::CircleFit,
+    cutoff: Real,
+    params: &CylinderParams,
+) -> Option<EllipseFit> {
+    // The ellipse's valley is long and flat (size against shape along the line of sight):
+    // LM needs a few hundred steps from the circle (measured: ≤ 220 on the corpus).
+    let lm = LmParams {
+        max_iterations: params.robust.lm.max_iterations.max(ELLIPSE_MAX_ITERATIONS),
+        ..params.robust.lm
+    };
+    // Screening (`docs/cylinder.md`, "Screening"): the score-test F costs one pass over the
+    // points; the fitted F never exceeded it by more than 14 % on the corpus and 367
+    // evaluation curves, so below half the threshold the fit cannot flag the stem.
+    if ellipse::ellipse_score_f(pts, &fit.circle, cutoff).ok()?
+        < ELLIPTIC_SCREEN * params.elliptic_min_f
+    {
+        return None;
+    }
+    let e = ellipse::fit_ellipse(pts, &fit.circle, cutoff, &lm).ok()?;
+    (e.f_statistic() > params.elliptic_min_f && e.eccentricity() > params.elliptic_min_eccentricity)
+        .then_some(e)
+}
+
+/// Choice between a three-tangent radius and a fit radius (`docs/cylinder.md`, "Choosing
+/// the method"): `(use_fit, inconsistent)`.
+fn choose(tt: Option<(Real, Real)>, fit: Option<(Real, Real, bool)>) -> Option<(bool, bool)> {
+    match (tt, fit) {
+        (None, None) => None,
+        // The three-tangent alone has no check on the fade-out of its edges (docs/cylinder.md
+        // §5b: biased low by up to tens of percent, and a fragment of the curve looks like a
+        // small stem): without a fit to judge it there is no trustworthy answer.
+        (Some(_), None) => None,
+        (None, Some((_, _, short))) => {
+            if short {
+                None
+            } else {
+                Some((true, false))
+            }
+        }
+        (Some((rt, st)), Some((rf, sf, short))) => {
+            let inconsistent = (rt - rf).abs() > 3.0 * sqrt(st * st + sf * sf);
+            if short {
+                Some((false, inconsistent))
+            } else if inconsistent {
+                Some((true, true))
+            } else {
+                Some((sf < st, false))
+            }
+        }
+    }
+}
+
+/// Solves the stem diameter of one capture (`docs/cylinder.md`, "Choosing the method").
+///
+/// * One plane: three-tangent and robust circle fit; [`Flags::TILT_IGNORED`].
+/// * Two or more planes: cylinder fit (axis and radius) and the generalised three-tangent
+///   method on each curve projected along the axis; [`CylinderSolution::tilt`] is set. If the
+///   cylinder fit fails, falls back to the one-plane solution of plane 0
+///   ([`Flags::TILT_FIT_FAILED`]).
+///
+/// The reported diameter is the method with the smaller 1σ, except: the fit when the two
+/// disagree beyond 3σ ([`Flags::INCONSISTENT`], occluded edge), the three-tangent when the
+/// arc is too short for the fit. Errors: [`SolveError::PlaneCount`] (no curve, or
+/// curves ≠ planes), [`SolveError::ScratchTooSmall`], [`SolveError::ArcTooShort`] (fit
+/// ill-conditioned and three-tangent failed), [`SolveError::RadiusOutOfRange`], and the
+/// [`SolveError::NotConverged`] when both methods fail.
+pub fn solve(
+    input: &CylinderInput<'_>,
+    params: &CylinderParams,
+    mut scratch: Scratch<'_>,
+) -> Result<CylinderSolution, SolveError> {
+    if input.curves.is_empty()
+        || input.curves.len() != input.planes.len()
+        || input.sigmas.len() != input.curves.len()
+    {
+        return Err(SolveError::PlaneCount);
+    }
+    if input
+        .curves
+        .iter()
+        .zip(input.sigmas)
+        .any(|(c, s)| c.len() != s.len())
+    {
+        return Err(SolveError::InvalidParameter);
+    }
+    if !(params.min_radius > 0.0
+        && params.max_radius > params.min_radius
+        && params.focal_px > 0.0
+        && params.focal_px.is_finite())
+    {
+        return Err(SolveError::InvalidParameter);
+    }
+    let longest = input.curves.iter().map(|c| c.len()).max().unwrap_or(0);
+    if scratch.points.len() < longest || scratch.values.len() < longest {
+        return Err(SolveError::ScratchTooSmall);
+    }
+    let plane0 = &input.planes[0];
+    let one = solve_plane(
+        input.curves[0],
+        input.sigmas[0],
+        plane0,
+        params,
+        &mut scratch,
+    )?;
+    let mut sol = if input.curves.len() >= 2 {
+        match solve_tilted(input, params, &mut scratch, &one) {
+            Ok(s) => s,
+            Err(_) => {
+                let mut s = finish_plane(&one, plane0, params)?;
+                s.flags.insert(Flags::TILT_FIT_FAILED);
+                s.flags.insert(Flags::TILT_IGNORED);
+                s
+            }
+        }
+    } else {
+        let mut s = finish_plane(&one, plane0, params)?;
+        s.flags.insert(Flags::TILT_IGNORED);
+        s
+    };
+    let r = 0.5 * sol.diameter;
+    if !(r >= params.min_radius && r <= params.max_radius) {
+        return Err(SolveError::RadiusOutOfRange);
+    }
+    if !(sol.distance >= params.range.0 && sol.distance <= params.range.1) {
+        sol.flags.insert(Flags::RANGE_LIMIT);
+    }
+    Ok(sol)
+}
+
+fn finish_plane(
+    one: &PlaneResult,
+    plane: &LaserPlane,
+    params: &CylinderParams,
+) -> Result<CylinderSolution, SolveError> {
+    if let (Some(e), Some((f, _, _))) = (one.ellipse, one.fit) {
+        let cal_rel = noise::calibration_relative_sigma(
+            plane,
+            plane.from_plane_coords(e.centre),
+            &params.noise,
+            params.focal_px,
+        );
+        let (d, s) = elliptic_diameter(&e, cal_rel)?;
+        let mut flags = one.flags;
+        flags.insert(Flags::ELLIPTIC);
+        let c = f.circle.centre;
+        return Ok(CylinderSolution {
+            diameter: d,
+            method: Method::CircleFit,
+            uncertainty: s,
+            tilt: None,
+            flags,
+            fit_rms: f.rms_residual,
+            n_points: one.n,
+            three_tangent_diameter: one.tt.map(|(t, _)| 2.0 * t.radius),
+            three_tangent_uncertainty: one.tt.map(|(_, s)| 2.0 * s),
+            fit_diameter: Some(2.0 * f.circle.radius),
+            fit_uncertainty: one.fit.map(|(_, s, _)| 2.0 * s),
+            distance: norm(&c) - f.circle.radius,
+            centre: plane.from_plane_coords(e.centre),
+            axes: Some((2.0 * e.semi_axes.0, 2.0 * e.semi_axes.1)),
+        });
+    }
+    let short = one.flags.contains(Flags::ARC_TOO_SHORT);
+    let tt = one.tt.map(|(t, s)| (t.radius, s));
+    let fit = one.fit.map(|(f, s, _)| (f.circle.radius, s, short));
+    let (use_fit, inconsistent) = match choose(tt, fit) {
+        Some(c) => c,
+        None => {
+            return Err(if one.fit.is_some() {
+                SolveError::ArcTooShort
+            } else {
+                SolveError::NotConverged
+            })
+        }
+    };
+    let mut flags = one.flags;
+    if inconsistent {
+        flags.insert(Flags::INCONSISTENT);
+    }
+    let (radius, sigma, method, centre, distance) = if use_fit {
+        let (f, s, _) = one.fit.ok_or(SolveError::NotConverged)?;
+        let c = f.circle.centre;
+        (
+            f.circle.radius,
+            s,
+            Method::CircleFit,
+            c,
+            norm(&c) - f.circle.radius,
+        )
+    } else {
+        let (t, s) = one.tt.ok_or(SolveError::NotConverged)?;
+        (
+            t.radius,
+            s,
+            Method::ThreeTangent,
+            t.centre,
+            t.nearest_distance,
+        )
+    };
+    Ok(CylinderSolution {
+        diameter: 2.0 * radius,
+        method,
+        uncertainty: 2.0 * sigma,
+        tilt: None,
+        flags,
+        fit_rms: one.fit.map(|(f, _, _)| f.rms_residual).unwrap_or(0.0),
+        n_points: one.n,
+        three_tangent_diameter: one.tt.map(|(t, _)| 2.0 * t.radius),
+        three_tangent_uncertainty: one.tt.map(|(_, s)| 2.0 * s),
+        fit_diameter: one.fit.map(|(f, _, _)| 2.0 * f.circle.radius),
+        fit_uncertainty: one.fit.map(|(_, s, _)| 2.0 * s),
+        distance,
+        centre: plane.from_plane_coords(centre),
+        axes: None,
+    })
+}
+
+fn solve_tilted(
+    input: &CylinderInput<'_>,
+    params: &CylinderParams,
+    scratch: &mut Scratch<'_>,
+    one: &PlaneResult,
+) -> Result<CylinderSolution, SolveError> {
+    let init = initial_cylinder(input.curves, input.planes, scratch.points)?;
+    let fit = fit_cylinder(input.curves, init, &params.lm)?;
+    let cyl = fit.cylinder;
+    let plane0 = &input.planes[0];
+    // Generalised three-tangent on every curve; mean radius, σ of the mean of the
+    // per-curve model σ's (independent curves).
+    let mut rsum = 0.0;
+    let mut s2sum = 0.0;
+    let mut k = 0;
+    // Σ of the per-curve data-driven radius variances of the projected circle fits.
+    let mut fit_s2sum = 0.0;
+    let mut kf = 0;
+    // Σ of the per-curve edge-fade bias σ's: a bias, common to the curves, so it is
+    // averaged, not reduced as independent noise.
+    let mut edge_sum = 0.0;
+    for ((curve, sigmas), plane) in input.curves.iter().zip(input.sigmas).zip(input.planes) {
+        // The data-driven terms of the one-plane path on the projected curve
+        // (docs/cylinder.md, "Data-driven σ of the two-plane result").
+        let extra = projected_data_sigma(curve, sigmas, plane, cyl.axis, params, scratch);
+        if let Some((_, sf, _)) = extra {
+            fit_s2sum += sf * sf;
+            kf += 1;
+        }
+        if let Ok(t) = generalised_three_tangent(
+            curve,
+            plane.source,
+            cyl.axis,
+            &params.three_tangent,
+            scratch.points,
+        ) {
+            let s_point = one_point_sigma(plane, params, t.nearest_distance);
+            // Fade-out of the projected edges, judged against the projected fit.
+            let edge = extra.map_or(0.0, |(c, sf, _)| edge_bias_sigma(&t, &c, sf));
+            rsum += t.radius;
+            s2sum += three_tangent_variance(&t, s_point, params);
+            edge_sum += edge;
+            k += 1;
+        }
+    }
+    // Where the axis meets plane 0.
+    let denom = plane0.normal.dot(&cyl.axis);
+    let centre = if denom.abs() > 1e-6 {
+        cyl.point + cyl.axis * ((plane0.offset - plane0.normal.dot(&cyl.point)) / denom)
+    } else {
+        return Err(SolveError::Degenerate);
+    };
+    let cal_rel = noise::calibration_relative_sigma(plane0, centre, &params.noise, params.focal_px);
+    // The cylinder fit's own σ assumes independent, equal point noise; the dim ends of a far
+    // curve and coherent bending break that as in one plane. σ of the mean of the per-curve
+    // data-driven terms (independent curves) is the floor, as `max` in `solve_plane`.
+    let data_sigma = if kf > 0 {
+        sqrt(fit_s2sum / (kf * kf) as Real)
+    } else {
+        0.0
+    };
+    let fit_sigma = sqrt(fit.sigma_radius.max(data_sigma).powi(2) + (cal_rel * cyl.radius).powi(2));
+    let tt = if k > 0 {
+        let r = rsum / k as Real;
+        let edge = edge_sum / k as Real;
+        let s = sqrt(s2sum / (k * k) as Real + edge * edge + (cal_rel * r).powi(2));
+        Some((r, s))
+    } else {
+        None
+    };
+    let mut flags = Flags::default();
+    if tt.is_none() {
+        flags.insert(Flags::THREE_TANGENT_FAILED);
+    }
+    let short = one.flags.contains(Flags::ARC_TOO_SHORT);
+    if short {
+        flags.insert(Flags::ARC_TOO_SHORT);
+    }
+    let (use_fit, inconsistent) =
+        choose(tt, Some((cyl.radius, fit_sigma, short))).ok_or(SolveError::ArcTooShort)?;
+    if inconsistent {
+        flags.insert(Flags::INCONSISTENT);
+    }
+    let tilt = Tilt::of(cyl.axis, plane0, fit.sigma_axis);
+    if tilt.total > params.max_tilt {
+        flags.insert(Flags::LARGE_TILT);
+    }
+    let point_sigma = one_point_sigma(plane0, params, norm(&(centre - plane0.source)) - cyl.radius);
+    if fit.rms_residual > 3.0 * point_sigma.max(params.robust.min_scale) {
+        flags.insert(Flags::POOR_FIT);
+    }
+    let (radius, sigma, method) = match (use_fit, tt) {
+        (false, Some((r, s))) => (r, s, Method::GeneralisedThreeTangent),
+        _ => (cyl.radius, fit_sigma, Method::CylinderFit),
+    };
+    let c0 = plane0.to_plane_coords(centre);
+    // Non-roundness in the plane perpendicular to the fitted axis (where a round stem's
+    // section is a circle whatever the tilt), on plane 0's curve.
+    if let Some(e) = projected_non_round(
+        input.curves[0],
+        plane0.source,
+        cyl.axis,
+        params,
+        scratch,
+        point_sigma,
+    ) {
+        let (d, s) = elliptic_diameter(&e, cal_rel)?;
+        flags.insert(Flags::ELLIPTIC);
+        return Ok(CylinderSolution {
+            diameter: d,
+            method: Method::CylinderFit,
+            uncertainty: s,
+            tilt: Some(tilt),
+            flags,
+            fit_rms: fit.rms_residual,
+            n_points: fit.points,
+            three_tangent_diameter: tt.map(|(r, _)| 2.0 * r),
+            three_tangent_uncertainty: tt.map(|(_, s)| 2.0 * s),
+            fit_diameter: Some(2.0 * cyl.radius),
+            fit_uncertainty: Some(2.0 * fit_sigma),
+            distance: norm(&c0) - cyl.radius,
+            centre,
+            axes: Some((2.0 * e.semi_axes.0, 2.0 * e.semi_axes.1)),
+        });
+    }
+    Ok(CylinderSolution {
+        diameter: 2.0 * radius,
+        method,
+        uncertainty: 2.0 * sigma,
+        tilt: Some(tilt),
+        flags,
+        fit_rms: fit.rms_residual,
+        n_points: fit.points,
+        three_tangent_diameter: tt.map(|(r, _)| 2.0 * r),
+        three_tangent_uncertainty: tt.map(|(_, s)| 2.0 * s),
+        fit_diameter: Some(2.0 * cyl.radius),
+        fit_uncertainty: Some(2.0 * fit_sigma),
+        distance: norm(&c0) - cyl.radius,
+        centre,
+        axes: None,
+    })
+}
+
+/// [`non_round`] on `curve` projected along `axis` onto the plane perpendicular to it (origin
+/// at `source`, [`project_along_axis`]), with a robust circle fit whose scale floor is
+/// `point_sigma`.
+fn projected_non_round(
+    curve: &[Vec3],
+    source: Vec3,
+    axis: Vec3,
+    params: &CylinderParams,
+    scratch: &mut Scratch<'_>,
+    point_sigma: Real,
+) -> Option<EllipseFit> {
+    let pts = project_along_axis(curve, source, axis, scratch.points)
+        .ok()?
+        .points;
+    let init = circle::fit_hyper(pts).ok()?;
+    let mut rp = params.robust;
+    rp.min_scale = rp.min_scale.max(point_sigma);
+    let f = circle::fit_robust(pts, init, &rp, scratch.values).ok()?;
+    let cutoff = rp.tuning * f.rms_residual.max(rp.min_scale);
+    non_round(pts, &f, cutoff, params)
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,274 @@
+//! The σ of each method of [`super::solve`] (`docs/error-model.md`, "Data-driven fit
+//! uncertainty"; `docs/cylinder.md`, "Stripe fade-out"): the robust circle fit with its
+//! residual sandwich and coherent-bending terms, the three-tangent variance and edge bias,
+//! the elliptic reading, and the model σ of points the data does not contain.
+
+// `!(x > 0.0)` is deliberate throughout: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+#[allow(unused_imports)]
+use crate::real::Float;
+use crate::real::{norm, sqrt, Real, Vec2, Vec3, PI};
+
+use super::{CylinderParams, Scratch};
+use crate::laser_plane::LaserPlane;
+use crate::noise;
+use crate::solvers::circle;
+use crate::solvers::cylinder_fit::project_along_axis;
+use crate::solvers::ellipse::EllipseFit;
+use crate::solvers::three_tangent::ThreeTangent;
+use crate::solvers::SolveError;
+
+/// Angle subtended at `centre` by the points (the arc's extent, radians).
+pub(super) fn arc_angle(points: &[Vec2], centre: Vec2) -> Real {
+    let mut sum = Vec2::zeros();
+    for q in points {
+        let d = q - centre;
+        let n = norm(&d);
+        if n > 0.0 {
+            sum += d / n;
+        }
+    }
+    let len = norm(&sum);
+    if !(len > 0.0) {
+        return 2.0 * PI;
+    }
+    let f = sum / len;
+    let s = Vec2::new(f.y, -f.x);
+    let (mut lo, mut hi) = (Real::INFINITY, Real::NEG_INFINITY);
+    for q in points {
+        let d = q - centre;
+        let a = d.dot(&s).atan2(d.dot(&f));
+        lo = lo.min(a);
+        hi = hi.max(a);
+    }
+    hi - lo
+}
+
+/// Model point noise (1σ, in-plane vector, metres) of the in-plane point `q` of `plane`: for
+/// points the data does not contain (an arc's nearest tangent point); data points carry
+/// their σ.
+pub(super) fn noise_vector(plane: &LaserPlane, q: Vec2, params: &CylinderParams) -> Vec2 {
+    let x = plane.from_plane_coords(q);
+    let g =
+        noise::displacement_per_pixel(plane, params.focal_px, x).unwrap_or_else(|_| Vec3::zeros());
+    let (a, b) = plane.plane_axes();
+    Vec2::new(g.dot(&a), g.dot(&b)) * params.noise.image_px()
+}
+
+/// Diameter and 1σ of an elliptic section (`docs/cylinder.md`, "Elliptic stems"): the mean
+/// of the fitted axes `a + b`; σ² = fit σ² + (a − b)² (the unseen back may differ from the
+/// front's continuation by as much as the front's own non-roundness) + calibration.
+/// [`SolveError::NotRound`] when the fit does not resolve the axes (its σ on `a + b`
+/// exceeds their difference `2(a − b)`: nothing distinguishes the ellipse's size from its
+/// shape).
+pub(super) fn elliptic_diameter(e: &EllipseFit, cal_rel: Real) -> Result<(Real, Real), SolveError> {
+    let (a, b) = e.semi_axes;
+    let d = a + b;
+    if !(e.sigma_mean_diameter < 2.0 * (a - b)) {
+        return Err(SolveError::NotRound);
+    }
+    let s = sqrt(e.sigma_mean_diameter.powi(2) + (a - b).powi(2) + (cal_rel * d).powi(2));
+    Ok((d, s))
+}
+
+/// Share of the fit's residual RMS (in pixels of stripe position) that bends the curve
+/// coherently — ends against middle (`docs/error-model.md`, "Coherent bending"). Measured
+/// on simulated captures against their true curves (development seeds 5000–5039, not the
+/// evaluation's): the mean row error of the outer fifths minus that of the middle reaches
+/// about half the per-point RMS on dim, far stripes.
+pub const BENDING_FRACTION: Real = 0.5;
+
+/// 1σ of the fit radius from a coherent bending of the curve: every point displaced along its
+/// noise vector `gᵢ` (1σ, `noise(i)` for point `i`) by `s·P₂(τ)/ḡ`, `τ ∈ [−1, 1]` its position
+/// along the curve, `P₂ = (3τ² − 1)/2` (ends against middle), `ḡ` the mean `|gᵢ|`, `s` =
+/// [`BENDING_FRACTION`] × the fit's residual RMS (a bend of that many RMS in units of the mean
+/// point noise). Propagated through the linearised geometric fit
+/// (`Δθ = A⁻¹ Σ Jᵢ (nᵢ·gᵢ) δᵢ`, `docs/error-model.md`).
+pub(super) fn bending_sigma(
+    fit: &circle::CircleFit,
+    pts: &[Vec2],
+    noise: impl Fn(usize) -> Vec2,
+) -> Real {
+    let n = pts.len();
+    if n < 4 {
+        return 0.0;
+    }
+    let c = fit.circle;
+    let mut a = crate::real::Mat3::zeros();
+    let mut b = Vec3::zeros();
+    let mut sigma_sum = 0.0;
+    for (i, q) in pts.iter().enumerate() {
+        let d = q - c.centre;
+        let len = norm(&d);
+        if !(len > 0.0) {
+            continue;
+        }
+        let nn = d / len;
+        let j = Vec3::new(-nn.x, -nn.y, -1.0);
+        let g = noise(i);
+        sigma_sum += norm(&g);
+        let tau = 2.0 * i as Real / (n - 1) as Real - 1.0;
+        let p2 = 0.5 * (3.0 * tau * tau - 1.0);
+        a += j * j.transpose();
+        b += j * (nn.dot(&g) * p2);
+    }
+    let mean_sigma = sigma_sum / n as Real;
+    if !(mean_sigma > 0.0) {
+        return 0.0;
+    }
+    let s = BENDING_FRACTION * fit.rms_residual / mean_sigma;
+    match a.try_inverse() {
+        Some(inv) => {
+            let out = ((inv * b)[2] * s).abs();
+            if out.is_finite() {
+                out
+            } else {
+                0.0
+            }
+        }
+        None => 0.0,
+    }
+}
+
+/// Radius error (1σ) of the three-tangent solution `t` due to the fade-out of its edges, judged
+/// against a fitted `circle` whose radius has 1σ `sigma_fit` (`docs/cylinder.md`, "Stripe
+/// fade-out"): the fit's grazing half-aperture `α_f = asin(R/|C|)` minus the three-tangent's
+/// `α`, through `∂r/∂α`, in quadrature with the fit's own uncertainty on `α_f` mapped the
+/// same way (`∂α_f/∂R = 1/(|C| cos α_f)`). Zero when the circle does not enclose a grazing
+/// geometry (source inside it).
+pub fn edge_bias_sigma(t: &ThreeTangent, circle: &circle::Circle, sigma_fit: Real) -> Real {
+    let l = norm(&circle.centre);
+    if !(l > circle.radius && circle.radius > 0.0) {
+        return 0.0;
+    }
+    let alpha_f = (circle.radius / l).asin();
+    let (dr_da, _) = t.partials();
+    let gap = alpha_f - t.alpha;
+    let s_alpha_f = sigma_fit / (l * alpha_f.cos());
+    let out = dr_da * gap.hypot(s_alpha_f);
+    if out.is_finite() {
+        out
+    } else {
+        Real::INFINITY
+    }
+}
+
+/// Data-driven radius σ of one curve projected along `axis` onto the plane perpendicular to
+/// it (origin at `plane.source`, [`project_along_axis`]; the projected lit arc is an arc of
+/// the true section): the one-plane path's [`robust_circle`] terms, `max(σ_GN, σ_sandwich)` in
+/// quadrature with the coherent bending (`docs/cylinder.md`, "Data-driven σ of the two-plane
+/// result"). A data point's noise vector is its stored σ along its direction, projected.
+/// Returns the projected circle, that σ and the fit's RMS residual; `None` when the
+/// projection or fit fails.
+pub(super) fn projected_data_sigma(
+    curve: &[Vec3],
+    sigmas: &[Real],
+    plane: &LaserPlane,
+    axis: Vec3,
+    params: &CylinderParams,
+    scratch: &mut Scratch<'_>,
+) -> Option<(circle::Circle, Real, Real)> {
+    let source = plane.source;
+    let projected = project_along_axis(curve, source, axis, scratch.points).ok()?;
+    let (u, e1, e2, pts) = (projected.axis, projected.e1, projected.e2, projected.points);
+    // Back from the projection to the laser plane: `x = s + q₁e₁ + q₂e₂ + t·u` with
+    // `n·(x − s) = 0` (the source lies in the plane).
+    let nu = plane.normal.dot(&u);
+    if !(nu.abs() > 1e-6) {
+        return None;
+    }
+    let near_sigma = |q: Vec2| {
+        let w = e1 * q.x + e2 * q.y;
+        let x = source + w - u * (plane.normal.dot(&w) / nu);
+        let g = noise::displacement_per_pixel(plane, params.focal_px, x)
+            .unwrap_or_else(|_| Vec3::zeros());
+        norm(&(Vec2::new(g.dot(&e1), g.dot(&e2)) * params.noise.image_px()))
+    };
+    let field = noise::DisplacementField::of(plane);
+    let noise_of = |i: usize| {
+        let g = field.direction(curve[i]) * sigmas[i];
+        Vec2::new(g.dot(&e1), g.dot(&e2))
+    };
+    let rc = robust_circle(pts, near_sigma, noise_of, params, scratch.values)?;
+    let s = rc.data_sigma.hypot(rc.bending);
+    s.is_finite()
+        .then_some((rc.fit.circle, s, rc.fit.rms_residual))
+}
+
+/// A robust circle fit with its data-driven σ terms (`docs/error-model.md`, "Data-driven fit
+/// uncertainty"), as the one-plane and the projected two-plane results both use.
+pub(super) struct RobustCircle {
+    /// The robust fit (Hyper start, Tukey weights).
+    pub(super) fit: circle::CircleFit,
+    /// Model σ of the initial circle's point nearest the source: the robust scale's floor.
+    pub(super) near_sigma: Real,
+    /// Residual beyond which a point is the fit's outlier.
+    pub(super) cutoff: Real,
+    /// `max(σ_GN, σ_sandwich)` of the radius (the sandwich from the residuals, 0 if
+    /// undefined).
+    pub(super) data_sigma: Real,
+    /// Radius σ from a coherent bending of the curve ([`bending_sigma`]).
+    pub(super) bending: Real,
+}
+
+/// [`RobustCircle`] of `pts`: Hyper start, robust fit with the scale floor `near_sigma` of the
+/// start's point nearest the source (origin), the residual sandwich and the bending term with
+/// the points' noise vectors `noise(i)`. `None` when a fit fails or the start circle is
+/// centred on the source.
+pub(super) fn robust_circle(
+    pts: &[Vec2],
+    near_sigma: impl Fn(Vec2) -> Real,
+    noise: impl Fn(usize) -> Vec2,
+    params: &CylinderParams,
+    values: &mut [Real],
+) -> Option<RobustCircle> {
+    let init = circle::fit_hyper(pts).ok()?;
+    let cn = norm(&init.centre);
+    if !(cn > 0.0) {
+        return None;
+    }
+    let near = init.centre - init.centre / cn * init.radius;
+    let s_point = near_sigma(near);
+    let mut rp = params.robust;
+    rp.min_scale = rp.min_scale.max(s_point);
+    let fit = circle::fit_robust(pts, init, &rp, values).ok()?;
+    // Data-driven sandwich: the dim ends of a far curve are several times noisier than the
+    // model's per-point σ (docs/error-model.md).
+    let cutoff = rp.tuning * fit.rms_residual.max(rp.min_scale);
+    let data = circle::circle_radius_sigma_residuals(&fit.circle, pts, cutoff);
+    let data = if data.is_finite() { data } else { 0.0 };
+    let bending = bending_sigma(&fit, pts, noise);
+    Some(RobustCircle {
+        fit,
+        near_sigma: s_point,
+        cutoff,
+        data_sigma: fit.std_dev.z.max(data),
+        bending,
+    })
+}
+
+/// Random variance of a three-tangent radius (`docs/cylinder.md`, "Sensitivity"): `α` from
+/// the two grazing-ray columns (`edge_px` each, so `σ_α = σ_edge/√2`) and `D` from the window
+/// parabola with the point noise the larger of `point_sigma` (the model's, along the
+/// bisector) and the window's own RMS.
+pub(super) fn three_tangent_variance(
+    t: &ThreeTangent,
+    point_sigma: Real,
+    params: &CylinderParams,
+) -> Real {
+    let (dr_da, dr_dd) = t.partials();
+    let s_alpha = params.noise.edge_angle_sigma(params.focal_px) / sqrt(2.0);
+    let s_d = sqrt(t.nearest_variance_factor) * point_sigma.max(t.window_rms);
+    (dr_da * s_alpha).powi(2) + (dr_dd * s_d).powi(2)
+}
+
+/// Model σ of one point (metres, along the viewing direction) at in-plane distance
+/// `distance` straight ahead of the source.
+pub(super) fn one_point_sigma(plane: &LaserPlane, params: &CylinderParams, distance: Real) -> Real {
+    norm(&noise_vector(
+        plane,
+        Vec2::new(0.0, distance.max(0.0)),
+        params,
+    ))
+}

@@ -1,0 +1,248 @@
+// The casts to f64 are no-ops in f64 builds but needed with `--features f32`.
+#![allow(clippy::unnecessary_cast)]
+
+extern crate std;
+use super::*;
+use crate::camera::Camera;
+use crate::noise::sample_columns;
+use crate::solvers::circle::tests::Rng;
+use crate::solvers::circle::Circle;
+use crate::solvers::cylinder_fit::tests::{planes, section, tilted_cylinder};
+use crate::solvers::three_tangent::tests::lit_arc;
+
+const EPS: Real = Real::EPSILON;
+
+fn noisy_columns(
+    plane: &LaserPlane,
+    c: &Circle,
+    sigma_px: Real,
+    rng: &mut Rng,
+    out: &mut std::vec::Vec<Vec3>,
+) {
+    let cam = Camera::reference_design();
+    let mut buf = [Vec2::zeros(); 800];
+    let (n, _) = sample_columns(plane, &cam, c.centre, c.radius, &mut buf).unwrap();
+    out.clear();
+    for q in &buf[..n] {
+        let x = plane.from_plane_coords(*q);
+        let g = noise::displacement_per_pixel(plane, cam.fy, x).unwrap();
+        out.push(x + g * (sigma_px * rng.gauss() as Real));
+    }
+}
+
+/// Each point's 1σ, as the pipeline writes it ([`crate::pipeline::point_sigmas`]).
+fn sigmas_of(curve: &[Vec3], plane: &LaserPlane, params: &CylinderParams) -> std::vec::Vec<Real> {
+    let px = params.noise.image_px();
+    curve
+        .iter()
+        .map(|x| noise::displacement_sigma(plane, params.focal_px, *x, px).unwrap_or(0.0))
+        .collect()
+}
+
+#[test]
+fn solve_transversal_stem() {
+    let (p0, _) = planes();
+    let params = CylinderParams::default();
+    let mut rng = Rng::new(1);
+    let mut curve = std::vec::Vec::new();
+    let mut pts = std::vec![Vec2::zeros(); 800];
+    let mut vals = std::vec![0.0; 800];
+    for (d, diam) in [(1.5, 0.3), (0.8, 0.12), (2.5, 0.5)] {
+        let (d, diam): (Real, Real) = (d, diam);
+        let c = Circle::new(Vec2::new(0.02, d + diam / 2.0), diam / 2.0);
+        noisy_columns(&p0, &c, params.noise.image_px(), &mut rng, &mut curve);
+        let sol = solve(
+            &CylinderInput {
+                curves: &[&curve],
+                sigmas: &[&sigmas_of(&curve, &p0, &params)],
+                planes: &[p0],
+            },
+            &params,
+            Scratch {
+                points: &mut pts,
+                values: &mut vals,
+            },
+        )
+        .unwrap();
+        // The uncertainty includes calibration (systematic, absent here) so it bounds
+        // the random error from above; 4σ.
+        assert!(
+            (sol.diameter - diam).abs() < 4.0 * sol.uncertainty,
+            "{sol:?}"
+        );
+        assert!(sol.flags.contains(Flags::TILT_IGNORED));
+        // Round: never flagged elliptic (docs/cylinder.md, "Elliptic stems").
+        assert!(
+            !sol.flags.contains(Flags::ELLIPTIC) && sol.axes.is_none(),
+            "{sol:?}"
+        );
+        assert!(sol.tilt.is_none());
+        assert!(sol.three_tangent_diameter.is_some() && sol.fit_diameter.is_some());
+        assert_eq!(sol.n_points, curve.len());
+        assert!((sol.distance - d).abs() < 0.01);
+    }
+}
+
+#[test]
+fn solve_tilted_stem_two_planes() {
+    let (p0, p1) = planes();
+    let deg = PI / 180.0;
+    let params = CylinderParams::default();
+    let truth = tilted_cylinder(-10.0 * deg, 25.0 * deg, 0.2, Vec2::new(0.0, 1.6), &p0);
+    let (mut c0, mut c1) = (std::vec::Vec::new(), std::vec::Vec::new());
+    section(&truth, &p0, 1500, &mut c0);
+    section(&truth, &p1, 1500, &mut c1);
+    let mut rng = Rng::new(9);
+    for x in c0.iter_mut().chain(c1.iter_mut()) {
+        *x += Vec3::new(
+            rng.gauss() as Real,
+            rng.gauss() as Real,
+            rng.gauss() as Real,
+        ) * 3e-4;
+    }
+    let mut pts = std::vec![Vec2::zeros(); 1500];
+    let mut vals = std::vec![0.0; 1500];
+    let sol = solve(
+        &CylinderInput {
+            curves: &[&c0, &c1],
+            sigmas: &[&sigmas_of(&c0, &p0, &params), &sigmas_of(&c1, &p1, &params)],
+            planes: &[p0, p1],
+        },
+        &params,
+        Scratch {
+            points: &mut pts,
+            values: &mut vals,
+        },
+    )
+    .unwrap();
+    let tilt = sol.tilt.unwrap();
+    assert!(
+        (sol.diameter - 0.4).abs() < 4.0 * sol.uncertainty,
+        "{sol:?}"
+    );
+    assert!((tilt.phi - 25.0 * deg).abs() < 2.0 * deg, "{tilt:?}");
+    assert!((tilt.theta + 10.0 * deg).abs() < 2.0 * deg, "{tilt:?}");
+    assert!(!sol.flags.contains(Flags::TILT_IGNORED));
+    // The one-plane answer would have been inflated by ≈ 1/cos 25° = +10 %.
+    let one = solve(
+        &CylinderInput {
+            curves: &[&c0],
+            sigmas: &[&sigmas_of(&c0, &p0, &params)],
+            planes: &[p0],
+        },
+        &params,
+        Scratch {
+            points: &mut pts,
+            values: &mut vals,
+        },
+    )
+    .unwrap();
+    assert!(one.diameter > 0.4 * 1.05, "{one:?}");
+}
+
+#[test]
+fn solve_errors() {
+    let (p0, p1) = planes();
+    let params = CylinderParams::default();
+    let mut pts = [Vec2::zeros(); 4];
+    let mut vals = [0.0; 4];
+    let curve = [Vec3::new(0.0, 0.0, 1.0); 10];
+    let r = solve(
+        &CylinderInput {
+            curves: &[&curve],
+            sigmas: &[&sigmas_of(&curve, &p0, &params)],
+            planes: &[p0, p1],
+        },
+        &params,
+        Scratch {
+            points: &mut pts,
+            values: &mut vals,
+        },
+    );
+    assert_eq!(r.err(), Some(SolveError::PlaneCount));
+    let r = solve(
+        &CylinderInput {
+            curves: &[&curve],
+            sigmas: &[&sigmas_of(&curve, &p0, &params)],
+            planes: &[p0],
+        },
+        &params,
+        Scratch {
+            points: &mut pts,
+            values: &mut vals,
+        },
+    );
+    assert_eq!(r.err(), Some(SolveError::ScratchTooSmall));
+    // A 1.4 m stem: outside the plausible range (max radius 0.6 m).
+    let mut rng = Rng::new(3);
+    let mut big = std::vec::Vec::new();
+    noisy_columns(
+        &p0,
+        &Circle::new(Vec2::new(0.0, 3.5), 0.7),
+        0.0,
+        &mut rng,
+        &mut big,
+    );
+    let mut pts = std::vec![Vec2::zeros(); 800];
+    let mut vals = std::vec![0.0; 800];
+    let r = solve(
+        &CylinderInput {
+            curves: &[&big],
+            sigmas: &[&sigmas_of(&big, &p0, &params)],
+            planes: &[p0],
+        },
+        &params,
+        Scratch {
+            points: &mut pts,
+            values: &mut vals,
+        },
+    );
+    assert_eq!(r.err(), Some(SolveError::RadiusOutOfRange));
+}
+
+/// The fade-out bias term: a three-tangent solution whose edges stop short of the true
+/// grazing rays by `g` radians (each side) gets `∂r/∂α·g` from an exact fitted circle
+/// (σ_fit = 0), and the fit's σ adds in quadrature through `∂α_f/∂R = 1/(L cos α_f)`.
+#[test]
+fn edge_bias_sigma_measures_the_fade_gap() {
+    let (c, r) = (Vec2::new(0.05, 2.0), 0.15);
+    let mut pts = std::vec![Vec2::zeros(); 400];
+    lit_arc(c, r, 400, &mut pts);
+    let l = c.norm();
+    let alpha_true = (r / l).asin();
+    // Drop the outer points until the aperture has lost about 1 % of α on each side.
+    let keep: std::vec::Vec<Vec2> = pts
+        .iter()
+        .copied()
+        .filter(|q| {
+            let psi = (q.x * c.y - q.y * c.x).atan2(q.dot(&c));
+            psi.abs() <= 0.99 * alpha_true
+        })
+        .collect();
+    let t = three_tangent(&keep, &ThreeTangentParams::default()).unwrap();
+    let gap = alpha_true - t.alpha;
+    assert!(gap > 0.0);
+    let (dr_da, _) = t.partials();
+    let exact = circle::Circle::new(c, r);
+    let b = edge_bias_sigma(&t, &exact, 0.0);
+    assert!(
+        (b - dr_da * gap).abs() <= 1e-6 * b + 64.0 * EPS,
+        "{b} vs {}",
+        dr_da * gap
+    );
+    // The three-tangent radius really is short by about that much.
+    assert!(
+        ((r - t.radius) - b).abs() < 0.05 * b,
+        "short by {} vs {b}",
+        r - t.radius
+    );
+    let sf = 1e-3;
+    let with_fit = edge_bias_sigma(&t, &exact, sf);
+    let s_af = sf / (l * alpha_true.cos());
+    assert!((with_fit - dr_da * gap.hypot(s_af)).abs() <= 1e-6 * with_fit);
+    // Source inside the circle: no grazing geometry, no term.
+    assert_eq!(
+        edge_bias_sigma(&t, &circle::Circle::new(Vec2::new(0.0, 0.1), 0.2), 0.0),
+        0.0
+    );
+}
