@@ -74,7 +74,7 @@ pub enum CalibrationFileError {
     },
     /// A value outside its physical range (the message names the key).
     #[error(transparent)]
-    OutOfRange(#[from] crate::calibrate::sanity::OutOfRange),
+    OutOfRange(#[from] crate::calibration_bounds::OutOfRange),
     /// The values parse but do not form a valid calibration (e.g. a normal of zero length).
     #[error("invalid calibration: {0}")]
     Invalid(CalibrationError),
@@ -266,7 +266,7 @@ impl CalibrationToml {
                 |error| CalibrationFileError::Invalid(CalibrationError::Plane { index, error }),
             )?;
             // What the core accepts is then held to physical ranges (the key named).
-            crate::calibrate::sanity::check_plane(
+            crate::calibration_bounds::check_plane(
                 index,
                 v3(p.normal),
                 p.offset_m as f64,
@@ -276,7 +276,7 @@ impl CalibrationToml {
         }
         let calibration =
             Calibration::new(self.id, camera, &planes).map_err(CalibrationFileError::Invalid)?;
-        crate::calibrate::sanity::check_camera(&calibration.camera)?;
+        crate::calibration_bounds::check_camera(&calibration.camera)?;
         Ok(calibration)
     }
 }
@@ -304,7 +304,7 @@ impl CameraToml {
         camera
             .validate()
             .map_err(|e| CalibrationFileError::Invalid(CalibrationError::Camera(e)))?;
-        crate::calibrate::sanity::check_camera(&camera)?;
+        crate::calibration_bounds::check_camera(&camera)?;
         Ok(camera)
     }
 }

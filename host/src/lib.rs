@@ -7,6 +7,7 @@
 #![deny(missing_docs)]
 
 pub mod calibrate;
+pub mod calibration_bounds;
 pub mod calibration_file;
 pub mod capture;
 pub mod emulator;

@@ -6,7 +6,7 @@
 //! (millimetres, degrees) and names the flags (`protocol::codes`).
 
 use std::borrow::Cow;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use serde::Serialize;
 use tangent_core::calibration::Calibration;
@@ -21,7 +21,7 @@ use tangent_core::solvers::stem::CylinderParams;
 
 use crate::capture::{Capture, CaptureError, Mode};
 use crate::pgm::{Pgm, PgmSamples};
-use crate::simulate::scene::Object;
+use crate::truth::Object;
 
 type Vec3d = nalgebra::Vector3<f64>;
 
@@ -382,32 +382,4 @@ pub fn measure_loaded(
         points,
         calibration,
     })
-}
-
-/// Lists capture directories: each argument is a capture (has `capture.toml`) or a directory
-/// whose sub-directories are captures (sorted by name).
-pub fn expand_captures(args: &[PathBuf]) -> std::io::Result<Vec<PathBuf>> {
-    let mut out = Vec::new();
-    for a in args {
-        if a.join(crate::capture::META_FILE).is_file() {
-            out.push(a.clone());
-            continue;
-        }
-        let mut subs: Vec<PathBuf> = std::fs::read_dir(a)?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.join(crate::capture::META_FILE).is_file())
-            .collect();
-        if subs.is_empty() {
-            return Err(std::io::Error::new(
-                std::io::ErrorKind::NotFound,
-                format!(
-                    "{} is neither a capture (no capture.toml) nor a directory of captures",
-                    a.display()
-                ),
-            ));
-        }
-        subs.sort();
-        out.extend(subs);
-    }
-    Ok(out)
 }

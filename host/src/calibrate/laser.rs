@@ -423,11 +423,11 @@ pub fn calibrate_plane(
     }
     let all: Vec<Vec3> = per_pose.iter().flatten().copied().collect();
     let fit = fit_plane(&all)?;
-    super::sanity::plane_determined(&per_pose, &fit)?;
+    super::sanity::plane_determined(&per_pose, fit.normal)?;
     let plane = laser_plane(&fit, source)?;
     let repeatability = repeatability(&per_pose);
     if let Some(rep) = &repeatability {
-        super::sanity::plane_repeatable(rep)?;
+        super::sanity::plane_repeatable(rep.std_error)?;
     }
     Ok(LaserCalibration {
         fit,

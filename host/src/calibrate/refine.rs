@@ -315,7 +315,7 @@ pub fn calibrate_camera(
 
     // What the views cannot determine is refused by name before the camera's validity
     // (an undetermined camera is often also an invalid one).
-    super::sanity::parameters_determined(&camera, &std_dev)?;
+    super::sanity::parameters_determined(&camera, &INTRINSIC_NAMES, &std_dev)?;
     if camera.validate().is_err() {
         return Err(CalibrateError::Refinement(format!(
             "the refined camera is not valid: {camera:?}"

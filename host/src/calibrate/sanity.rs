@@ -1,15 +1,14 @@
 //! What a calibration refuses (`docs/calibration.md`, "When calibration refuses"): views
 //! that cannot determine it (repeated views, too little tilt between them, a laser plane
-//! seen at a single depth), parameters whose standard deviation exceeds a sane bound, and
-//! loaded values outside physical ranges.
+//! seen at a single depth) and parameters whose standard deviation exceeds a sane bound.
+//! Loaded values outside physical ranges are refused by [`crate::calibration_bounds`].
 
 use nalgebra::Vector3;
 use tangent_core::camera::Camera;
 use tangent_core::real::Vec3;
 
-use super::laser::{PlaneFit, Repeatability};
-use super::refine::{INTRINSIC_NAMES, N_INTRINSICS};
 use super::{CalibrateError, Pose, View};
+use crate::calibration_bounds::corner_radius;
 
 /// Two views whose common corners differ by less than this RMS (pixels) are the same view:
 /// corner noise is ~0.1–0.3 px, so a board that has not moved agrees to well under 1 px,
@@ -120,12 +119,15 @@ pub fn orientations_spread(poses: &[Pose]) -> Result<(), CalibrateError> {
 
 /// Refuses a camera calibration with a parameter whose σ is beyond its bound (the
 /// `MAX_*_SIGMA_*` constants), naming the parameter and its σ.
+/// `names` and `std_dev` are the refined intrinsics' names and standard deviations, in the
+/// refinement's order.
 pub fn parameters_determined(
     c: &Camera,
-    std_dev: &[f64; N_INTRINSICS],
+    names: &[&'static str],
+    std_dev: &[f64],
 ) -> Result<(), CalibrateError> {
     let r = corner_radius(c);
-    for (k, (&name, &sigma)) in INTRINSIC_NAMES.iter().zip(std_dev).enumerate() {
+    for (&name, &sigma) in names.iter().zip(std_dev) {
         let (bound, unit) = match name {
             "fx" => (MAX_FOCAL_SIGMA_RELATIVE * c.fx, "px"),
             "fy" => (MAX_FOCAL_SIGMA_RELATIVE * c.fy, "px"),
@@ -141,7 +143,7 @@ pub fn parameters_determined(
         // A NaN σ (singular normal matrix) is undetermined too.
         if sigma.is_nan() || sigma > bound {
             return Err(CalibrateError::TooUncertain {
-                name: INTRINSIC_NAMES[k],
+                name,
                 sigma,
                 bound,
                 unit,
@@ -151,18 +153,11 @@ pub fn parameters_determined(
     Ok(())
 }
 
-/// Normalised radius of the image corner farthest from the principal point (at least a
-/// small positive value, so the bounds stay finite).
-fn corner_radius(c: &Camera) -> f64 {
-    let dx = c.cx.abs().max((c.width as f64 - c.cx).abs()) / c.fx;
-    let dy = c.cy.abs().max((c.height as f64 - c.cy).abs()) / c.fy;
-    dx.hypot(dy).max(1e-3)
-}
-
 /// Refuses a laser plane whose leave-one-pose-out standard errors exceed
-/// [`MAX_PLANE_STD_ERROR`].
-pub fn plane_repeatable(rep: &Repeatability) -> Result<(), CalibrateError> {
-    let (se, st, sr) = rep.std_error;
+/// [`MAX_PLANE_STD_ERROR`] (`std_error`: baseline, tilt, roll, as in
+/// [`super::laser::Repeatability::std_error`]).
+pub fn plane_repeatable(std_error: (f64, f64, f64)) -> Result<(), CalibrateError> {
+    let (se, st, sr) = std_error;
     let (be, bt, br) = MAX_PLANE_STD_ERROR;
     for (name, sigma, bound, scale, unit) in [
         ("the laser baseline", se, be, 1e3, "mm"),
@@ -182,8 +177,9 @@ pub fn plane_repeatable(rep: &Repeatability) -> Result<(), CalibrateError> {
 }
 
 /// Refuses a laser plane the poses do not determine: its stripe lines must be spread across
-/// the plane by at least [`MIN_PLANE_SPREAD_M`] (two or more distinct depths).
-pub fn plane_determined(per_pose: &[Vec<Vec3>], fit: &PlaneFit) -> Result<(), CalibrateError> {
+/// the plane by at least [`MIN_PLANE_SPREAD_M`] (two or more distinct depths). `normal` is
+/// the fitted plane's unit normal.
+pub fn plane_determined(per_pose: &[Vec<Vec3>], normal: Vec3) -> Result<(), CalibrateError> {
     let all: Vec<&Vec3> = per_pose.iter().flatten().collect();
     let n = all.len().max(1) as f64;
     let mean = all.iter().fold(Vec3::zeros(), |a, p| a + *p) / n;
@@ -192,7 +188,7 @@ pub fn plane_determined(per_pose: &[Vec<Vec3>], fit: &PlaneFit) -> Result<(), Ca
     let mut scatter = nalgebra::Matrix3::zeros();
     for p in &all {
         let d = *p - mean;
-        let d = d - fit.normal * fit.normal.dot(&d);
+        let d = d - normal * normal.dot(&d);
         scatter += d * d.transpose();
     }
     let eig = scatter.symmetric_eigen();
@@ -203,7 +199,7 @@ pub fn plane_determined(per_pose: &[Vec<Vec3>], fit: &PlaneFit) -> Result<(), Ca
         .max_by(|a, b| a.1.total_cmp(b.1))
         .unwrap_or((0, &0.0));
     let along: Vec3 = eig.eigenvectors.column(imax).into_owned();
-    let across = fit.normal.cross(&along);
+    let across = normal.cross(&along);
     let centres: Vec<f64> = per_pose
         .iter()
         .filter(|p| !p.is_empty())
@@ -220,114 +216,6 @@ pub fn plane_determined(per_pose: &[Vec<Vec3>], fit: &PlaneFit) -> Result<(), Ca
             spread.max(0.0) * 1e3,
             MIN_PLANE_SPREAD_M * 1e3
         )));
-    }
-    Ok(())
-}
-
-/// A loaded calibration value outside its physical range.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("calibration.{key} = {} is outside {range}", readable(*.value))]
-pub struct OutOfRange {
-    /// The key, as in the file (`camera.fx_px`, `planes[0].offset_m`).
-    pub key: String,
-    /// Its value.
-    pub value: f64,
-    /// The range, with unit and reason.
-    pub range: String,
-}
-
-/// `value` as people write it: plain between 0.001 and 1e6, else in exponent form.
-fn readable(value: f64) -> String {
-    if value == 0.0 || (1e-3..1e6).contains(&value.abs()) {
-        format!("{value}")
-    } else {
-        format!("{value:e}")
-    }
-}
-
-/// Focal lengths a camera of this instrument can have (pixels): a 100 px focal length on
-/// a 752 px sensor is a 150° field, 100 000 px a 0.4° one.
-pub const FOCAL_RANGE_PX: (f64, f64) = (100.0, 100_000.0);
-
-/// Largest plane offset and source distance from the camera (metres): the instrument is
-/// handheld, its lasers are centimetres from the lens.
-pub const MAX_PLANE_DISTANCE_M: f64 = 2.0;
-
-/// Checks a loaded camera against physical ranges, naming the first key outside.
-pub fn check_camera(c: &Camera) -> Result<(), OutOfRange> {
-    let out = |key: &str, value: f64, range: String| {
-        Err(OutOfRange {
-            key: format!("camera.{key}"),
-            value,
-            range,
-        })
-    };
-    let (lo, hi) = FOCAL_RANGE_PX;
-    for (key, v) in [("fx_px", c.fx), ("fy_px", c.fy)] {
-        if !(lo..=hi).contains(&v) {
-            return out(key, v, format!("{lo}..{hi} px"));
-        }
-    }
-    let (w, h) = (c.width as f64, c.height as f64);
-    if !(0.0..=w).contains(&c.cx) {
-        return out("cx_px", c.cx, format!("0..{w} px (inside the image)"));
-    }
-    if !(0.0..=h).contains(&c.cy) {
-        return out("cy_px", c.cy, format!("0..{h} px (inside the image)"));
-    }
-    // No lens moves a point at the image corner by more than its own radius: |k_i|·r^(2i)
-    // ≤ 1 and 3|p|·r² ≤ 1 (r the normalised radius of the farthest corner).
-    let r = corner_radius(c);
-    let d = c.distortion;
-    for (key, v, bound) in [
-        ("k1", d.k1, 1.0 / r.powi(2)),
-        ("k2", d.k2, 1.0 / r.powi(4)),
-        ("k3", d.k3, 1.0 / r.powi(6)),
-        ("p1", d.p1, 1.0 / (3.0 * r * r)),
-        ("p2", d.p2, 1.0 / (3.0 * r * r)),
-    ] {
-        if !(0.0..=bound).contains(&v.abs()) {
-            return out(
-                &format!("distortion.{key}"),
-                v,
-                format!("±{bound:.3e} (its term may not exceed the radius at the image corner, r = {r:.2})"),
-            );
-        }
-    }
-    Ok(())
-}
-
-/// Checks loaded plane `index` (`normal`, `offset_m`, `source_m` as in the file) against
-/// physical ranges, naming the first key outside (the core then validates the plane
-/// itself: the source on the plane, the camera off it).
-pub fn check_plane(
-    index: usize,
-    normal: Vec3,
-    offset: f64,
-    source: Vec3,
-) -> Result<(), OutOfRange> {
-    let out = |key: &str, value: f64, range: String| {
-        Err(OutOfRange {
-            key: format!("planes[{index}].{key}"),
-            value,
-            range,
-        })
-    };
-    // Written with 5 or more digits a unit normal is within 1e-4 of 1; 1 % is a typo.
-    let len = normal.norm();
-    if !(0.99..=1.01).contains(&len) {
-        return out("normal", len, "length 0.99..1.01 (a unit normal)".into());
-    }
-    let d = MAX_PLANE_DISTANCE_M;
-    if !(1e-3..=d).contains(&offset.abs()) {
-        return out("offset_m", offset, format!("±(0.001..{d}) m"));
-    }
-    if !(0.0..=d).contains(&source.norm()) {
-        return out(
-            "source_m",
-            source.norm(),
-            format!("0..{d} m from the camera (distance given)"),
-        );
     }
     Ok(())
 }

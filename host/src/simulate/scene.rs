@@ -8,10 +8,7 @@
 
 use tangent_core::real::Vec3;
 
-use crate::truth::{Texture, Wave};
-// Transitional: `crate::measure` still names the object type by this path; new code imports
-// it from `crate::truth`.
-pub use crate::truth::Object;
+use crate::truth::{Object, Texture, Wave};
 
 /// Why a scene is invalid.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
