@@ -567,7 +567,8 @@ fn solve_tilted(
     let c0 = plane0.to_plane_coords(centre);
     // Non-roundness in the plane perpendicular to the fitted axis (where a round stem's
     // section is a circle whatever the tilt), on plane 0's curve.
-    if let Some(e) = projected_non_round(
+    // An elliptic section reports the mean of its axes (`docs/cylinder.md`, "Elliptic stems").
+    let (diameter, method, uncertainty, axes) = match projected_non_round(
         input.curves[0],
         plane0.source,
         cyl.axis,
@@ -575,29 +576,18 @@ fn solve_tilted(
         scratch,
         point_sigma,
     ) {
-        let (d, s) = elliptic_diameter(&e, cal_rel)?;
-        flags.insert(Flags::ELLIPTIC);
-        return Ok(CylinderSolution {
-            diameter: d,
-            method: Method::CylinderFit,
-            uncertainty: s,
-            tilt: Some(tilt),
-            flags,
-            fit_rms: fit.rms_residual,
-            n_points: fit.points,
-            three_tangent_diameter: tt.map(|(r, _)| 2.0 * r),
-            three_tangent_uncertainty: tt.map(|(_, s)| 2.0 * s),
-            fit_diameter: Some(2.0 * cyl.radius),
-            fit_uncertainty: Some(2.0 * fit_sigma),
-            distance: norm(&c0) - cyl.radius,
-            centre,
-            axes: Some((2.0 * e.semi_axes.0, 2.0 * e.semi_axes.1)),
-        });
-    }
+        Some(e) => {
+            let (d, s) = elliptic_diameter(&e, cal_rel)?;
+            flags.insert(Flags::ELLIPTIC);
+            let axes = (2.0 * e.semi_axes.0, 2.0 * e.semi_axes.1);
+            (d, Method::CylinderFit, s, Some(axes))
+        }
+        None => (2.0 * radius, method, 2.0 * sigma, None),
+    };
     Ok(CylinderSolution {
-        diameter: 2.0 * radius,
+        diameter,
         method,
-        uncertainty: 2.0 * sigma,
+        uncertainty,
         tilt: Some(tilt),
         flags,
         fit_rms: fit.rms_residual,
@@ -608,7 +598,7 @@ fn solve_tilted(
         fit_uncertainty: Some(2.0 * fit_sigma),
         distance: norm(&c0) - cyl.radius,
         centre,
-        axes: None,
+        axes,
     })
 }
 
