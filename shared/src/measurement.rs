@@ -1,5 +1,5 @@
 //! One reading of any of Tangent's instruments: what the pipeline returns, the wire protocol
-//! sends, the host prints and the field log keeps (`docs/architecture.md`, "Measurement").
+//! sends, the host prints and the field log keeps (`docs/architecture.md`, "Module map" and "Adding an instrument").
 //!
 //! Each instrument (stem today; sphere, wall and road next) is one [`Mode`] of the same head
 //! and one variant of [`Measurement`]. The values are SI (metres, radians) and computed in
