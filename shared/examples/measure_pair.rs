@@ -8,6 +8,7 @@
 use std::path::{Path, PathBuf};
 
 use tangent_core::pipeline::WorkspaceSizes;
+use tangent_core::protocol::codes::{method_name, Failure};
 use tangent_core::PipelineConfig;
 use tangent_core::{measure, Buffers, Calibration, Frame, InstrumentParams, Measurement, Mode};
 
@@ -47,14 +48,15 @@ fn main() -> Result<(), String> {
     );
     match reading {
         Ok(Measurement::Stem(stem)) => println!(
-            "{}: d = {:.1} mm ± {:.1} mm ({:?}) at {:.2} m",
+            "{}: d = {:.1} mm ± {:.1} mm ({}) at {:.2} m",
             dir.display(),
             stem.diameter * 1e3,
             stem.uncertainty * 1e3,
-            stem.method,
+            method_name(stem.method),
             stem.distance
         ),
-        Err(e) => println!("{}: no reading: {e}", dir.display()),
+        // The sentence the CLI and the caliper's companion print for the same failure.
+        Err(e) => println!("{}: no reading: {}", dir.display(), Failure::of(&e)),
     }
     Ok(())
 }
