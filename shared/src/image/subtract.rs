@@ -126,7 +126,7 @@ fn difference_word<P: Pixel>(
 /// of `out`, more than 2^32 − 1 pixels), checked before any pixel is written.
 ///
 /// Cost: for 8-bit frames whose bit depth is 8 (the reference sensor) the pixels are processed
-/// four to a `u32` word, two words per loop iteration ([`lanes`]: the saturating difference
+/// four to a `u32` word, two words per loop iteration (`image::lanes`: the saturating difference
 /// and the laser-off sum are one DSP instruction each on the Cortex-M7), and the four
 /// differences of a word that are all below 4 (most of a laser image: the difference of two
 /// exposures of an unlit scene is noise of a grey level or two) are counted with one

@@ -1,7 +1,7 @@
 //! The pipeline's working memory, assembled once for everyone: a const-constructible set for
 //! statics ([`Buffers`], or its parts [`SmallBuffers`] and [`NO_OBJECTS`] for a board that
 //! spreads them over RAM regions) and, with the `alloc` feature, a heap set sized at run time
-//! ([`OwnedBuffers`]). Each lends the pipeline a [`Workspace`].
+//! (`OwnedBuffers`). Each lends the pipeline a [`Workspace`].
 
 use crate::curve::CurvePoint;
 use crate::image::segment::ObjectFeatures;

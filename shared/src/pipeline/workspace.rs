@@ -9,7 +9,7 @@ use crate::real::{Real, Vec2, Vec3};
 use super::buffers::{LABEL_TABLE_LEN, MAX_OBJECTS};
 use super::PipelineError;
 
-/// Caller-owned working memory of the pipeline: borrowed from a [`Buffers`] (static),
+/// Caller-owned working memory of the pipeline: borrowed from a [`Buffers`](super::Buffers) (static),
 /// an `OwnedBuffers` (heap, feature `alloc`), or any slices of the [`WorkspaceSizes`].
 #[derive(Debug)]
 pub struct Workspace<'a, P: Pixel> {
@@ -25,7 +25,7 @@ pub struct Workspace<'a, P: Pixel> {
     pub objects: &'a mut [ObjectFeatures],
     /// Curve points, all planes (about `width × planes`).
     pub curve: &'a mut [CurvePoint],
-    /// 3-D points, grouped by plane in [`Profile::plane_points`] order (same length as `curve`).
+    /// 3-D points, grouped by plane in [`Profile::plane_points`](super::Profile::plane_points) order (same length as `curve`).
     pub points: &'a mut [Vec3],
     /// 1σ of each 3-D point (metres, along its noise direction; same indexing as `points`),
     /// from [`super::point_sigmas`]: what the solvers weigh the points by.
