@@ -3,8 +3,10 @@
 #   fuzz <target>: <execs> execs, <exec/s> exec/s, ok|CRASH
 # exiting non-zero if any target crashed (the input is kept in fuzz/artifacts/<target>/).
 #
-#   bash fuzz/run.sh [SECONDS] [--ci] [TARGET...]
+#   bash fuzz/run.sh [SECONDS] [--ci] [--runs=N] [TARGET...]
 #
+# --runs=N runs each target for N executions instead of SECONDS (the long run of
+# docs/fuzzing.md: --runs=10000000).
 # From a fresh machine it installs what it needs: a nightly toolchain (rustup, minimal
 # profile) and cargo-fuzz (crates.io, --locked). With --ci it installs nothing: if either is
 # missing it says so and skips (a cold install plus the first build takes ~8 min; see
@@ -15,14 +17,17 @@ cd "$(dirname "$0")"
 
 seconds=10
 ci=0
+limit=()
 targets=()
 for arg in "$@"; do
   case $arg in
     --ci) ci=1 ;;
+    --runs=*) limit=(-runs="${arg#--runs=}") ;;
     ''|*[!0-9]*) targets+=("$arg") ;;
     *) seconds=$arg ;;
   esac
 done
+[ ${#limit[@]} -eq 0 ] && limit=(-max_total_time="$seconds")
 
 missing=()
 rustup run nightly rustc --version >/dev/null 2>&1 || missing+=("the nightly toolchain")
@@ -57,7 +62,7 @@ for target in "${targets[@]}"; do
   mkdir -p "$work" "artifacts/$target"
   log="target/fuzz-$target.log"
   cargo +nightly fuzz run "${build_flags[@]}" "$target" "$work" "corpus/$target" -- \
-    -max_total_time="$seconds" -print_final_stats=1 -rss_limit_mb=1024 -timeout=10 \
+    "${limit[@]}" -print_final_stats=1 -rss_limit_mb=1024 -timeout=10 \
     >"$log" 2>&1
   result=$?
   execs=$(awk '/stat::number_of_executed_units:/ { print $2 }' "$log")

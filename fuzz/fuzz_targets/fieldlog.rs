@@ -12,7 +12,9 @@ const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
 fn check(line: &[u8]) {
     if let Some(record) = decode_line(line) {
         let encoded = encode_line(&record);
-        let body = encoded.strip_suffix('\n').expect("a line ends in a newline");
+        let body = encoded
+            .strip_suffix('\n')
+            .expect("a line ends in a newline");
         let again = decode_line(body.as_bytes()).expect("an encoded record decodes");
         assert_eq!(encode_line(&again), encoded, "re-encoding changed the line");
     }

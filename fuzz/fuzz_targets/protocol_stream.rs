@@ -54,7 +54,8 @@ fuzz_target!(|data: &[u8]| {
             };
             if let Some(mut frame) = frame {
                 let first = frame.clone();
-                let again: FromDevice = tangent_core::protocol::decode(&mut frame).expect("decodes");
+                let again: FromDevice =
+                    tangent_core::protocol::decode(&mut frame).expect("decodes");
                 let (mut scratch, mut out) = ([0u8; MAX_RAW_LEN], [0u8; MAX_FRAME_LEN]);
                 let n = encode(&again, &mut scratch, &mut out).expect("re-encodes");
                 assert_eq!(first, out[..n], "re-encoding changed the frame");

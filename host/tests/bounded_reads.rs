@@ -47,7 +47,11 @@ fn a_pgm_extended_to_1_5_gb_is_refused_without_being_read() {
         other => panic!("expected TrailingData, got {other:?}"),
     }
     // Reading 1.5 GB takes seconds; refusing from the size takes microseconds.
-    assert!(started.elapsed() < Duration::from_secs(1), "{:?}", started.elapsed());
+    assert!(
+        started.elapsed() < Duration::from_secs(1),
+        "{:?}",
+        started.elapsed()
+    );
 }
 
 #[test]
@@ -122,7 +126,13 @@ fn a_capture_frame_that_is_a_fifo_is_refused() {
     let path = dir.path().to_path_buf();
     let result = within_timeout(move || Capture::read(&path).map(|_| ()));
     assert!(
-        matches!(result, Err(CaptureError::Pgm { source: PgmError::NotAFile { .. }, .. })),
+        matches!(
+            result,
+            Err(CaptureError::Pgm {
+                source: PgmError::NotAFile { .. },
+                ..
+            })
+        ),
         "{result:?}"
     );
 }
@@ -154,19 +164,26 @@ fn a_frame_whose_header_declares_8000x8000_is_refused_before_its_raster_is_read(
         ),
         "{result:?}"
     );
-    assert!(started.elapsed() < Duration::from_secs(1), "{:?}", started.elapsed());
+    assert!(
+        started.elapsed() < Duration::from_secs(1),
+        "{:?}",
+        started.elapsed()
+    );
 }
 
 #[test]
 fn a_capture_declaring_frames_above_the_maximum_is_refused() {
     let text = std::fs::read_to_string(corpus_capture().join("capture.toml")).unwrap();
-    let big = text
-        .replacen("width = 752", "width = 8000", 1)
-        .replacen("height = 480", "height = 8000", 1);
+    let big = text.replacen("width = 752", "width = 8000", 1).replacen(
+        "height = 480",
+        "height = 8000",
+        1,
+    );
     assert_ne!(big, text);
     let err = tangent_host::capture::CaptureMeta::parse(&big).unwrap_err();
     assert!(
-        err.to_string().contains("8000x8000 exceeds the format's maximum"),
+        err.to_string()
+            .contains("8000x8000 exceeds the format's maximum"),
         "{err}"
     );
     let side = MAX_FRAME_SIDE;

@@ -8,7 +8,13 @@ use tangent_host::fieldlog::{FieldLog, PlotHeader, Record};
 
 fn listen(log: &Path) -> Output {
     Command::new(env!("CARGO_BIN_EXE_tangent"))
-        .args(["listen", "--port", "/nonexistent/tangent-tty", "--plot-id", "new-plot"])
+        .args([
+            "listen",
+            "--port",
+            "/nonexistent/tangent-tty",
+            "--plot-id",
+            "new-plot",
+        ])
         .arg("--log")
         .arg(log)
         .output()
@@ -27,7 +33,10 @@ fn a_missing_port_creates_no_log() {
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("field.log");
     assert_port_error(&listen(&log));
-    assert!(!log.exists(), "listen created the log before opening the port");
+    assert!(
+        !log.exists(),
+        "listen created the log before opening the port"
+    );
 }
 
 #[test]

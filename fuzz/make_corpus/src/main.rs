@@ -6,9 +6,8 @@
 use std::path::{Path, PathBuf};
 
 use tangent_core::protocol::{
-    calibration_record, encode, encode_raw, DeviceError, ErrorCode, FrameSel, FromDevice,
-    Request, Response, ToDevice, WireCalibration, MAX_FRAME_LEN, MAX_RAW_LEN, PROTOCOL_VERSION,
-    UNSOLICITED,
+    calibration_record, encode, encode_raw, DeviceError, ErrorCode, FrameSel, FromDevice, Request,
+    Response, ToDevice, WireCalibration, MAX_FRAME_LEN, MAX_RAW_LEN, PROTOCOL_VERSION, UNSOLICITED,
 };
 use tangent_host::capture::Capture;
 use tangent_host::fieldlog::{encode_line, PlotHeader, Record, TreeRecord};
@@ -22,9 +21,9 @@ fn write(target: &str, bytes: &[u8]) {
     let dir = root().join("fuzz/corpus").join(target);
     std::fs::create_dir_all(&dir).unwrap();
     // FNV-1a: a stable name from the content.
-    let hash = bytes
-        .iter()
-        .fold(0xcbf29ce484222325u64, |h, &b| (h ^ b as u64).wrapping_mul(0x100000001b3));
+    let hash = bytes.iter().fold(0xcbf29ce484222325u64, |h, &b| {
+        (h ^ b as u64).wrapping_mul(0x100000001b3)
+    });
     std::fs::write(dir.join(format!("{hash:016x}")), bytes).unwrap();
 }
 
@@ -101,14 +100,20 @@ fn main() {
         stream_to.extend_from_slice(&frame[..n]);
         write("protocol_stream", &[&[0u8][..], &frame[..n]].concat());
         let raw = encode_raw(&m, PROTOCOL_VERSION, &mut scratch).unwrap();
-        write("protocol_body", &[&[0u8][..], &raw[1..raw.len() - 2]].concat());
+        write(
+            "protocol_body",
+            &[&[0u8][..], &raw[1..raw.len() - 2]].concat(),
+        );
     }
     for m in responses(&wire) {
         let n = encode(&m, &mut scratch, &mut frame).unwrap();
         stream_from.extend_from_slice(&frame[..n]);
         write("protocol_stream", &[&[1u8][..], &frame[..n]].concat());
         let raw = encode_raw(&m, PROTOCOL_VERSION, &mut scratch).unwrap();
-        write("protocol_body", &[&[1u8][..], &raw[1..raw.len() - 2]].concat());
+        write(
+            "protocol_body",
+            &[&[1u8][..], &raw[1..raw.len() - 2]].concat(),
+        );
     }
     write("protocol_stream", &stream_to);
     write("protocol_stream", &stream_from);
@@ -118,7 +123,10 @@ fn main() {
     let mut record = [0u8; calibration_record::MAX_RECORD];
     let n = calibration_record::encode(&wire, &mut record).unwrap();
     write("calibration_record", &[&[0u8][..], &record[..n]].concat());
-    write("calibration_record", &[&[1u8][..], &record[8..n - 4]].concat());
+    write(
+        "calibration_record",
+        &[&[1u8][..], &record[8..n - 4]].concat(),
+    );
 
     // PGM: small crops of the corpus frames around the laser stripe, 16-bit and 8-bit.
     let on = Pgm::read(&capture_dir.join("on.pgm")).unwrap();
@@ -136,13 +144,21 @@ fn main() {
         let wide = Pgm::from_u16(w, h, 1023, scale(10).collect()).unwrap();
         write("pgm", &wide.encode().unwrap());
         let narrow = scale(8).map(|v| v as u8).collect();
-        write("pgm", &Pgm::from_u8(w, h, 255, narrow).unwrap().encode().unwrap());
+        write(
+            "pgm",
+            &Pgm::from_u8(w, h, 255, narrow).unwrap().encode().unwrap(),
+        );
     }
     write("pgm", b"P5\n# a comment\n2 1\n65535\n\xff\xff\x00\x01");
 
     // Capture and calibration TOML from the corpus.
     for name in ["cyl-d300-z150-shade", "board-pose-01"] {
-        let text = std::fs::read(root().join("tests/captures").join(name).join("capture.toml"));
+        let text = std::fs::read(
+            root()
+                .join("tests/captures")
+                .join(name)
+                .join("capture.toml"),
+        );
         write("capture_toml", &text.unwrap());
     }
     write(
@@ -172,7 +188,11 @@ fn main() {
             device_time_ms: 1000 * tree_id as u64,
         })
     };
-    let records = [plot, tree(1, "PIAB", 314.06, 0), tree(2, "50", 88.0, 0x8006)];
+    let records = [
+        plot,
+        tree(1, "PIAB", 314.06, 0),
+        tree(2, "50", 88.0, 0x8006),
+    ];
     let mut log = String::new();
     for r in &records {
         let line = encode_line(r);
