@@ -9,7 +9,7 @@
 # docs/fuzzing.md: --runs=10000000).
 # From a fresh machine it installs what it needs: a nightly toolchain (rustup, minimal
 # profile) and cargo-fuzz (crates.io, --locked). With --ci it installs nothing: if either is
-# missing it says so and skips (a cold install plus the first build takes ~8 min; see
+# missing it says so and skips (a cold install plus the first build takes ~9 min; see
 # docs/fuzzing.md). New inputs go to fuzz/target/corpus/<target>/; the checked-in seeds in
 # fuzz/corpus/<target>/ are only read.
 set -uo pipefail
@@ -35,7 +35,7 @@ cargo fuzz --version >/dev/null 2>&1 || missing+=("cargo-fuzz")
 if [ ${#missing[@]} -gt 0 ]; then
   if [ "$ci" = 1 ]; then
     echo "fuzz: SKIPPED — ${missing[*]} not installed; installing and building from cold takes" \
-         "~8 min, beyond the CI step's budget. Run \`bash fuzz/run.sh\` once on this machine" \
+         "~9 min, beyond the CI step's budget. Run \`bash fuzz/run.sh\` once on this machine" \
          "to install them; CI then runs the targets."
     exit 0
   fi
