@@ -192,3 +192,37 @@ fn a_capture_declaring_frames_above_the_maximum_is_refused() {
         .replacen("height = 480", "height = 1", 1);
     tangent_host::capture::CaptureMeta::parse(&at_limit).unwrap();
 }
+
+#[test]
+fn inspect_refuses_an_8000x8000_capture_with_a_clear_message() {
+    let dir = edited_capture(|d| {
+        let meta = d.join("capture.toml");
+        let text = std::fs::read_to_string(&meta).unwrap();
+        let big = text.replacen("width = 752", "width = 8000", 1).replacen(
+            "height = 480",
+            "height = 8000",
+            1,
+        );
+        std::fs::write(&meta, big).unwrap();
+    });
+    let out_png = dir.path().join("inspect.png");
+    let out = within_timeout({
+        let capture = dir.path().to_path_buf();
+        move || {
+            std::process::Command::new(env!("CARGO_BIN_EXE_tangent"))
+                .arg("inspect")
+                .arg(&capture)
+                .arg("--out")
+                .arg(&out_png)
+                .output()
+                .unwrap()
+        }
+    });
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("frame size 8000x8000 exceeds the format's maximum"),
+        "{stderr}"
+    );
+    assert!(!dir.path().join("inspect.png").exists());
+}

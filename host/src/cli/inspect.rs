@@ -9,7 +9,8 @@
 //!
 //! Memory is bounded by the capture's declared frame size, which the format caps at
 //! `capture::MAX_FRAME_PIXELS` (`docs/formats.md`, "Bounds"): about 60 bytes per pixel
-//! (the frames, the difference, the 4-panel image), 250 MB at the cap, 22 MB for the sensor.
+//! (the frames, the difference, the 4-panel image): ≈ 250 MB at the cap, 20 MB (measured)
+//! for the sensor.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
