@@ -64,6 +64,12 @@ run_cargo_tests firmware-logic bash -c 'cd firmware && cargo test --target x86_6
 run_cargo_tests host-and-core cargo test --workspace --release --no-fail-fast
 run_cargo_tests core-f32 cargo test -p tangent-core --features f32 --release --no-fail-fast
 
+# Fuzzing smoke test: every libFuzzer target for 5 s (docs/fuzzing.md). --ci installs nothing:
+# without nightly + cargo-fuzz it prints why it skips (a cold install and build take ~9 min);
+# `bash fuzz/run.sh` once installs them. With them, the first build takes ~6 min, later ones
+# seconds; the runs take ~40 s.
+run_step fuzz-smoke bash fuzz/run.sh 5 --ci
+
 # --- summary -----------------------------------------------------------------------
 echo
 if [ ${#failed_steps[@]} -gt 0 ]; then

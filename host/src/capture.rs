@@ -19,6 +19,13 @@ use crate::calibration_file::{self, CalibrationFileError};
 use crate::pgm::{Pgm, PgmError};
 use crate::truth::{Object, TruthPoint};
 
+/// The largest frame side a capture may declare (pixels). With [`MAX_FRAME_PIXELS`] this
+/// bounds the memory reading (and inspecting) a capture takes; the sensor (MT9V034,
+/// 752 × 480) is far below it (`docs/formats.md`, "Bounds").
+pub const MAX_FRAME_SIDE: u32 = 4096;
+/// The most pixels a capture's frames may have (4 Mpx, 8 MiB per 16-bit frame).
+pub const MAX_FRAME_PIXELS: u64 = 4 * 1024 * 1024;
+
 /// The `format_version` this reader understands.
 pub const FORMAT_VERSION: u32 = 1;
 
@@ -316,6 +323,16 @@ impl CaptureMeta {
                 "width and height must be positive".into(),
             ));
         }
+        if meta.width > MAX_FRAME_SIDE
+            || meta.height > MAX_FRAME_SIDE
+            || u64::from(meta.width) * u64::from(meta.height) > MAX_FRAME_PIXELS
+        {
+            return Err(CaptureError::InvalidField(format!(
+                "frame size {}x{} exceeds the format's maximum ({MAX_FRAME_SIDE} px a side, \
+                 {MAX_FRAME_PIXELS} px in all; the MT9V034 is 752x480)",
+                meta.width, meta.height
+            )));
+        }
         if !(meta.exposure_s.is_finite() && meta.exposure_s > 0.0) {
             return Err(CaptureError::InvalidField(
                 "exposure_s must be positive".into(),
@@ -407,14 +424,14 @@ impl Capture {
         let expected_maxval = (1u32 << meta.bit_depth) - 1;
         let mut frames = Vec::with_capacity(meta.frames.len());
         for f in &meta.frames {
-            let pgm = Pgm::read(&dir.join(&f.file)).map_err(|e| frame_error(&f.file, e))?;
-            if (pgm.width, pgm.height) != (meta.width as usize, meta.height as usize) {
-                return Err(CaptureError::FrameSizeMismatch {
-                    file: f.file.clone(),
-                    expected: (meta.width, meta.height),
-                    actual: (pgm.width, pgm.height),
-                });
-            }
+            // The header's size is checked before the raster is read: a frame takes at most
+            // the memory `capture.toml` declares (itself bounded by `MAX_FRAME_PIXELS`).
+            let pgm = Pgm::read_expecting(
+                &dir.join(&f.file),
+                meta.width as usize,
+                meta.height as usize,
+            )
+            .map_err(|e| frame_error(&f.file, e))?;
             if pgm.maxval as u32 != expected_maxval {
                 return Err(CaptureError::WrongMaxval {
                     file: f.file.clone(),
@@ -524,6 +541,12 @@ fn frame_error(file: &str, error: PgmError) -> CaptureError {
         PgmError::Io { error, .. } => CaptureError::Io {
             file: file.to_string(),
             error,
+        },
+        PgmError::UnexpectedSize { expected, actual } => CaptureError::FrameSizeMismatch {
+            file: file.to_string(),
+            // `expected` is the `capture.toml` size, which fits `u32`.
+            expected: (expected.0 as u32, expected.1 as u32),
+            actual,
         },
         source => CaptureError::Pgm {
             file: file.to_string(),

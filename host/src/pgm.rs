@@ -12,8 +12,12 @@
 //! (bad magic, truncated raster with byte counts, maxval out of range, trailing data) and the
 //! raw 10-bit samples untouched. The format is 30 lines of parsing.
 
-use std::io::Write;
+use std::io::{Read, Write};
 use std::path::Path;
+
+/// The longest header (magic, numbers, comments) [`Pgm::read`] looks at before the raster:
+/// a file's size is then known from its header alone, and only that much is read.
+pub const MAX_HEADER_BYTES: u64 = 64 * 1024;
 
 /// Why a PGM file could not be read or written.
 #[derive(Debug, thiserror::Error)]
@@ -68,6 +72,22 @@ pub enum PgmError {
     /// the maxval, or the maxval is 0.
     #[error("cannot write PGM: {0}")]
     InvalidImage(String),
+    /// The header declares another size than the caller expects ([`Pgm::read_expecting`]);
+    /// the raster was not read.
+    #[error("PGM size {}x{} differs from the expected {}x{}", .actual.0, .actual.1, .expected.0, .expected.1)]
+    UnexpectedSize {
+        /// `(width, height)` expected.
+        expected: (usize, usize),
+        /// `(width, height)` in the header.
+        actual: (usize, usize),
+    },
+    /// The path is not a regular file (a FIFO, a device, a directory): reading it could
+    /// block forever or never end, so it is refused before it is opened.
+    #[error("{path}: not a regular file")]
+    NotAFile {
+        /// The path.
+        path: String,
+    },
     /// Reading or writing the file failed. The message names the file and the cause once
     /// (the cause is not also a `source()`, so an error chain does not print it twice).
     #[error("{path}: {error}")]
@@ -216,32 +236,8 @@ impl Pgm {
 
     /// Parses a `P5` file's bytes. Never panics; every malformation is a [`PgmError`].
     pub fn decode(bytes: &[u8]) -> Result<Self, PgmError> {
-        if bytes.len() < 2 || &bytes[..2] != b"P5" {
-            let found = String::from_utf8_lossy(&bytes[..bytes.len().min(2)]).into_owned();
-            return Err(PgmError::BadMagic { found });
-        }
-        let mut pos = 2;
-        let width = header_number(bytes, &mut pos, "width")?;
-        let height = header_number(bytes, &mut pos, "height")?;
-        let maxval = header_number(bytes, &mut pos, "maxval")?;
-        if maxval > 65535 {
-            return Err(PgmError::BadMaxval(maxval));
-        }
-        // Exactly one whitespace byte separates maxval from the raster (pgm(5)).
-        match bytes.get(pos) {
-            Some(c) if c.is_ascii_whitespace() => pos += 1,
-            _ => return Err(PgmError::BadHeader { field: "maxval" }),
-        }
-        let too_large = PgmError::TooLarge { width, height };
-        let n = usize::try_from(width)
-            .ok()
-            .zip(usize::try_from(height).ok())
-            .and_then(|(w, h)| w.checked_mul(h))
-            .ok_or(too_large)?;
-        let bytes_per_sample = if maxval > 255 { 2 } else { 1 };
-        let expected = n
-            .checked_mul(bytes_per_sample)
-            .ok_or(PgmError::TooLarge { width, height })?;
+        let header = Header::parse(bytes)?;
+        let (pos, expected) = (header.raster_start, header.raster_bytes);
         let raster = &bytes[pos..];
         if raster.len() < expected {
             return Err(PgmError::Truncated {
@@ -252,20 +248,20 @@ impl Pgm {
         if raster.len() > expected {
             return Err(PgmError::TrailingData(raster.len() - expected));
         }
-        let samples = if bytes_per_sample == 1 {
-            PgmSamples::U8(raster.to_vec())
-        } else {
+        let samples = if header.maxval > 255 {
             PgmSamples::U16(
                 raster
                     .chunks_exact(2)
                     .map(|c| u16::from_be_bytes([c[0], c[1]]))
                     .collect(),
             )
+        } else {
+            PgmSamples::U8(raster.to_vec())
         };
         let pgm = Pgm {
-            width: width as usize,
-            height: height as usize,
-            maxval: maxval as u16,
+            width: header.width,
+            height: header.height,
+            maxval: header.maxval,
             samples,
         };
         if let Some((i, v)) = pgm.first_above_maxval() {
@@ -295,12 +291,65 @@ impl Pgm {
         Ok(out)
     }
 
-    /// Reads and decodes a file.
+    /// Reads and decodes a file, reading no more than its header promises.
+    ///
+    /// Only regular files are read (a FIFO or a device is refused before it is opened, so a
+    /// read cannot block forever). The header is parsed from the first
+    /// [`MAX_HEADER_BYTES`]; a file whose size differs from header + raster is refused from
+    /// its size alone, and the raster is read with one byte to spare, so a file that grows
+    /// while it is read is refused as [`PgmError::TrailingData`] rather than read whole.
     pub fn read(path: &Path) -> Result<Self, PgmError> {
-        let bytes = std::fs::read(path).map_err(|error| PgmError::Io {
+        Self::read_bounded(path, None)
+    }
+
+    /// [`Pgm::read`] of a frame that must be `width × height`: a header declaring another
+    /// size is refused as [`PgmError::UnexpectedSize`] before the raster is read, so the
+    /// memory a read takes is bounded by what the caller expects, not by the file.
+    pub fn read_expecting(path: &Path, width: usize, height: usize) -> Result<Self, PgmError> {
+        Self::read_bounded(path, Some((width, height)))
+    }
+
+    fn read_bounded(path: &Path, expected: Option<(usize, usize)>) -> Result<Self, PgmError> {
+        let io = |error| PgmError::Io {
             path: path.display().to_string(),
             error,
-        })?;
+        };
+        let meta = std::fs::metadata(path).map_err(io)?;
+        if !meta.is_file() {
+            return Err(PgmError::NotAFile {
+                path: path.display().to_string(),
+            });
+        }
+        let file_len = meta.len();
+        let mut file = std::fs::File::open(path).map_err(io)?;
+        let mut bytes = Vec::new();
+        (&mut file)
+            .take(file_len.min(MAX_HEADER_BYTES))
+            .read_to_end(&mut bytes)
+            .map_err(io)?;
+        let header = Header::parse(&bytes)?;
+        if let Some(expected) = expected {
+            let actual = (header.width, header.height);
+            if actual != expected {
+                return Err(PgmError::UnexpectedSize { expected, actual });
+            }
+        }
+        let promised = header.raster_start as u64 + header.raster_bytes as u64;
+        if file_len < promised {
+            return Err(PgmError::Truncated {
+                expected: header.raster_bytes,
+                actual: (file_len - header.raster_start as u64) as usize,
+            });
+        }
+        if file_len > promised {
+            return Err(PgmError::TrailingData(
+                usize::try_from(file_len - promised).unwrap_or(usize::MAX),
+            ));
+        }
+        // The size checked out: read the rest, one byte more than promised at most.
+        let remaining = (promised + 1).saturating_sub(bytes.len() as u64);
+        bytes.reserve(usize::try_from(remaining).unwrap_or(0));
+        file.take(remaining).read_to_end(&mut bytes).map_err(io)?;
         Self::decode(&bytes)
     }
 
@@ -313,6 +362,56 @@ impl Pgm {
         };
         let mut f = std::fs::File::create(path).map_err(io)?;
         f.write_all(&bytes).map_err(io)
+    }
+}
+
+/// What a `P5` header says: the size, the maxval, where the raster starts and how long it is.
+struct Header {
+    width: usize,
+    height: usize,
+    maxval: u16,
+    /// Offset of the first raster byte.
+    raster_start: usize,
+    /// `width × height × bytes per sample`.
+    raster_bytes: usize,
+}
+
+impl Header {
+    /// Parses the header at the start of `bytes` (the raster need not follow).
+    fn parse(bytes: &[u8]) -> Result<Self, PgmError> {
+        if bytes.len() < 2 || &bytes[..2] != b"P5" {
+            let found = String::from_utf8_lossy(&bytes[..bytes.len().min(2)]).into_owned();
+            return Err(PgmError::BadMagic { found });
+        }
+        let mut pos = 2;
+        let width = header_number(bytes, &mut pos, "width")?;
+        let height = header_number(bytes, &mut pos, "height")?;
+        let maxval = header_number(bytes, &mut pos, "maxval")?;
+        if maxval > 65535 {
+            return Err(PgmError::BadMaxval(maxval));
+        }
+        // Exactly one whitespace byte separates maxval from the raster (pgm(5)).
+        match bytes.get(pos) {
+            Some(c) if c.is_ascii_whitespace() => pos += 1,
+            _ => return Err(PgmError::BadHeader { field: "maxval" }),
+        }
+        let too_large = || PgmError::TooLarge { width, height };
+        let (w, h) = usize::try_from(width)
+            .ok()
+            .zip(usize::try_from(height).ok())
+            .ok_or_else(too_large)?;
+        let bytes_per_sample = if maxval > 255 { 2 } else { 1 };
+        let raster_bytes = w
+            .checked_mul(h)
+            .and_then(|n| n.checked_mul(bytes_per_sample))
+            .ok_or_else(too_large)?;
+        Ok(Header {
+            width: w,
+            height: h,
+            maxval: maxval as u16,
+            raster_start: pos,
+            raster_bytes,
+        })
     }
 }
 

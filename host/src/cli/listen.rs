@@ -89,6 +89,19 @@ fn parse_typed(line: &str) -> Vec<Typed> {
 
 /// Runs the listener.
 pub fn run(args: Args) -> Result<ExitCode> {
+    // The port first: a listen that cannot reach the device leaves the log untouched (no
+    // file created, no plot header appended, no torn tail set aside).
+    let path = resolve_port(args.port.clone())?;
+    let mut cfg = LinkConfig {
+        reconnect_timeout: args.reconnect_timeout.map(Duration::from_secs_f64),
+        ..LinkConfig::default()
+    };
+    if args.stream {
+        // A streaming device reads requests between measurements (the emulated board
+        // about one byte per measurement): give replies more time.
+        cfg.reply_timeout = Duration::from_secs(5);
+    }
+    let mut link = Link::open(&path, cfg)?;
     // The error names the file.
     let mut log = FieldLog::open(&args.log).context("cannot open the field log")?;
     if log.torn_bytes() > 0 {
@@ -120,17 +133,6 @@ pub fn run(args: Args) -> Result<ExitCode> {
         }
     };
 
-    let path = resolve_port(args.port.clone())?;
-    let mut cfg = LinkConfig {
-        reconnect_timeout: args.reconnect_timeout.map(Duration::from_secs_f64),
-        ..LinkConfig::default()
-    };
-    if args.stream {
-        // A streaming device reads requests between measurements (the emulated board
-        // about one byte per measurement): give replies more time.
-        cfg.reply_timeout = Duration::from_secs(5);
-    }
-    let mut link = Link::open(&path, cfg)?;
     link.on_event(|e| match e {
         LinkEvent::Lost(why) => eprintln!("link lost ({why}); waiting for the device…"),
         LinkEvent::Reconnected { .. } => eprintln!("device back; catching up"),
