@@ -250,6 +250,9 @@ pub struct Capture {
     pub frames: Vec<Pgm>,
     /// The true laser curve, when the capture has one.
     pub truth_curve: Option<Vec<TruthPoint>>,
+    /// Why the truth curve that `capture.toml` names could not be read (its file and the
+    /// cause); the capture is measured all the same.
+    pub truth_curve_unreadable: Option<String>,
 }
 
 /// The capture directories `path` names: `path` itself when it holds [`META_FILE`], else
@@ -374,11 +377,7 @@ impl CaptureMeta {
                 // A calibration may live next to several captures, so `..` is allowed here.
                 // Read here rather than by `calibration_file::read` so that the error names
                 // the file as `capture.toml` does, relative to the capture.
-                let text =
-                    std::fs::read_to_string(dir.join(name)).map_err(|error| CaptureError::Io {
-                        file: name.clone(),
-                        error,
-                    })?;
+                let text = read_text(dir, name)?;
                 calibration_file::parse(&text).map_err(|error| CaptureError::CalibrationFile {
                     file: name.clone(),
                     error,
@@ -393,15 +392,49 @@ impl CaptureMeta {
     }
 }
 
+/// Largest text file a capture may have (`capture.toml`, a calibration, the truth curve):
+/// far above any real one (a truth curve of 752 columns and four planes is ≈ 200 kB), so a
+/// wrong file is refused before it is read whole.
+pub const MAX_TEXT_FILE_BYTES: u64 = 16 << 20;
+
+/// Reads the text file `name` of the capture in `dir`: a regular file (a FIFO or a device
+/// would block the read) of at most [`MAX_TEXT_FILE_BYTES`]. Errors name the file.
+fn read_text(dir: &Path, name: &str) -> Result<String, CaptureError> {
+    use std::io::{Error, ErrorKind, Read};
+    let path = dir.join(name);
+    let fail = |error| CaptureError::Io {
+        file: name.into(),
+        error,
+    };
+    let meta = std::fs::metadata(&path).map_err(fail)?;
+    if !meta.is_file() {
+        return Err(fail(Error::new(
+            ErrorKind::InvalidInput,
+            "not a regular file",
+        )));
+    }
+    if meta.len() > MAX_TEXT_FILE_BYTES {
+        let msg = format!(
+            "{} bytes, more than the {MAX_TEXT_FILE_BYTES} a capture's text file may have",
+            meta.len()
+        );
+        return Err(fail(Error::new(ErrorKind::InvalidData, msg)));
+    }
+    let mut text = String::new();
+    // `take`: the file may have grown since its size was read.
+    std::fs::File::open(&path)
+        .map_err(fail)?
+        .take(MAX_TEXT_FILE_BYTES)
+        .read_to_string(&mut text)
+        .map_err(fail)?;
+    Ok(text)
+}
+
 impl Capture {
     /// Reads and checks a capture directory.
     pub fn read(dir: &Path) -> Result<Self, CaptureError> {
         check_directory(dir)?;
-        let text =
-            std::fs::read_to_string(dir.join(META_FILE)).map_err(|error| CaptureError::Io {
-                file: META_FILE.into(),
-                error,
-            })?;
+        let text = read_text(dir, META_FILE)?;
         let meta = CaptureMeta::parse(&text)?;
         let calibration = meta.resolve_calibration(dir)?;
         let cam = (calibration.camera.width, calibration.camera.height);
@@ -442,22 +475,24 @@ impl Capture {
             }
             frames.push(pgm);
         }
-        let truth_curve = match meta.truth.as_ref().and_then(|t| t.truth_curve.as_ref()) {
-            Some(name) => {
-                let text =
-                    std::fs::read_to_string(dir.join(name)).map_err(|error| CaptureError::Io {
-                        file: name.clone(),
-                        error,
-                    })?;
-                Some(parse_truth_curve(&text, name)?)
-            }
-            None => None,
-        };
+        // The truth curve is optional ground truth: one that cannot be read is named, and the
+        // capture is still measured without it.
+        let (truth_curve, truth_curve_unreadable) =
+            match meta.truth.as_ref().and_then(|t| t.truth_curve.as_ref()) {
+                Some(name) => {
+                    match read_text(dir, name).and_then(|text| parse_truth_curve(&text, name)) {
+                        Ok(curve) => (Some(curve), None),
+                        Err(e) => (None, Some(e.to_string())),
+                    }
+                }
+                None => (None, None),
+            };
         Ok(Capture {
             meta,
             calibration,
             frames,
             truth_curve,
+            truth_curve_unreadable,
         })
     }
 

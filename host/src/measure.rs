@@ -94,6 +94,9 @@ pub struct Reading {
     /// The true diameter, for synthetic captures with ground truth (metres).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub truth_diameter_m: Option<f64>,
+    /// Why the capture's optional truth curve was not read (the reading is unaffected).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub truth_curve_unreadable: Option<String>,
 }
 
 impl Reading {
@@ -124,6 +127,7 @@ impl Reading {
                     points: Some(s.n_points),
                     error: None,
                     truth_diameter_m: truth,
+                    truth_curve_unreadable: None,
                 }
             }
             Err(e) => Reading {
@@ -141,12 +145,21 @@ impl Reading {
                 // The sentence the caliper's report of this failure reads as.
                 error: Some(Failure::of(e).to_string()),
                 truth_diameter_m: truth,
+                truth_curve_unreadable: None,
             },
         }
     }
 
     /// One line for people: `d = 301.2 mm ± 0.8 mm (circle_fit) [flags]` or the error.
     pub fn summary(&self) -> String {
+        let mut line = self.result_text();
+        if let Some(e) = &self.truth_curve_unreadable {
+            line += &format!(" (truth curve ignored: {e})");
+        }
+        line
+    }
+
+    fn result_text(&self) -> String {
         match (self.diameter_m, &self.error) {
             (Some(d), _) => {
                 let mut s = format!(
@@ -373,7 +386,8 @@ pub fn measure_loaded(
         }
         _ => return Err(MeasureError::MixedDepth),
     };
-    let reading = Reading::from_result(name, &result, truth_diameter(capture));
+    let mut reading = Reading::from_result(name, &result, truth_diameter(capture));
+    reading.truth_curve_unreadable = capture.truth_curve_unreadable.clone();
     Ok(Outcome {
         reading,
         result,

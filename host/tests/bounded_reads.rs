@@ -226,3 +226,64 @@ fn inspect_refuses_an_8000x8000_capture_with_a_clear_message() {
     );
     assert!(!dir.path().join("inspect.png").exists());
 }
+
+#[test]
+fn a_capture_toml_that_is_a_fifo_is_refused_not_waited_on() {
+    let dir = edited_capture(|d| {
+        let meta = d.join("capture.toml");
+        std::fs::remove_file(&meta).unwrap();
+        nix::unistd::mkfifo(&meta, nix::sys::stat::Mode::S_IRWXU).unwrap();
+    });
+    let path = dir.path().to_path_buf();
+    let result = within_timeout(move || Capture::read(&path).map(|_| ()));
+    match result {
+        Err(e @ CaptureError::Io { .. }) => {
+            let text = e.to_string();
+            assert!(text.starts_with("capture.toml: "), "{text}");
+            assert!(text.contains("not a regular file"), "{text}");
+        }
+        other => panic!("expected an I/O error naming capture.toml, got {other:?}"),
+    }
+}
+
+#[test]
+fn a_broken_optional_truth_curve_does_not_block_the_measurement() {
+    // One broken row; and, separately, a truth curve that is a FIFO.
+    let broken = edited_capture(|d| {
+        let path = d.join("truth-curve.csv");
+        let mut text = std::fs::read_to_string(&path).unwrap();
+        text.push_str("0,12,not-a-number,0,0,0,0\n");
+        std::fs::write(&path, text).unwrap();
+    });
+    let fifo = edited_capture(|d| {
+        let path = d.join("truth-curve.csv");
+        std::fs::remove_file(&path).unwrap();
+        nix::unistd::mkfifo(&path, nix::sys::stat::Mode::S_IRWXU).unwrap();
+    });
+    for dir in [broken, fifo] {
+        let path = dir.path().to_path_buf();
+        let capture = within_timeout(move || Capture::read(&path)).expect("still a capture");
+        assert!(capture.truth_curve.is_none());
+        let why = capture
+            .truth_curve_unreadable
+            .clone()
+            .expect("the problem is named");
+        assert!(why.contains("truth-curve.csv"), "{why}");
+        let outcome = tangent_host::measure::measure_loaded(
+            &capture,
+            "edited",
+            None,
+            &Default::default(),
+            &Default::default(),
+        )
+        .expect("measured");
+        assert!(
+            outcome.reading.diameter_m.is_some(),
+            "{:?}",
+            outcome.reading
+        );
+        let summary = outcome.reading.summary();
+        assert!(summary.contains("(truth curve ignored: "), "{summary}");
+        assert!(summary.contains("truth-curve.csv"), "{summary}");
+    }
+}

@@ -175,5 +175,6 @@ pub fn build_capture(
             Pgm::from_u8(w, h, maxval, on)?,
         ],
         truth_curve: None,
+        truth_curve_unreadable: None,
     })
 }

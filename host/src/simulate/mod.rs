@@ -386,6 +386,7 @@ pub fn simulate(spec: &SimSpec) -> Result<(Capture, SimReport), SimError> {
         calibration: cal.clone(),
         frames,
         truth_curve: Some(truth_curve),
+        truth_curve_unreadable: None,
     };
     Ok((
         capture,
