@@ -583,3 +583,6 @@ pub async fn expose<C: Camera, L: Laser, K: Clock>(
     laser.set(0);
     result
 }
+
+#[cfg(test)]
+mod tests;

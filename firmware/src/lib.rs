@@ -31,3 +31,6 @@ pub mod mt9v034;
 pub mod pgm;
 pub mod ports;
 pub mod stats;
+
+#[cfg(test)]
+mod fakes;

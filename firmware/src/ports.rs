@@ -255,3 +255,6 @@ impl<L: Laser, C: Clock> Drop for Strobe<'_, L, C> {
         self.laser.get_mut().set(0);
     }
 }
+
+#[cfg(test)]
+mod tests;

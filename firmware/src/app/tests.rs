@@ -1,0 +1,262 @@
+//! The application's two safety promises on virtual time (`crate::fakes`): the lasers never
+//! stay lit beyond [`MAX_LASER_ON_US`] (+ one guard poll) whatever the camera does, and the
+//! watchdog is fed by the main loop only — while idle and between measurements — so a hang
+//! stops the feeding and the hardware watchdog resets the device.
+
+use std::cell::RefCell;
+use std::rc::Rc;
+
+use tangent_core::protocol::{ErrorCode, Request, MAX_FRAME_LEN};
+
+use super::*;
+use crate::fakes::{
+    longest_lit_us, poll_bounded, CameraBehaviour, FailingMeasurer, FakeBoard, FakeCamera,
+    FakeClock, FakeLaser, FakeWatchdog, NoTrigger, QuietLink, RefStore, Time, GEOMETRY,
+};
+
+/// Polls enough for any bounded capture here (each poll advances the time by ≥ one guard
+/// poll while a capture hangs, and CAPTURE_TIMEOUT_US / GUARD_POLL_US = 500).
+const POLLS: usize = 100_000;
+
+/// The longest a capture may keep a laser lit: the limit plus the guard's polling period.
+const LIT_BOUND_US: u64 = MAX_LASER_ON_US + GUARD_POLL_US as u64;
+
+/// The longest one exposure may take: the capture timeout plus the guard's polling period.
+const EXPOSE_BOUND_US: u64 = CAPTURE_TIMEOUT_US + GUARD_POLL_US as u64;
+
+struct Rig {
+    time: Time,
+    switches: Rc<RefCell<Vec<(u64, u8)>>>,
+    feeds: Rc<RefCell<Vec<u64>>>,
+    writes: Rc<core::cell::Cell<usize>>,
+    off: Vec<u8>,
+    on: Vec<u8>,
+    rx: Vec<u8>,
+}
+
+impl Rig {
+    fn new() -> Self {
+        Rig {
+            time: Time::default(),
+            switches: Rc::default(),
+            feeds: Rc::default(),
+            writes: Rc::default(),
+            off: vec![0; GEOMETRY.frame_len()],
+            on: vec![0; GEOMETRY.frame_len()],
+            rx: vec![0; MAX_FRAME_LEN],
+        }
+    }
+
+    fn app(
+        &mut self,
+        camera: CameraBehaviour,
+        writes_hang: bool,
+    ) -> App<'_, FakeBoard, FailingMeasurer> {
+        let clock = FakeClock(self.time.clone());
+        let devices = Devices::<FakeBoard> {
+            camera: FakeCamera {
+                clock: clock.clone(),
+                behaviour: camera,
+            },
+            laser: FakeLaser {
+                time: self.time.clone(),
+                switches: self.switches.clone(),
+            },
+            trigger: NoTrigger,
+            link: QuietLink {
+                writes: self.writes.clone(),
+                writes_hang,
+            },
+            clock,
+            store: RefStore,
+            watchdog: FakeWatchdog {
+                time: self.time.clone(),
+                feeds: self.feeds.clone(),
+            },
+        };
+        let buffers = Buffers {
+            off: &mut self.off,
+            on: &mut self.on,
+            rx: &mut self.rx,
+        };
+        App::new(devices, FailingMeasurer, buffers)
+    }
+}
+
+/// Captures a pair with the camera doing `behaviour`; the result, the longest laser
+/// on-time and the laser mask at the end.
+fn capture_with(behaviour: CameraBehaviour) -> (Result<FrameSetInfo, DeviceError>, u64, u8) {
+    let mut rig = Rig::new();
+    let switches = rig.switches.clone();
+    let result = {
+        let mut app = rig.app(behaviour, false);
+        assert!(
+            app.calibration().is_some(),
+            "the fake store's calibration loads"
+        );
+        poll_bounded(app.capture_pair(), POLLS).expect("a capture is bounded by its guard")
+    };
+    let (lit, last) = longest_lit_us(&switches.borrow());
+    (result, lit, last)
+}
+
+#[test]
+fn a_working_camera_lights_the_lasers_for_the_exposure_only() {
+    let (result, lit, last) = capture_with(CameraBehaviour::Works);
+    let info = result.expect("capture");
+    assert_eq!(info.laser_mask, 0b11);
+    assert_eq!(lit, info.exposure_us as u64);
+    assert_eq!(last, 0);
+}
+
+#[test]
+fn a_camera_that_hangs_with_the_lasers_lit_is_cut_off_at_the_limit() {
+    let (result, lit, last) = capture_with(CameraBehaviour::HangsLit);
+    assert_eq!(result.map_err(|e| e.code), Err(ErrorCode::LaserTimeout));
+    assert!(
+        lit > MAX_LASER_ON_US,
+        "lit {lit} µs: tripped before the limit"
+    );
+    assert!(lit <= LIT_BOUND_US, "lit {lit} µs > {LIT_BOUND_US} µs");
+    assert_eq!(last, 0, "a laser is still on");
+}
+
+#[test]
+fn a_measurement_with_a_hung_lit_camera_reports_laser_timeout() {
+    let mut rig = Rig::new();
+    let switches = rig.switches.clone();
+    let result = {
+        let mut app = rig.app(CameraBehaviour::HangsLit, false);
+        poll_bounded(app.measure_once(), POLLS).expect("bounded")
+    };
+    assert_eq!(result.map_err(|e| e.code), Err(ErrorCode::LaserTimeout));
+    let (lit, last) = longest_lit_us(&switches.borrow());
+    assert!(
+        lit <= LIT_BOUND_US && last == 0,
+        "lit {lit} µs, last mask {last:#b}"
+    );
+}
+
+#[test]
+fn a_camera_that_fails_mid_exposure_leaves_the_lasers_off() {
+    let (result, lit, last) = capture_with(CameraBehaviour::FailsMidExposure);
+    let error = result.expect_err("the camera failed");
+    assert_eq!(error.code, ErrorCode::CameraFailure);
+    assert_eq!(error.detail, CameraError::Transfer.code());
+    assert!(lit <= LIT_BOUND_US, "lit {lit} µs");
+    assert_eq!(last, 0, "a laser is still on");
+}
+
+#[test]
+fn a_dead_camera_times_out_without_lighting_and_without_feeding_the_watchdog() {
+    let mut rig = Rig::new();
+    let (time, feeds, switches) = (rig.time.clone(), rig.feeds.clone(), rig.switches.clone());
+    let result = {
+        let mut app = rig.app(CameraBehaviour::HangsDark, false);
+        poll_bounded(app.capture_pair(), POLLS).expect("bounded")
+    };
+    assert_eq!(result.map_err(|e| e.code), Err(ErrorCode::CameraTimeout));
+    let took = time.get();
+    assert!(
+        took > CAPTURE_TIMEOUT_US && took <= EXPOSE_BOUND_US,
+        "took {took} µs"
+    );
+    assert!(
+        feeds.borrow().is_empty(),
+        "fed from inside a capture: {:?}",
+        feeds.borrow()
+    );
+    assert!(switches.borrow().iter().all(|&(_, m)| m == 0));
+}
+
+/// The largest gap between consecutive feeds (from time 0).
+fn longest_gap(feeds: &[u64]) -> u64 {
+    let mut previous = 0;
+    feeds
+        .iter()
+        .map(|&t| {
+            let gap = t - previous;
+            previous = t;
+            gap
+        })
+        .max()
+        .unwrap_or(0)
+}
+
+#[test]
+fn the_idle_loop_feeds_the_watchdog_every_tick() {
+    let mut rig = Rig::new();
+    let (time, feeds) = (rig.time.clone(), rig.feeds.clone());
+    {
+        let mut app = rig.app(CameraBehaviour::Works, false);
+        for _ in 0..50 {
+            poll_bounded(app.step(), POLLS).expect("an idle step ends");
+        }
+    }
+    let feeds = feeds.borrow();
+    assert_eq!(feeds.len(), 50);
+    assert_eq!(
+        time.get(),
+        50 * IDLE_TICK_US as u64,
+        "each idle step is one tick"
+    );
+    assert!(longest_gap(&feeds) <= IDLE_TICK_US as u64);
+}
+
+#[test]
+fn a_long_stream_feeds_the_watchdog_between_measurements() {
+    // A stream of measurements — with a working camera, and with a dead one (every
+    // exposure runs into the capture timeout) — is fed once per measurement: the longest
+    // gap is one measurement, bounded by two guarded exposures.
+    for camera in [
+        CameraBehaviour::Works,
+        CameraBehaviour::HangsDark,
+        CameraBehaviour::HangsLit,
+    ] {
+        let mut rig = Rig::new();
+        let (feeds, writes, switches) =
+            (rig.feeds.clone(), rig.writes.clone(), rig.switches.clone());
+        {
+            let mut app = rig.app(camera, false);
+            poll_bounded(app.handle(1, Request::StartStream), POLLS).expect("ack");
+            for _ in 0..200 {
+                poll_bounded(app.step(), POLLS).expect("a stream step ends");
+            }
+        }
+        let feeds = feeds.borrow();
+        assert_eq!(feeds.len(), 200, "{camera:?}");
+        assert_eq!(
+            writes.get(),
+            1 + 200,
+            "{camera:?}: the ack and one report per step"
+        );
+        let gap = longest_gap(&feeds);
+        assert!(
+            gap <= 2 * EXPOSE_BOUND_US,
+            "{camera:?}: {gap} µs between feeds"
+        );
+        let (lit, last) = longest_lit_us(&switches.borrow());
+        assert!(
+            lit <= LIT_BOUND_US && last == 0,
+            "{camera:?}: lit {lit} µs, last {last:#b}"
+        );
+    }
+}
+
+#[test]
+fn a_hang_in_the_main_loop_stops_the_feeding() {
+    // The link's write never completes (a hang the guard does not cover): the step that
+    // hangs fed the watchdog once when it started and never again, so the hardware
+    // watchdog's countdown runs out — nothing else feeds it.
+    let mut rig = Rig::new();
+    let feeds = rig.feeds.clone();
+    {
+        let mut app = rig.app(CameraBehaviour::Works, true);
+        app.stream = Some((1, crate::stats::Welford::new()));
+        assert!(
+            poll_bounded(app.step(), POLLS).is_none(),
+            "the step should hang"
+        );
+    }
+    assert_eq!(feeds.borrow().len(), 1, "{:?}", feeds.borrow());
+}
