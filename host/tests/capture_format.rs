@@ -482,17 +482,24 @@ fn capture_errors() {
         ),
         "{e}"
     );
-    // A malformed truth curve.
+    // A malformed truth curve is optional ground truth: the capture still reads, without it,
+    // and the problem is named (file and line).
     let truth = "[truth]\ntruth_curve = \"t.csv\"\n";
     let tail = format!("{cal}{truth}");
-    let e = read_err("", &tail, |d| {
-        std::fs::write(
-            d.join("t.csv"),
-            "plane,column,row_px,x_m,y_m,z_m,object\n0,1,nan,0,0,1,0\n",
-        )
-        .unwrap()
-    });
-    assert!(matches!(e, CaptureError::TruthCurve { line: 2, .. }), "{e}");
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("c");
+    hand_made(&dir, "", &tail);
+    std::fs::write(
+        dir.join("t.csv"),
+        "plane,column,row_px,x_m,y_m,z_m,object\n0,1,nan,0,0,1,0\n",
+    )
+    .unwrap();
+    let capture = Capture::read(&dir)
+        .map_err(|e| e.to_string())
+        .expect("still readable");
+    assert!(capture.truth_curve.is_none());
+    let why = capture.truth_curve_unreadable.expect("named");
+    assert!(why.contains("t.csv line 2"), "{why}");
 }
 
 // ---------------------------------------------------------------------------------------
