@@ -28,10 +28,12 @@ pub use devices::*;
 #[cfg(feature = "h743")]
 pub use start::*;
 
-/// Rows read out per frame. The DMA limit alone allows 348 rows of 752 bytes; RAM decides:
-/// two frames, the pipeline's difference frame (1 B/px) and labels (2 B/px) are
-/// 5 B/px = 601,600 B for 160 rows, in AXI SRAM (frames, difference) and SRAM1–3 (labels).
-/// See `docs/hardware.md` for the working range this window covers.
+/// Rows read out per frame. The pipeline's memory is laid out for the whole 480-row frame
+/// (`docs/hardware.md`, "Memory map": the laser-off frame stored whole and turned into the
+/// difference in place, the laser-on frame streamed); the window remains because this
+/// board's camera driver still reads a frame in one DMA transfer (at most 65,535 words), into
+/// a stored laser-on window, rather than in double-buffered line blocks. See
+/// `docs/hardware.md` for the working range this window covers.
 pub const WINDOW_ROWS: u16 = 160;
 /// First sensor row of the window: centred on the 480-row sensor.
 pub const WINDOW_ROW_OFFSET: u16 = (mt9v034::HEIGHT - WINDOW_ROWS) / 2;
@@ -42,10 +44,13 @@ pub const WINDOW: Window = Window {
 };
 /// Frame width: the whole sensor width.
 pub const WIDTH: u16 = mt9v034::WIDTH;
-/// Bytes of one frame.
+/// Bytes of one frame of the read-out window.
 pub const FRAME_BYTES: usize = WIDTH as usize * WINDOW_ROWS as usize;
+/// Bytes of a whole sensor frame (752 × 480): the laser-off frame the pipeline stores and
+/// turns into the difference frame in place (`docs/hardware.md`, "Memory map").
+pub const SENSOR_FRAME_BYTES: usize = WIDTH as usize * mt9v034::HEIGHT as usize;
 /// Curve/point entries of the pipeline's workspace: every column, two planes.
-pub const POINTS: usize = WorkspaceSizes::new(WIDTH as usize, WINDOW_ROWS as usize, 8, 2).points;
+pub const POINTS: usize = WorkspaceSizes::new(WIDTH as usize, mt9v034::HEIGHT as usize, 8, 2).points;
 /// Pixel clock of the sensor module (its own 26.66 MHz oscillator).
 pub const PIXCLK_HZ: u64 = 26_660_000;
 /// Trigger debounce time (µs): mechanical bounce of a tactile switch lasts < 5 ms.

@@ -19,7 +19,7 @@ use tangent_core::pipeline::Workspace;
 use super::devices::{
     Button, EmbassyClock, FlashStore, GpioLasers, Iwdg, Mt9v034Dcmi, UsbLink, H743,
 };
-use super::{FRAME_BYTES, POINTS, USB_PID, USB_VID, WATCHDOG_US};
+use super::{FRAME_BYTES, POINTS, SENSOR_FRAME_BYTES, USB_PID, USB_VID, WATCHDOG_US};
 use crate::app::Buffers;
 use crate::ports::Devices;
 
@@ -30,21 +30,24 @@ bind_interrupts!(struct Irqs {
     EXTI15_10 => exti::InterruptHandler<interrupt::typelevel::EXTI15_10>;
 });
 
-// Frames, difference frame and the small buffers in AXI SRAM (DMA1 cannot reach DTCM), the
-// labels in SRAM1–3 (240,640 of its 294,912 bytes), the object features in DTCM (.bss:
-// CPU-only, which the pipeline is). See `memory.x` and `docs/hardware.md`.
+// The laser-off frame (752 × 480, turned into the difference in place) and the laser-on
+// window in AXI SRAM (DMA1 cannot reach DTCM); the run tables and the per-point buffers in
+// SRAM1–3; the object features in DTCM (.bss: CPU-only, which the pipeline is). No stored
+// laser-off frame for raw captures. See `memory.x` and `docs/hardware.md`, "Memory map".
 crate::buffers::board_buffers! {
-    frame_bytes = FRAME_BYTES, points = POINTS;
-    #[link_section = ".axisram"] frames;
+    off_bytes = 0, on_bytes = FRAME_BYTES, diff_bytes = SENSOR_FRAME_BYTES, points = POINTS;
+    #[link_section = ".axisram"] off;
+    #[link_section = ".axisram"] on;
     #[link_section = ".axisram"] diff;
-    #[link_section = ".sram123"] labels;
-    #[link_section = ".axisram"] small;
+    #[link_section = ".sram123"] runs;
+    #[link_section = ".sram123"] small;
     objects;
 }
 
-/// The clock tree: 64 MHz HSI → PLL1: 400 MHz core (voltage scale 1), 200 MHz AHB (DCMI
-/// kernel clock ≥ 2.5 × 26.66 MHz PIXCLK), APB 100 MHz, HSI48 trimmed from USB SOF for the
-/// OTG FS.
+/// The clock tree: 64 MHz HSI → PLL1 (÷4 × 60 ÷ 2): 480 MHz core at voltage scale 0 (the
+/// STM32H743's rated maximum, revision V silicon; embassy raises VOS1 → VOS0 through the
+/// SYSCFG over-drive), 240 MHz AHB (DCMI kernel clock ≥ 2.5 × 26.66 MHz PIXCLK), APB 120 MHz,
+/// HSI48 trimmed from USB SOF for the OTG FS.
 pub fn clock_tree() -> embassy_stm32::Config {
     use embassy_stm32::rcc::*;
     let mut config = embassy_stm32::Config::default();
@@ -56,7 +59,7 @@ pub fn clock_tree() -> embassy_stm32::Config {
     config.rcc.pll1 = Some(Pll {
         source: PllSource::HSI,
         prediv: PllPreDiv::DIV4,
-        mul: PllMul::MUL50,
+        mul: PllMul::MUL60,
         fracn: None,
         divp: Some(PllDiv::DIV2),
         divq: None,
@@ -68,7 +71,7 @@ pub fn clock_tree() -> embassy_stm32::Config {
     config.rcc.apb2_pre = APBPrescaler::DIV2;
     config.rcc.apb3_pre = APBPrescaler::DIV2;
     config.rcc.apb4_pre = APBPrescaler::DIV2;
-    config.rcc.voltage_scale = VoltageScale::Scale1;
+    config.rcc.voltage_scale = VoltageScale::Scale0;
     config.rcc.mux.usbsel = mux::Usbsel::HSI48;
     config
 }
@@ -164,7 +167,7 @@ pub async fn start() -> Started {
     let class = CdcAcmClass::new(&mut builder, CDC_STATE.init(State::new()), 64);
     let usb = builder.build();
 
-    let Some((buffers, workspace)) = take_buffers(FRAME_BYTES) else {
+    let Some((buffers, workspace)) = take_buffers(SENSOR_FRAME_BYTES) else {
         defmt::panic!("the H743 board is started once");
     };
     let devices = Devices {
