@@ -62,8 +62,11 @@ pub trait Measurer {
 pub trait StreamMeasurer: RowSink {
     /// Starts a pair of frames of `geometry` measured with `calibration` (of the full
     /// sensor); returns where the laser-off frame goes (`geometry.frame_len()` bytes).
-    fn begin(&mut self, geometry: Geometry, calibration: &Calibration)
-        -> Result<&mut [u8], Failure>;
+    fn begin(
+        &mut self,
+        geometry: Geometry,
+        calibration: &Calibration,
+    ) -> Result<&mut [u8], Failure>;
     /// The measurement, once the laser-on frame's last row is in.
     fn finish(&mut self) -> Result<Measurement, Failure>;
 }
@@ -128,7 +131,8 @@ impl<'w> PipelineMeasurer<'w> {
     ) -> Result<Measurement, Failure> {
         let profile = profile.map_err(|e| Failure::of(&e))?;
         let t = self.now();
-        let solved = instrument::solve_with::<Stem, u8>(&profile, 255, cal, &self.params, &mut self.ws);
+        let solved =
+            instrument::solve_with::<Stem, u8>(&profile, 255, cal, &self.params, &mut self.ws);
         self.last_stages.solver_us = self.now().saturating_sub(t);
         let solved = solved.map_err(|e| Failure::of(&e))?;
         Ok(Measurement::from(&solved))

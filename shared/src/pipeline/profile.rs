@@ -162,7 +162,10 @@ pub fn extract_profile_probed<P: Pixel>(
     probe: impl FnMut(Stage),
 ) -> Result<Profile, PipelineError> {
     let (width, height) = check_inputs(off, on, calibration, ws)?;
-    for (y, stored) in ws.diff[..width * height].chunks_exact_mut(width).enumerate() {
+    for (y, stored) in ws.diff[..width * height]
+        .chunks_exact_mut(width)
+        .enumerate()
+    {
         stored.copy_from_slice(off.row(y));
     }
     let mut stream = ProfileStream::begin(ws, calibration, config, on.bit_depth())?;
@@ -327,8 +330,7 @@ fn extract_curves<P: Pixel>(
         };
         let row = diff.row(run.row as usize);
         for x in run.start as usize..run.end as usize {
-            let (Some(&v), Some(slot)) = (row.get(x), seeds.get_mut((x - x0) * curves + k))
-            else {
+            let (Some(&v), Some(slot)) = (row.get(x), seeds.get_mut((x - x0) * curves + k)) else {
                 continue;
             };
             let v: u32 = v.into();

@@ -50,7 +50,7 @@ pub const BLOCK_ROWS: usize = 16;
 /// let (w, h) = (cal.camera.width as usize, cal.camera.height as usize);
 /// ws.diff[..w * h].copy_from_slice(off); // the laser-off frame (on a device: its DMA)
 /// let config = PipelineConfig::default();
-/// let mut stream = ProfileStream::begin(&ws, cal, &config, 8).unwrap();
+/// let mut stream = ProfileStream::begin(&mut ws, cal, &config, 8).unwrap();
 /// for block in on.chunks(16 * w) {
 ///     stream.push_rows(&mut ws, block).unwrap(); // as the camera delivers them
 /// }
@@ -223,14 +223,13 @@ impl ProfileStream {
         probe(Stage::Subtracted);
 
         let automatic = config.threshold.threshold(histogram)?;
-        let t = config
-            .floors
-            .apply(automatic, stats.max_difference, noise);
+        let t = config.floors.apply(automatic, stats.max_difference, noise);
         probe(Stage::Thresholded);
 
         // Runs above `t`: inside the candidates (t ≥ the provisional threshold), or, when the
         // candidate table overflowed, from the whole difference frame.
-        let diff = Frame::new(&ws.diff[..pixels], width, height, width)?.with_bit_depth(bit_depth)?;
+        let diff =
+            Frame::new(&ws.diff[..pixels], width, height, width)?.with_bit_depth(bit_depth)?;
         let mut n = 0usize;
         if overflow || t < provisional {
             for y in 0..height {

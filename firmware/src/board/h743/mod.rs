@@ -4,9 +4,9 @@
 //! * trigger: EXTI input, debounced by re-reading the level after [`DEBOUNCE_US`];
 //! * camera: MT9V034 set up over I²C ([`crate::mt9v034`], register table in
 //!   `docs/hardware.md`), snapshot mode started by a pulse on its EXPOSURE pin, frames
-//!   received by DCMI + DMA into AXI SRAM. One DMA transfer moves at most 65,535 words
-//!   (262,140 bytes), and RAM holds two frames plus the pipeline's per-pixel buffers, so the
-//!   sensor reads out a window of [`WINDOW_ROWS`] rows (752 × 160 = 120,320 bytes);
+//!   received by DCMI + circular DMA in double-buffered line blocks (16 rows) in AXI SRAM:
+//!   the laser-off frame is stored whole, the laser-on frame goes through the pipeline block
+//!   by block as it is read out, so the whole 752 × 480 frame fits ([`WINDOW_ROWS`]);
 //! * link: USB CDC-ACM (embassy-usb);
 //! * calibration: a record in the last flash sector (`protocol::calibration_record`);
 //! * watchdog: IWDG1, fed by the application's main loop.
@@ -28,15 +28,13 @@ pub use devices::*;
 #[cfg(feature = "h743")]
 pub use start::*;
 
-/// Rows read out per frame. The pipeline's memory is laid out for the whole 480-row frame
-/// (`docs/hardware.md`, "Memory map": the laser-off frame stored whole and turned into the
-/// difference in place, the laser-on frame streamed); the window remains because this
-/// board's camera driver still reads a frame in one DMA transfer (at most 65,535 words), into
-/// a stored laser-on window, rather than in double-buffered line blocks. See
-/// `docs/hardware.md` for the working range this window covers.
-pub const WINDOW_ROWS: u16 = 160;
-/// First sensor row of the window: centred on the 480-row sensor.
-pub const WINDOW_ROW_OFFSET: u16 = (mt9v034::HEIGHT - WINDOW_ROWS) / 2;
+/// Rows read out per frame: the whole sensor. Frames arrive in double-buffered DMA line
+/// blocks, so the one-transfer limit (65,535 words) does not apply, and the pipeline keeps
+/// one per-pixel buffer (the laser-off frame, turned into the difference in place):
+/// `docs/hardware.md`, "Memory map".
+pub const WINDOW_ROWS: u16 = mt9v034::HEIGHT;
+/// First sensor row of the window.
+pub const WINDOW_ROW_OFFSET: u16 = 0;
 /// The sensor rows read out.
 pub const WINDOW: Window = Window {
     first_row: WINDOW_ROW_OFFSET,
@@ -44,13 +42,11 @@ pub const WINDOW: Window = Window {
 };
 /// Frame width: the whole sensor width.
 pub const WIDTH: u16 = mt9v034::WIDTH;
-/// Bytes of one frame of the read-out window.
+/// Bytes of one frame: the laser-off frame the pipeline stores and turns into the difference
+/// frame in place (`docs/hardware.md`, "Memory map").
 pub const FRAME_BYTES: usize = WIDTH as usize * WINDOW_ROWS as usize;
-/// Bytes of a whole sensor frame (752 × 480): the laser-off frame the pipeline stores and
-/// turns into the difference frame in place (`docs/hardware.md`, "Memory map").
-pub const SENSOR_FRAME_BYTES: usize = WIDTH as usize * mt9v034::HEIGHT as usize;
 /// Curve/point entries of the pipeline's workspace: every column, two planes.
-pub const POINTS: usize = WorkspaceSizes::new(WIDTH as usize, mt9v034::HEIGHT as usize, 8, 2).points;
+pub const POINTS: usize = WorkspaceSizes::new(WIDTH as usize, WINDOW_ROWS as usize, 8, 2).points;
 /// Pixel clock of the sensor module (its own 26.66 MHz oscillator).
 pub const PIXCLK_HZ: u64 = 26_660_000;
 /// Trigger debounce time (µs): mechanical bounce of a tactile switch lasts < 5 ms.

@@ -1,7 +1,9 @@
 //! Bringing the H743 board up: the clock tree, the pin map (`docs/hardware.md`, "Wiring"),
 //! the USB descriptors, and the buffers' places in RAM.
 
+use core::ptr::addr_of_mut;
 use embassy_stm32::dcmi::{self, Dcmi};
+use embassy_stm32::dma::ReadableRingBuffer;
 use embassy_stm32::exti::{self, ExtiInput};
 use embassy_stm32::flash::Flash;
 use embassy_stm32::gpio::{Level, Output, Pull, Speed};
@@ -16,26 +18,29 @@ use embassy_usb::{Builder, UsbDevice};
 use static_cell::StaticCell;
 use tangent_core::pipeline::Workspace;
 
+use super::devices::BLOCK_WORDS;
 use super::devices::{
     Button, EmbassyClock, FlashStore, GpioLasers, Iwdg, Mt9v034Dcmi, UsbLink, H743,
 };
-use super::{FRAME_BYTES, POINTS, SENSOR_FRAME_BYTES, USB_PID, USB_VID, WATCHDOG_US};
+use super::{FRAME_BYTES, POINTS, USB_PID, USB_VID, WATCHDOG_US};
 use crate::app::Buffers;
+use crate::buffers::FrameBuffer;
 use crate::ports::Devices;
 
 bind_interrupts!(struct Irqs {
     OTG_FS => usb::InterruptHandler<peripherals::USB_OTG_FS>;
     DCMI => dcmi::InterruptHandler<peripherals::DCMI>;
     DMA1_STREAM0 => dma::InterruptHandler<peripherals::DMA1_CH0>;
+    DMA1_STREAM1 => dma::InterruptHandler<peripherals::DMA1_CH1>;
     EXTI15_10 => exti::InterruptHandler<interrupt::typelevel::EXTI15_10>;
 });
 
-// The laser-off frame (752 × 480, turned into the difference in place) and the laser-on
-// window in AXI SRAM (DMA1 cannot reach DTCM); the run tables and the per-point buffers in
-// SRAM1–3; the object features in DTCM (.bss: CPU-only, which the pipeline is). No stored
-// laser-off frame for raw captures. See `memory.x` and `docs/hardware.md`, "Memory map".
+// The laser-off frame (752 × 480, turned into the difference in place) in AXI SRAM (DMA1
+// cannot reach DTCM), with the DMA's line blocks (below); the run tables and the per-point
+// buffers in SRAM1–3; the object features in DTCM (.bss: CPU-only, which the pipeline is).
+// No stored frame pair for raw captures. See `memory.x` and `docs/hardware.md`, "Memory map".
 crate::buffers::board_buffers! {
-    off_bytes = 0, on_bytes = FRAME_BYTES, diff_bytes = SENSOR_FRAME_BYTES, points = POINTS;
+    off_bytes = 0, on_bytes = 0, diff_bytes = FRAME_BYTES, points = POINTS;
     #[link_section = ".axisram"] off;
     #[link_section = ".axisram"] on;
     #[link_section = ".axisram"] diff;
@@ -129,8 +134,32 @@ pub async fn start() -> Started {
         p.PA6,
         dcmi_config,
     );
+    // The line blocks: a circular DMA on DMA1 stream 1 with the DCMI's request, into two
+    // blocks in AXI SRAM (DMA-reachable), and the block the pipeline reads.
+    #[link_section = ".axisram"]
+    static mut RING: FrameBuffer<{ 8 * BLOCK_WORDS }> = FrameBuffer([0; 8 * BLOCK_WORDS]);
+    #[link_section = ".axisram"]
+    static mut BLOCK: [u32; BLOCK_WORDS] = [0; BLOCK_WORDS];
+    let request = dcmi::FrameDma::<peripherals::DCMI>::request(&*p.DMA1_CH1);
+    // SAFETY: `start` runs once (the peripherals can be taken only once), so these are the
+    // only references to the statics; NOLOAD sections are zeroed in place first. The ring
+    // reads the DCMI's data register, a valid peripheral address for the DMA.
+    let (ring, block) = unsafe {
+        core::ptr::write_bytes(addr_of_mut!(RING), 0, 1);
+        core::ptr::write_bytes(addr_of_mut!(BLOCK), 0, 1);
+        let ring_bytes: &'static mut [u8; 8 * BLOCK_WORDS] = &mut (*addr_of_mut!(RING)).0;
+        let words: &'static mut [u32] = bytemuck::cast_slice_mut(&mut ring_bytes[..]);
+        let ring = ReadableRingBuffer::new(
+            dma::Channel::new(p.DMA1_CH1, Irqs),
+            request,
+            embassy_stm32::pac::DCMI.dr().as_ptr() as *mut u32,
+            words,
+            dma::TransferOptions::default(),
+        );
+        (ring, &mut *addr_of_mut!(BLOCK))
+    };
     let exposure_pin = Output::new(p.PD12, Level::Low, Speed::High);
-    let camera = Mt9v034Dcmi::new(i2c, dcmi, exposure_pin).await;
+    let camera = Mt9v034Dcmi::new(i2c, dcmi, ring, block, exposure_pin).await;
 
     let trigger = Button::new(ExtiInput::new(p.PC13, p.EXTI13, Pull::Down, Irqs));
     let store = FlashStore::new(Flash::new_blocking(p.FLASH));
@@ -167,7 +196,7 @@ pub async fn start() -> Started {
     let class = CdcAcmClass::new(&mut builder, CDC_STATE.init(State::new()), 64);
     let usb = builder.build();
 
-    let Some((buffers, workspace)) = take_buffers(SENSOR_FRAME_BYTES) else {
+    let Some((buffers, workspace)) = take_buffers(FRAME_BYTES) else {
         defmt::panic!("the H743 board is started once");
     };
     let devices = Devices {
