@@ -10,14 +10,13 @@
 
 use tangent_core::calibration::Calibration;
 use tangent_core::image::Frame;
-use tangent_core::instrument::{self, Stem};
-use tangent_core::measurement::Measurement;
+use tangent_core::instrument::{self, InstrumentParams};
+use tangent_core::measurement::{Measurement, Mode};
 use tangent_core::pipeline::{
     self, PipelineConfig, PipelineError, ProfileStream, Stage, Workspace,
 };
 use tangent_core::protocol::codes::Failure;
 use tangent_core::real::Real;
-use tangent_core::solvers::stem::CylinderParams;
 
 use crate::ports::{Geometry, RowSink};
 
@@ -40,10 +39,12 @@ pub struct FramePair<'a> {
 
 /// Runs the measurement on a frame pair.
 pub trait Measurer {
-    /// Measures; a failure is sent as [`Failure::device_error`] (the code map and the
-    /// sentence the host prints are in `tangent_core::protocol::codes`).
+    /// Measures with the instrument of `mode`; a failure is sent as
+    /// [`Failure::device_error`] (the code map and the sentence the host prints are in
+    /// `tangent_core::protocol::codes`).
     fn measure(
         &mut self,
+        mode: Mode,
         pair: &FramePair<'_>,
         calibration: &Calibration,
     ) -> Result<Measurement, Failure>;
@@ -67,18 +68,19 @@ pub trait StreamMeasurer: RowSink {
         geometry: Geometry,
         calibration: &Calibration,
     ) -> Result<&mut [u8], Failure>;
-    /// The measurement, once the laser-on frame's last row is in.
-    fn finish(&mut self) -> Result<Measurement, Failure>;
+    /// The measurement with the instrument of `mode`, once the laser-on frame's last row is
+    /// in.
+    fn finish(&mut self, mode: Mode) -> Result<Measurement, Failure>;
 }
 
-/// The shared pipeline (`tangent_core::instrument`, the stem instrument) with its working
-/// memory.
+/// The shared pipeline (`tangent_core::instrument`, the instrument of the device's mode) with
+/// its working memory.
 pub struct PipelineMeasurer<'w> {
     ws: Workspace<'w, u8>,
     /// Image-chain parameters.
     pub config: PipelineConfig,
-    /// Cylinder-solver parameters.
-    pub params: CylinderParams,
+    /// Every instrument's solver parameters.
+    pub params: InstrumentParams,
     /// A free-running clock (µs) to time the pipeline's stages with, or `None`.
     pub stage_clock: Option<fn() -> u64>,
     /// Durations of the last measurement's stages (µs of `stage_clock`; zero without a clock
@@ -101,7 +103,7 @@ pub struct StageTimes {
     /// selection, curve extraction, triangulation (for a stored pair the first includes the
     /// whole subtraction).
     pub image_us: [u64; 6],
-    /// Cylinder solver ([`instrument::solve_with`] of [`Stem`]).
+    /// The mode's solver ([`instrument::solve`]).
     pub solver_us: u64,
 }
 
@@ -111,7 +113,7 @@ impl<'w> PipelineMeasurer<'w> {
         PipelineMeasurer {
             ws,
             config: PipelineConfig::default(),
-            params: CylinderParams::default(),
+            params: InstrumentParams::default(),
             stage_clock: None,
             last_stages: StageTimes::default(),
             stream: None,
@@ -126,16 +128,16 @@ impl<'w> PipelineMeasurer<'w> {
     /// measurement after the profile's stages have been probed.
     fn solve(
         &mut self,
+        mode: Mode,
         profile: Result<pipeline::Profile, PipelineError>,
         cal: &Calibration,
     ) -> Result<Measurement, Failure> {
         let profile = profile.map_err(|e| Failure::of(&e))?;
         let t = self.now();
-        let solved =
-            instrument::solve_with::<Stem, u8>(&profile, 255, cal, &self.params, &mut self.ws);
+        // 8-bit frames: full scale 255.
+        let solved = instrument::solve(mode, &profile, 255, cal, &self.params, &mut self.ws);
         self.last_stages.solver_us = self.now().saturating_sub(t);
-        let solved = solved.map_err(|e| Failure::of(&e))?;
-        Ok(Measurement::from(&solved))
+        solved.map_err(|e| Failure::of(&e))
     }
 }
 
@@ -164,9 +166,13 @@ pub fn window_calibration(cal: &Calibration, row_offset: usize, height: usize) -
 impl Measurer for PipelineMeasurer<'_> {
     fn measure(
         &mut self,
+        mode: Mode,
         pair: &FramePair<'_>,
         calibration: &Calibration,
     ) -> Result<Measurement, Failure> {
+        if !instrument::supports(mode) {
+            return Err(Failure::UnsupportedMode(mode));
+        }
         let frame = |data| {
             Frame::new(data, pair.width, pair.height, pair.width)
                 .map_err(|e| Failure::of(&PipelineError::Frame(e)))
@@ -191,7 +197,7 @@ impl Measurer for PipelineMeasurer<'_> {
                 last = t;
             });
         self.last_stages = stages;
-        self.solve(profile, cal)
+        self.solve(mode, profile, cal)
     }
 
     fn streaming(&mut self) -> Option<&mut dyn StreamMeasurer> {
@@ -239,7 +245,10 @@ impl StreamMeasurer for PipelineMeasurer<'_> {
             }))
     }
 
-    fn finish(&mut self) -> Result<Measurement, Failure> {
+    fn finish(&mut self, mode: Mode) -> Result<Measurement, Failure> {
+        if !instrument::supports(mode) {
+            return Err(Failure::UnsupportedMode(mode));
+        }
         let Some((stream, cal, error)) = self.stream.take() else {
             return Err(Failure::of(&PipelineError::Frame(
                 tangent_core::image::FrameError::Empty,
@@ -258,6 +267,6 @@ impl StreamMeasurer for PipelineMeasurer<'_> {
             last = t;
         });
         self.last_stages = stages;
-        self.solve(profile, &cal)
+        self.solve(mode, profile, &cal)
     }
 }
