@@ -47,9 +47,10 @@ fn main() {
             let mut full = None;
             for (k, step) in STEPS.iter().enumerate() {
                 let mut hist = vec![0u32; 1 << bits];
+                let top = hist.len() - 1;
                 for row in diff.chunks_exact(w).step_by(*step) {
                     for &d in row {
-                        hist[(d as usize).min(hist.len() - 1)] += 1;
+                        hist[(d as usize).min(top)] += 1;
                     }
                 }
                 let t = ThresholdMethod::Otsu
