@@ -649,7 +649,7 @@ struct PeakSink<'m> {
 impl RowSink for PeakSink<'_> {
     fn rows(&mut self, rows: &[u8]) {
         for row in rows.chunks_exact(self.width.max(1)) {
-            if self.row % PEAK_ROW_STEP == 0 {
+            if self.row.is_multiple_of(PEAK_ROW_STEP) {
                 self.peak = self.peak.max(exposure::peak(row, self.width, 1));
             }
             self.row += 1;

@@ -134,7 +134,7 @@ impl ProfileStream {
         rows: &[P],
     ) -> Result<(), PipelineError> {
         let w = self.width;
-        if rows.len() % w != 0 || self.next_row + rows.len() / w > self.height {
+        if !rows.len().is_multiple_of(w) || self.next_row + rows.len() / w > self.height {
             return Err(PipelineError::Frame(FrameError::SizeMismatch {
                 expected: (w, self.height),
                 actual: (rows.len() % w, self.next_row + rows.len().div_ceil(w)),
