@@ -8,8 +8,10 @@ use clap::{Subcommand, ValueEnum};
 use rayon::prelude::*;
 use tangent_host::capture::{Capture, Mode};
 use tangent_host::simulate::corpus::{self, dark, ground, stem, sun, tilted_axis};
+use tangent_host::simulate::physics::{self, model_for_seed};
 use tangent_host::simulate::render::Lighting;
 use tangent_host::simulate::{simulate, SimParams, SimSpec};
+use tangent_host::truth::PhysicsModel;
 
 /// Arguments of `tangent simulate`.
 #[derive(clap::Args, Debug)]
@@ -55,6 +57,11 @@ enum What {
         /// Random seed (below 2^63).
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// Physics model (docs/simulator.md §10): a name (`reference`, `oren_nayar_bark`,
+        /// `specular_sheen`, `flat_top_sheet`, `defocus`, `coarse_speckle`, `noisy_sensor`,
+        /// `mixed`) or `by-seed` (the model `tangent evaluate` gives the seed).
+        #[arg(long, default_value = "reference")]
+        physics: String,
         /// Output capture directory.
         #[arg(long)]
         out: PathBuf,
@@ -70,6 +77,9 @@ enum What {
         /// Largest lean (degrees); > 0 uses the two-plane device.
         #[arg(long, default_value_t = 0.0)]
         tilt_max_deg: f64,
+        /// Physics model, as for `simulate stem` (`by-seed`: as `tangent evaluate` does).
+        #[arg(long, default_value = "reference")]
+        physics: String,
         /// Output directory.
         #[arg(long)]
         out: PathBuf,
@@ -115,6 +125,19 @@ fn write(spec: &SimSpec, out: &std::path::Path) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The physics model named by `--physics` for a capture of `seed`.
+fn physics_model(name: &str, seed: u64) -> anyhow::Result<PhysicsModel> {
+    if name == "by-seed" {
+        return Ok(model_for_seed(seed));
+    }
+    PhysicsModel::from_name(name).with_context(|| {
+        format!(
+            "--physics {name:?}: not a physics model (by-seed, {})",
+            PhysicsModel::ALL.map(|m| m.name()).join(", ")
+        )
+    })
+}
+
 /// Runs `tangent simulate`.
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     match args.what {
@@ -147,6 +170,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             two_planes,
             light,
             seed,
+            physics,
             out,
         } => {
             let calibration = if two_planes {
@@ -179,20 +203,23 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
                 ],
                 params,
             };
+            let mut spec = spec;
+            physics::apply(physics_model(&physics, seed)?, seed, &mut spec);
             write(&spec, &out)?;
         }
         What::Random {
             count,
             seed,
             tilt_max_deg,
+            physics,
             out,
         } => {
+            physics_model(&physics, seed)?;
             (0..count).into_par_iter().try_for_each(|k| {
                 let s = seed + k;
-                write(
-                    &corpus::random_stem(s, tilt_max_deg),
-                    &out.join(format!("random-{s}")),
-                )
+                let mut spec = corpus::random_stem(s, tilt_max_deg);
+                physics::apply(physics_model(&physics, s)?, s, &mut spec);
+                write(&spec, &out.join(format!("random-{s}")))
             })?;
         }
         What::Again { capture, seed, out } => {

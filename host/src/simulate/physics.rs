@@ -27,6 +27,11 @@ pub fn model_for_seed(seed: u64) -> PhysicsModel {
     PhysicsModel::ALL[(seed % PhysicsModel::ALL.len() as u64) as usize]
 }
 
+/// f-number of the reference lens ([`super::sensor::OpticsParams::default`]).
+const REFERENCE_F_NUMBER: f64 = 2.4;
+/// Largest analogue gain of the MT9V034.
+const MAX_GAIN: f64 = 4.0;
+
 fn uniform(rng: &mut Pcg64, lo: f64, hi: f64) -> f64 {
     lo + (hi - lo) * rng.random::<f64>()
 }
@@ -97,14 +102,17 @@ pub fn apply(model: PhysicsModel, seed: u64, spec: &mut SimSpec) {
     }
     if coarse_speckle {
         // A single-longitudinal-mode diode (0.05–0.3 nm) through a lens stopped down to
-        // f/4–f/8 (depth of field): grains of 0.3–0.5 px σ, contrast 0.3–0.8.
+        // f/4–f/6 (depth of field): grains of 0.26–0.39 px σ, per-pixel contrast ≈ 0.2–0.5.
+        // The designer who stops down raises the analogue gain by the light lost, up to the
+        // MT9V034's 4× (the exposure is capped at 30 ms hand-held).
         p.laser.spectral_width_m = uniform(&mut rng, 0.05e-9, 0.3e-9);
-        p.optics.f_number = uniform(&mut rng, 4.0, 8.0);
+        p.optics.f_number = uniform(&mut rng, 4.0, 6.0);
         p.optics.psf_sigma_px = psf_sigma_px(
             p.optics.f_number,
             p.laser.wavelength_m,
             p.sensor.pixel_pitch_m,
         );
+        p.gain = (p.gain * (p.optics.f_number / REFERENCE_F_NUMBER).powi(2)).min(MAX_GAIN);
     }
     if noisy {
         // A cheaper global-shutter sensor: 40–60 e⁻ read noise, 0.5–2 % PRNU, 5–20 e⁻ row
