@@ -63,7 +63,12 @@ async function connect() {
 const readings = () => page.evaluate(() => Number(document.body.dataset.readings || 0));
 
 async function waitReadings(n) {
-  await page.waitForFunction((want) => Number(document.body.dataset.readings || 0) >= want, n, { timeout: WAIT });
+  try {
+    await page.waitForFunction((want) => Number(document.body.dataset.readings || 0) >= want, n, { timeout: WAIT });
+  } catch (e) {
+    const seen = await page.evaluate(() => [document.body.dataset.readings, document.getElementById("status").textContent, document.getElementById("r-message").textContent]);
+    throw new Error(`waiting for ${n} readings: ${JSON.stringify(seen)}: ${e.message}`);
+  }
   // Nothing beyond: a duplicate would show up here.
   await page.waitForTimeout(300);
   assert.equal(await readings(), n, "readings stored");
@@ -127,6 +132,11 @@ test("a plot of 20 trees measured, species by species, and a held trigger", asyn
     else await control("trigger");
     await waitReadings(tree);
     assert.equal(await page.textContent("#r-tree"), `Tree ${tree}`);
+    if (tree === 5) {
+      // The elliptic stem (the emulated camera's fifth scene): its flags in words.
+      const said = await page.$$eval("#r-warnings li", (lis) => lis.map((li) => li.textContent));
+      assert.ok(said.some((w) => /not round/.test(w)), `warnings: ${said}`);
+    }
   }
   assert.equal(await page.textContent("#next-tree"), "21");
   const diameter = Number(await page.textContent("#r-diameter"));
@@ -136,7 +146,6 @@ test("a plot of 20 trees measured, species by species, and a held trigger", asyn
   assert.equal(await page.evaluate(() => document.body.dataset.trees), "20");
   const rows = await page.$$eval("#tally tr", (trs) => trs.map((tr) => tr.firstChild.textContent));
   assert.deepEqual(rows, ["PIAB", "PISY", "FASY"]);
-  // Sunlit bark (one of the emulated scenes) is said in words somewhere in the plot.
   // The trigger held: readings stream under one tree with the running mean and spread.
   await control("hold?ms=2500");
   await page.waitForSelector("#r-held:not([hidden])", { timeout: WAIT });

@@ -320,7 +320,12 @@ fn pump(
         if bridge.generation.load(Ordering::SeqCst) != generation {
             return Ok(());
         }
-        while let Ok(bytes) = rx.try_recv() {
+        // Everything the device sent since the last look, as one message.
+        let mut bytes = Vec::new();
+        while let Ok(chunk) = rx.try_recv() {
+            bytes.extend_from_slice(&chunk);
+        }
+        if !bytes.is_empty() {
             if let Err(e) = ws.send(Message::binary(bytes)) {
                 return Err(std::io::Error::other(e.to_string()));
             }

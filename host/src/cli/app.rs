@@ -18,13 +18,14 @@ use tangent_host::link::BAUD;
 use tangent_host::simulate::{corpus, simulate};
 
 /// Corpus stems the emulated caliper's camera cycles through: one calibration (the
-/// one-plane reference design), several diameters, and sunlit bark (a reading with a warning).
+/// one-plane reference design), several diameters, and an elliptic stem (a reading with
+/// warnings).
 const SCENES: [&str; 6] = [
     "cyl-d300-z150-shade",
     "cyl-d450-z100-shade",
     "cyl-d200-z050-shade",
     "cyl-d600-z150-shade",
-    "cyl-d300-z150-sun",
+    "ell-a350-b250-z200-rot45",
     "cyl-d100-z100-shade",
 ];
 
@@ -184,7 +185,7 @@ struct Scenes {
 
 /// Renders [`SCENES`] once into a cache directory (reused while its files are there).
 fn scene_files() -> Result<Scenes> {
-    let dir = std::env::temp_dir().join("tangent-app-scenes-1");
+    let dir = std::env::temp_dir().join("tangent-app-scenes-2");
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
     let calibration = corpus::one_plane_calibration();
     let calib = dir.join("calib.bin");
