@@ -3,8 +3,8 @@
 // QEMU). One plot, in order: 20 trees and a held trigger; the cable pulled mid-plot (and
 // mid-measurement) with readings made meanwhile; the tab closed and reopened with readings
 // made meanwhile; every export compared byte for byte with `tangent log export`, and the
-// field log imported into a fresh browser. The invariant checked throughout: the stored
-// readings are exactly the caliper's sequence numbers, each once.
+// field log imported into a fresh browser; the page opened offline. The invariant checked
+// throughout: the stored readings are exactly the caliper's sequence numbers, each once.
 //
 // Run by app/e2e/run.sh (which builds what it needs); TANGENT_SCREENSHOTS=DIR also saves the
 // main screens at phone and tablet sizes, normal and sunlight mode.
@@ -270,4 +270,20 @@ test("screens at phone and tablet sizes, normal and sunlight", async () => {
     }
   }
   await page.evaluate(() => document.body.classList.remove("sun"));
+});
+
+test("the app opens offline once visited", async () => {
+  const p = await context.newPage();
+  try {
+    await p.goto(`${base}?transport=bridge`);
+    await p.waitForSelector("body[data-ready='1']", { timeout: WAIT });
+    await p.evaluate(() => navigator.serviceWorker.ready.then(() => true));
+    await context.setOffline(true);
+    await p.reload();
+    await p.waitForSelector("body[data-ready='1']", { timeout: WAIT });
+    assert.equal(await p.textContent("#plot-id"), "P-017", "the plot, from IndexedDB, offline");
+  } finally {
+    await context.setOffline(false);
+    await p.close();
+  }
 });
