@@ -121,6 +121,8 @@ mod tests {
             calib_id: 1,
             seq: id,
             device_time_ms: 0,
+            kind: "stem".into(),
+            measurement: None,
         })
     }
 

@@ -108,11 +108,11 @@ impl Link {
             return Value::Null;
         };
         self.current = Some(r);
-        let tangent_core::measurement::Measurement::Stem(stem) = r.measurement;
         json!({
             "reading": r,
-            "method": codes::method_name(stem.method),
-            "warnings": warnings(stem.flags.0),
+            "kind": r.measurement.kind(),
+            "method": codes::method_name(r.measurement.method()),
+            "warnings": warnings(r.measurement.flags().0),
         })
     }
 
