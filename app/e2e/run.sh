@@ -16,7 +16,7 @@ apt_install() {
   [ "$(id -u)" = 0 ] || return 1
   command -v apt-get >/dev/null || return 1
   echo "installing $* (apt)"
-  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "$@") >/tmp/tangent-app-apt.log 2>&1 \
+  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "$@") >/tmp/tangent-app-apt.log 2>&1 \
     || { tail -5 /tmp/tangent-app-apt.log; return 1; }
 }
 

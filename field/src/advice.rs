@@ -77,9 +77,7 @@ pub fn warnings(flags: u16) -> Vec<String> {
         .collect();
     let rest = flags & !codes::known_flags().0;
     if rest != 0 {
-        out.push(format!(
-            "unknown quality flag 0x{rest:04X}: update the app"
-        ));
+        out.push(format!("unknown quality flag 0x{rest:04X}: update the app"));
     }
     out
 }

@@ -151,7 +151,8 @@ fn read_head(stream: &mut TcpStream) -> std::io::Result<Vec<u8>> {
         }
         let n = stream.read(&mut buf)?;
         if n == 0 {
-            return Err(std::io::Error::other("connection closed in the request head"));
+            // A connection the browser opened ahead of need and closed unused is no error.
+            return Ok(head);
         }
         head.extend_from_slice(&buf[..n]);
     }
@@ -161,6 +162,9 @@ fn read_head(stream: &mut TcpStream) -> std::io::Result<Vec<u8>> {
 fn handle(mut stream: TcpStream, dir: &Path, bridge: &Arc<Bridge>) -> std::io::Result<()> {
     stream.set_read_timeout(Some(Duration::from_secs(10)))?;
     let head = read_head(&mut stream)?;
+    if !head.windows(4).any(|w| w == b"\r\n\r\n") {
+        return Ok(());
+    }
     let text = String::from_utf8_lossy(&head).into_owned();
     let mut words = text.split_whitespace();
     let (method, target) = (words.next().unwrap_or(""), words.next().unwrap_or("/"));
@@ -180,7 +184,12 @@ fn handle(mut stream: TcpStream, dir: &Path, bridge: &Arc<Bridge>) -> std::io::R
         return respond(&mut stream, status, "text/plain", body.as_bytes());
     }
     if method != "GET" && method != "HEAD" {
-        return respond(&mut stream, "405 Method Not Allowed", "text/plain", b"GET only");
+        return respond(
+            &mut stream,
+            "405 Method Not Allowed",
+            "text/plain",
+            b"GET only",
+        );
     }
     static_file(&mut stream, dir, path)
 }

@@ -40,6 +40,7 @@ use std::path::{Path, PathBuf};
 // The format itself (records, lines, damage scan, exports) lives in `tangent-field`, shared
 // with the browser field app; this module adds the file: locking, appending with fsync,
 // recovery of a torn tail.
+use tangent_core::protocol::calibration_record::CRC32;
 pub use tangent_field::export::{
     export, export_records, plots, ExportFormat, ExportPlot, NoSuchPlot, TREE_COLUMNS,
 };
@@ -50,7 +51,6 @@ pub use tangent_field::record::{
 pub use tangent_field::scan::{
     scan, DamageKind, DamagedSpan, Duplicate, HeaderlessPlot, Located, Scan, Tolerated,
 };
-use tangent_core::protocol::calibration_record::CRC32;
 
 /// Why the field log could not be used.
 #[derive(Debug, thiserror::Error)]

@@ -26,8 +26,8 @@ use tangent_core::protocol::{
 use tangent_field::advice::warnings;
 use tangent_field::seq::{HistoryOutcome, SeqTracker};
 use tangent_field::{
-    board_device_id, encode_line, export_records, is_foreign, scan, tally, ExportFormat, Filing, Record,
-    TreeRecord, MAGIC_LINE,
+    board_device_id, encode_line, export_records, is_foreign, scan, tally, ExportFormat, Filing,
+    Record, TreeRecord, MAGIC_LINE,
 };
 
 /// The browser side of the link to one caliper.

@@ -35,7 +35,10 @@ fn frame(tag: u16, response: Response<'_>) -> Vec<u8> {
 fn readings_arrive_in_order_once_and_are_filed_as_the_cli_files_them() {
     let mut link = Link::default();
     let mut bytes = frame(0, Response::Reading(reading(1, 0)));
-    bytes.extend(frame(0, Response::Reading(reading(3, Flags::ARC_TOO_SHORT.0))));
+    bytes.extend(frame(
+        0,
+        Response::Reading(reading(3, Flags::ARC_TOO_SHORT.0)),
+    ));
     bytes.extend(frame(0, Response::Reading(reading(1, 0))));
     // Split mid-frame: the decoder keeps the partial frame.
     let (a, b) = bytes.split_at(17);

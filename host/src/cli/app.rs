@@ -64,8 +64,8 @@ pub fn run(args: Args) -> Result<ExitCode> {
             dir.display()
         );
     }
-    let listener =
-        TcpListener::bind(&args.listen).with_context(|| format!("cannot listen on {}", args.listen))?;
+    let listener = TcpListener::bind(&args.listen)
+        .with_context(|| format!("cannot listen on {}", args.listen))?;
     let bridge = if let Some(port) = &args.port {
         Some(serial_bridge(port)?)
     } else if args.emulator {
@@ -79,7 +79,10 @@ pub fn run(args: Args) -> Result<ExitCode> {
     let url = format!("http://{}/", listener.local_addr()?);
     println!("field app: {url}");
     match &bridge {
-        Some(_) => println!("caliper bridged at {}bridge (WebSocket)", url.replace("http", "ws")),
+        Some(_) => println!(
+            "caliper bridged at {}bridge (WebSocket)",
+            url.replace("http", "ws")
+        ),
         None => println!("no caliper bridged: connect it in the page (Web Serial)"),
     }
     let bridge = bridge.unwrap_or_else(|| Bridge::new(Box::new(std::io::sink()), false));
@@ -206,7 +209,8 @@ fn scene_files() -> Result<Scenes> {
             if entry.spec.calibration != calibration {
                 bail!("corpus entry {name} has another calibration than the emulated caliper's");
             }
-            let (capture, _) = simulate(&entry.spec).with_context(|| format!("simulating {name}"))?;
+            let (capture, _) =
+                simulate(&entry.spec).with_context(|| format!("simulating {name}"))?;
             let (_, on_frame) = capture.on_frames().next().context("an on frame")?;
             write_atomically(&off, &pgm_u8(capture.off_frame()))?;
             write_atomically(&on, &pgm_u8(on_frame))?;
