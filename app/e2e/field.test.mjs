@@ -74,6 +74,18 @@ async function waitReadings(n) {
   assert.equal(await readings(), n, "readings stored");
 }
 
+// Waits until no reading has arrived for 1.5 s (a stream's last readings come after the
+// trigger is released).
+async function settle() {
+  let last = -1;
+  for (let i = 0; i < 40; i++) {
+    const n = await readings();
+    if (n === last) return;
+    last = n;
+    await page.waitForTimeout(1500);
+  }
+}
+
 // The sequence numbers of the stored readings, read from IndexedDB itself.
 function storedSeqs() {
   return page.evaluate(() => new Promise((ok, fail) => {
@@ -150,7 +162,8 @@ test("a plot of 20 trees measured, species by species, and a held trigger", asyn
   await control("hold?ms=2500");
   await page.waitForSelector("#r-held:not([hidden])", { timeout: WAIT });
   assert.match(await page.textContent("#r-held"), /held: \d+ readings · mean \d+\.\d mm · spread \d+\.\d mm/);
-  await page.waitForTimeout(3500);
+  await page.waitForTimeout(2500);
+  await settle();
   assert.equal(await page.textContent("#r-tree"), "Tree 21");
   assert.equal(await page.evaluate(() => document.body.dataset.trees), "21");
   await assertEachReadingOnce();
@@ -261,7 +274,7 @@ test("screens at phone and tablet sizes, normal and sunlight", async () => {
   for (const [name, viewport] of [["phone", { width: 412, height: 915 }], ["tablet", { width: 1280, height: 800 }]]) {
     await page.setViewportSize(viewport);
     for (const sun of [false, true]) {
-      await page.evaluate((on) => document.body.classList.toggle("sun", on), sun);
+      await page.evaluate((on) => { document.body.classList.toggle("sun", on); window.scrollTo(0, 0); }, sun);
       const file = join(dir, `${name}${sun ? "-sun" : ""}.png`);
       await page.screenshot({ path: file });
       // The diameter fits the screen: readable at arm's length.
