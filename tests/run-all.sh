@@ -76,6 +76,28 @@ run_cargo_tests core-f32 cargo test -p tangent-core --features f32 --release --n
 # seconds; the runs take ~40 s.
 run_step fuzz-smoke bash fuzz/run.sh 5 --ci
 
+# The field app in headless Chromium against the emulated caliper (docs/field-app.md). Installs
+# chromium (apt) and playwright-core (npm ci) when missing; exits 77 (skipped, reason printed)
+# when they cannot be had. Each browser test counts; a build failure counts as one failure.
+run_node_tests() {
+  local name=$1; shift
+  note "$name: $*"
+  local out="$log_dir/$name.log"
+  "$@" 2>&1 | tee "$out"
+  local status=${PIPESTATUS[0]}
+  if [ "$status" -eq 77 ]; then skipped=$((skipped + 1)); return; fi
+  local p f
+  p=$(awk '/^ℹ pass [0-9]+$/ { n = $3 } END { print n + 0 }' "$out")
+  f=$(awk '/^ℹ fail [0-9]+$/ { n = $3 } END { print n + 0 }' "$out")
+  passed=$((passed + p))
+  failed=$((failed + f))
+  if [ "$status" -ne 0 ]; then
+    failed_steps+=("$name")
+    [ "$f" -eq 0 ] && failed=$((failed + 1))
+  fi
+}
+run_node_tests field-app bash app/e2e/run.sh
+
 # --- summary -----------------------------------------------------------------------
 echo
 if [ ${#failed_steps[@]} -gt 0 ]; then

@@ -37,124 +37,20 @@ use std::fs::{File, OpenOptions};
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 
-use serde::{Deserialize, Serialize};
-use tangent_core::measurement::Measurement;
-
-mod export;
-mod scan;
-
-pub use export::{export, plots, ExportFormat, ExportPlot, TREE_COLUMNS};
-pub use scan::{
+// The format itself (records, lines, damage scan, exports) lives in `tangent-field`, shared
+// with the browser field app; this module adds the file: locking, appending with fsync,
+// recovery of a torn tail.
+use tangent_core::protocol::calibration_record::CRC32;
+pub use tangent_field::export::{
+    export, export_records, plots, ExportFormat, ExportPlot, NoSuchPlot, TREE_COLUMNS,
+};
+pub use tangent_field::record::{
+    decode_line, encode_line, flag_names, select_plot, Filing, PlotHeader, Record, TreeRecord,
+    MAGIC_LINE,
+};
+pub use tangent_field::scan::{
     scan, DamageKind, DamagedSpan, Duplicate, HeaderlessPlot, Located, Scan, Tolerated,
 };
-use tangent_core::protocol::calibration_record::CRC32;
-use tangent_core::protocol::{codes, Reading};
-use tangent_core::solvers::result::Flags;
-
-/// First line of every field log.
-pub const MAGIC_LINE: &str = "TANGENT-FIELDLOG 1\n";
-
-/// A plot header: the trees recorded after it belong to this plot.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct PlotHeader {
-    /// Plot id as the inventory names it (e.g. `"P-017"`).
-    pub plot_id: String,
-    /// When the plot was started (RFC 3339, UTC).
-    pub started: String,
-    /// Free-text note.
-    #[serde(default, skip_serializing_if = "String::is_empty")]
-    pub note: String,
-}
-
-/// One reading (a tree's, or of any other instrument: [`TreeRecord::kind`]). The record keeps
-/// its historical name and `"type":"tree"` so that every log ever written still reads.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct TreeRecord {
-    /// Plot the tree belongs to.
-    pub plot_id: String,
-    /// Tree number within the plot.
-    pub tree_id: u32,
-    /// Species code (the inventory's code list, e.g. `PIAB` or `50`).
-    pub species: String,
-    /// Diameter (millimetres): [`Measurement::value`] of the reading — a stem's or a sphere's
-    /// diameter.
-    pub diameter_mm: f64,
-    /// Standard uncertainty of the diameter (millimetres).
-    pub uncertainty_mm: f64,
-    /// Stem tilt from the laser-plane normal (degrees; 0 when not measured).
-    pub tilt_deg: f64,
-    /// Quality flags (bits of `solvers::result::Flags`).
-    pub flags: u16,
-    /// Host time of the reading (RFC 3339, UTC).
-    pub time: String,
-    /// Device id (USB serial number, or the board name).
-    pub device_id: String,
-    /// Calibration id the reading was computed with.
-    pub calib_id: u32,
-    /// Device sequence number of the reading.
-    pub seq: u32,
-    /// Device time of the reading (ms since its boot).
-    pub device_time_ms: u64,
-    /// What the reading is of ([`Measurement::kind`]: `stem`, `sphere`, …), so that one log
-    /// mixes instruments; logs written before readings had kinds hold stems only.
-    #[serde(default = "stem_kind")]
-    pub kind: String,
-    /// The whole reading as the device sent it (any instrument's fields, SI units); absent
-    /// from logs written before readings had kinds.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub measurement: Option<Measurement>,
-}
-
-/// The kind of the readings of logs written before readings had kinds.
-fn stem_kind() -> String {
-    "stem".to_string()
-}
-
-impl TreeRecord {
-    /// The record of a reading from the device, stamped with the host's time now.
-    pub fn from_reading(
-        r: &Reading,
-        plot_id: &str,
-        tree_id: u32,
-        species: &str,
-        device_id: &str,
-    ) -> TreeRecord {
-        let m = &r.measurement;
-        let tilt = match m {
-            Measurement::Stem(stem) => stem.tilt.map(|t| t.total),
-            #[allow(unreachable_patterns)] // the instruments without a tilt
-            _ => None,
-        };
-        TreeRecord {
-            plot_id: plot_id.to_string(),
-            tree_id,
-            species: species.to_string(),
-            // Via f32, the precision of the wire, so a reading logs the same digits whatever
-            // precision the host computes in.
-            diameter_mm: m.value() as f32 as f64 * 1e3,
-            uncertainty_mm: m.uncertainty() as f32 as f64 * 1e3,
-            tilt_deg: tilt.map_or(0.0, |t| (t as f32 as f64).to_degrees()),
-            flags: m.flags().0,
-            time: now_rfc3339(),
-            device_id: device_id.to_string(),
-            calib_id: r.calib_id,
-            seq: r.seq,
-            device_time_ms: r.timestamp_ms,
-            kind: m.kind().to_string(),
-            measurement: Some(*m),
-        }
-    }
-}
-
-/// One journal record.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "type", rename_all = "snake_case")]
-pub enum Record {
-    /// A plot header.
-    Plot(PlotHeader),
-    /// A tree reading.
-    Tree(TreeRecord),
-}
 
 /// Why the field log could not be used.
 #[derive(Debug, thiserror::Error)]
@@ -178,19 +74,6 @@ pub enum FieldLogError {
     NoPlot,
 }
 
-/// Flag names in capitals (how exports have always spelt [`codes::FLAG_NAMES`]) joined by
-/// `+`, unknown bits as hex; empty when no flag is set.
-pub fn flag_names(flags: u16) -> String {
-    let mut names: Vec<String> = codes::flag_names(Flags(flags))
-        .map(str::to_ascii_uppercase)
-        .collect();
-    let rest = flags & !codes::known_flags().0;
-    if rest != 0 {
-        names.push(format!("0x{rest:04X}"));
-    }
-    names.join("+")
-}
-
 /// An open field log.
 pub struct FieldLog {
     path: PathBuf,
@@ -205,23 +88,6 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> FieldLogError + '_ {
         path: path.to_path_buf(),
         source,
     }
-}
-
-/// Encodes one record as its journal line.
-pub fn encode_line(record: &Record) -> String {
-    // Serialising plain structs of strings and numbers cannot fail.
-    let json = serde_json::to_string(record).unwrap_or_default();
-    format!("{:08x} {json}\n", CRC32.checksum(json.as_bytes()))
-}
-
-/// Decodes one journal line (without its newline); `None` if it is damaged.
-pub fn decode_line(line: &[u8]) -> Option<Record> {
-    let text = std::str::from_utf8(line).ok()?;
-    let (crc, json) = text.split_once(' ')?;
-    if crc.len() != 8 || u32::from_str_radix(crc, 16).ok()? != CRC32.checksum(json.as_bytes()) {
-        return None;
-    }
-    serde_json::from_str(json).ok()
 }
 
 impl FieldLog {
@@ -390,7 +256,7 @@ impl FieldLog {
 /// Scans `bytes` read from `path`, refusing a file that is not a field log.
 fn scan_bytes(path: &Path, bytes: &[u8]) -> Result<Scan, FieldLogError> {
     let found = scan(bytes);
-    if scan::is_foreign(bytes, &found) {
+    if tangent_field::scan::is_foreign(bytes, &found) {
         return Err(FieldLogError::NotAFieldLog(path.to_path_buf()));
     }
     Ok(found)

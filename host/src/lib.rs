@@ -7,6 +7,7 @@
 #![deny(missing_docs)]
 
 pub mod baseline;
+pub mod bridge;
 pub mod calibrate;
 pub mod calibration_bounds;
 pub mod calibration_file;

@@ -25,7 +25,6 @@
 //! The receive side is the core's [`Decoder`], the one the firmware runs, here owning its
 //! buffer (a `Vec<u8>` of [`MAX_FRAME_LEN`]).
 
-use std::collections::{BTreeMap, VecDeque};
 use std::io::{ErrorKind, Read, Write};
 use std::time::{Duration, Instant};
 
@@ -35,21 +34,11 @@ use tangent_core::protocol::{
     FrameSetInfo, FromDevice, LinkStats, ProtocolError, Reading, Request, Response, SelfTestReport,
     ToDevice, WireCalibration, FRAME_CHUNK_MAX, MAX_FRAME_LEN, PROTOCOL_VERSION, UNSOLICITED,
 };
+use tangent_field::seq::{HistoryOutcome, SeqTracker};
 
 /// Line rate set on the port. USB CDC-ACM and ptys ignore it; a USB–UART adapter wired to
 /// the board's UART would need it.
 pub const BAUD: u32 = 115_200;
-
-/// Readings the device keeps for `History` ([`codes::HISTORY_LEN`]). Missing readings older
-/// than this are given up at once; younger ones are asked for again.
-const DEVICE_HISTORY: u32 = codes::HISTORY_LEN as u32;
-
-/// Replays in a row that bring none of the missing readings before they are given up
-/// anyway (a device with a shorter history than [`codes::HISTORY_LEN`]). On a noisy line a
-/// replayed reading frame is damaged with probability p (≈ 0.45 at 1 % dropped + 1 %
-/// corrupted bytes); giving up after k fruitless replays loses a reading the device still
-/// has with probability pᵏ: 6 gave ≈ 1 % (seen under load), 12 gives < 10⁻⁴.
-const MAX_FRUITLESS_REPLAYS: u32 = 12;
 
 /// How long one `read` on the port may block: bounds the latency of deadlines.
 const POLL: Duration = Duration::from_millis(20);
@@ -305,81 +294,6 @@ pub struct LinkCounters {
     pub retries: u64,
 }
 
-/// Readings in sequence order, once each.
-#[derive(Debug, Default)]
-struct SeqTracker {
-    /// Highest sequence number delivered (or skipped as lost).
-    last: u32,
-    /// Received ahead of a gap.
-    pending: BTreeMap<u32, Reading>,
-    /// In order, ready for the caller.
-    ready: VecDeque<Reading>,
-    /// Highest device timestamp seen (reboot detection).
-    newest_ms: u64,
-    /// The last replay left readings missing that the device should still have.
-    recheck: bool,
-}
-
-impl SeqTracker {
-    /// Takes a reading; returns whether it was a duplicate.
-    fn accept(&mut self, r: Reading) -> bool {
-        if r.seq <= self.last || self.pending.contains_key(&r.seq) {
-            return true;
-        }
-        self.newest_ms = self.newest_ms.max(r.timestamp_ms);
-        self.pending.insert(r.seq, r);
-        self.drain();
-        false
-    }
-
-    fn drain(&mut self) {
-        while let Some(r) = self.pending.remove(&(self.last.wrapping_add(1))) {
-            self.last = r.seq;
-            self.ready.push_back(r);
-        }
-    }
-
-    fn has_gap(&self) -> bool {
-        !self.pending.is_empty() || self.recheck
-    }
-
-    /// After a history replay that ended at `device_last`: the readings we still miss
-    /// that are older than `keep_from` are no longer on the device and are given up
-    /// (returned as ranges); younger ones stay missing (their replay frame was lost on the
-    /// wire) for the next replay.
-    fn give_up_before(&mut self, keep_from: u32, device_last: u32) -> Vec<(u32, u32)> {
-        let mut lost = Vec::new();
-        loop {
-            self.drain();
-            let next_have = self.pending.keys().next().copied();
-            let missing_to = match next_have {
-                Some(s) => s - 1,
-                None if device_last > self.last => device_last,
-                None => break,
-            };
-            let target = missing_to.min(keep_from.saturating_sub(1));
-            if target <= self.last {
-                break;
-            }
-            lost.push((self.last + 1, target));
-            self.last = target;
-        }
-        lost
-    }
-
-    /// Whether readings up to `device_last` are still missing.
-    fn missing_up_to(&self, device_last: u32) -> bool {
-        self.has_gap() || device_last > self.last
-    }
-
-    fn restart(&mut self) {
-        self.last = 0;
-        self.pending.clear();
-        self.newest_ms = 0;
-        self.recheck = false;
-    }
-}
-
 /// Receiver of [`LinkEvent`]s.
 type EventSink = Box<dyn FnMut(&LinkEvent) + Send>;
 
@@ -403,7 +317,6 @@ pub struct Link {
     counters: LinkCounters,
     bytes_in: usize,
     peer_version: Option<u8>,
-    fruitless_replays: u32,
     on_event: Option<EventSink>,
     /// The mode asked for with [`Link::set_mode`], set again after a device restart.
     mode: Option<Mode>,
@@ -450,12 +363,11 @@ impl Link {
             counters: LinkCounters::default(),
             bytes_in: 0,
             peer_version: None,
-            fruitless_replays: 0,
             on_event: None,
             mode: None,
         };
         link.handshake()?;
-        link.seq.last = link.identity.last_seq;
+        link.seq.resume_after(link.identity.last_seq);
         Ok(link)
     }
 
@@ -481,7 +393,7 @@ impl Link {
 
     /// Highest sequence number delivered (or given up on).
     pub fn last_seq(&self) -> u32 {
-        self.seq.last
+        self.seq.last()
     }
 
     /// Delivers readings after `seq` from now on (e.g. the last one already in the field
@@ -489,8 +401,7 @@ impl Link {
     /// history). Values above the device's `last_seq` are ignored.
     pub fn resume_after(&mut self, seq: u32) {
         if seq <= self.identity.last_seq {
-            self.seq.restart();
-            self.seq.last = seq;
+            self.seq.resume_after(seq);
         }
     }
 
@@ -532,7 +443,7 @@ impl Link {
             return Err(self.version_error(info.protocol_version));
         }
         let rebooted = !was.fw_version.is_empty()
-            && (info.last_seq < self.seq.last || info.uptime_ms < self.seq.newest_ms);
+            && (info.last_seq < self.seq.last() || info.uptime_ms < self.seq.newest_ms());
         self.identity = info;
         if rebooted {
             self.device_rebooted();
@@ -698,7 +609,7 @@ impl Link {
             }
             Reply::Info(i) if tag == UNSOLICITED => {
                 // The boot banner.
-                let had_any = self.seq.last > 0 || self.seq.has_gap();
+                let had_any = self.seq.last() > 0 || self.seq.has_gap();
                 self.identity = i;
                 if had_any {
                     self.device_rebooted();
@@ -769,9 +680,8 @@ impl Link {
     /// that fell out of its history.
     fn recover(&mut self) -> Result<(), LinkError> {
         self.counters.history_requests += 1;
-        self.seq.recheck = false;
         self.last_check_at = Instant::now();
-        let after_seq = self.seq.last;
+        let after_seq = self.seq.history_requested();
         let reply = self.request_inner(Request::History { after_seq }, "History", true)?;
         let Reply::HistoryEnd { last_seq } = reply else {
             return Err(LinkError::Unexpected {
@@ -779,32 +689,20 @@ impl Link {
                 got: format!("{reply:?}"),
             });
         };
-        if last_seq < self.seq.last {
-            // Sequence numbers went backwards: a reboot we had not noticed.
-            self.device_rebooted();
-            return self.recover();
-        }
-        // The device keeps its last DEVICE_HISTORY readings: older missing ones are gone.
-        // Younger missing ones had their replay frame damaged: ask again, and give them up
-        // only if replay after replay does not bring them (a device with a shorter history).
-        let mut keep_from = last_seq.saturating_sub(DEVICE_HISTORY - 1).max(1);
-        if self.seq.last == after_seq && self.seq.missing_up_to(last_seq) {
-            self.fruitless_replays += 1;
-            if self.fruitless_replays >= MAX_FRUITLESS_REPLAYS {
-                keep_from = last_seq.saturating_add(1);
+        match self.seq.history_ended(after_seq, last_seq) {
+            HistoryOutcome::Rebooted => {
+                // Sequence numbers went backwards: a reboot we had not noticed.
+                self.device_rebooted();
+                self.recover()
             }
-        } else {
-            self.fruitless_replays = 0;
+            HistoryOutcome::Done { lost } => {
+                for (from, to) in lost {
+                    self.counters.lost += (to - from + 1) as u64;
+                    self.emit(LinkEvent::Unrecoverable { from, to });
+                }
+                Ok(())
+            }
         }
-        for (from, to) in self.seq.give_up_before(keep_from, last_seq) {
-            self.counters.lost += (to - from + 1) as u64;
-            self.fruitless_replays = 0;
-            self.emit(LinkEvent::Unrecoverable { from, to });
-        }
-        if self.seq.missing_up_to(last_seq) {
-            self.seq.recheck = true;
-        }
-        Ok(())
     }
 
     /// The next reading, in sequence order, each exactly once; `None` when `timeout`
@@ -812,7 +710,7 @@ impl Link {
     pub fn next_reading(&mut self, timeout: Duration) -> Result<Option<Reading>, LinkError> {
         let deadline = Instant::now() + timeout;
         loop {
-            if let Some(r) = self.seq.ready.pop_front() {
+            if let Some(r) = self.seq.pop_ready() {
                 return Ok(Some(r));
             }
             let now = Instant::now();
@@ -1075,58 +973,6 @@ pub fn usb_serial_number(path: &str) -> Option<String> {
 
 /// A stable id for the device in the field log: its USB serial number, else the board.
 pub fn device_id(path: &str, identity: &DeviceIdentity) -> String {
-    usb_serial_number(path).unwrap_or_else(|| match identity.board {
-        Board::H743 => "H743".to_string(),
-        Board::Emulated => "emulated".to_string(),
-    })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use tangent_core::measurement::{Measurement, StemReading};
-    use tangent_core::protocol::Method;
-    use tangent_core::solvers::result::Flags;
-
-    fn r(seq: u32) -> Reading {
-        Reading {
-            seq,
-            timestamp_ms: seq as u64 * 10,
-            calib_id: 1,
-            exposure_us: 100,
-            measurement: Measurement::Stem(StemReading {
-                diameter: 0.3,
-                uncertainty: 0.001,
-                method: Method::CircleFit,
-                distance: 1.0,
-                tilt: None,
-                axes: None,
-                flags: Flags::default(),
-            }),
-            stats: None,
-        }
-    }
-
-    #[test]
-    fn tracker_orders_dedups_and_gives_up_on_lost() {
-        let mut t = SeqTracker::default();
-        assert!(!t.accept(r(1)));
-        assert!(t.accept(r(1)));
-        assert!(!t.accept(r(4)));
-        assert!(t.has_gap());
-        assert!(!t.accept(r(3)));
-        assert!(t.accept(r(3)));
-        let seqs: Vec<u32> = t.ready.iter().map(|r| r.seq).collect();
-        assert_eq!(seqs, [1]);
-        // History (keeping 3..) ended at 6 without 2, 5, 6: 2 is gone, 5 and 6 may come.
-        assert_eq!(t.give_up_before(3, 6), vec![(2, 2)]);
-        assert_eq!(t.last, 4);
-        assert!(t.missing_up_to(6));
-        // A device that kept nothing older than 7: 5 and 6 are gone too.
-        assert_eq!(t.give_up_before(7, 6), vec![(5, 6)]);
-        let seqs: Vec<u32> = t.ready.iter().map(|r| r.seq).collect();
-        assert_eq!(seqs, [1, 3, 4]);
-        assert_eq!(t.last, 6);
-        assert!(!t.has_gap());
-    }
+    usb_serial_number(path)
+        .unwrap_or_else(|| tangent_field::record::board_device_id(identity.board).to_string())
 }

@@ -24,6 +24,9 @@ enum Command {
     DeviceCalibration(cli::device_calibration::Args),
     /// List the serial ports that look like a Tangent.
     Devices(cli::devices::Args),
+    /// Serve the field app (the caliper in a browser) on localhost, with a WebSocket
+    /// bridge to a serial port or the emulated caliper.
+    App(cli::app::Args),
     /// Build the firmware and flash it through probe-rs.
     Flash(cli::flash::Args),
     /// Receive readings from the device, print them and append them to the field log.
@@ -56,6 +59,7 @@ fn main() -> std::process::ExitCode {
         Command::Calibrate(args) => cli::calibrate::run(args),
         Command::DeviceCalibration(args) => cli::device_calibration::run(args),
         Command::Devices(args) => cli::devices::run(args),
+        Command::App(args) => cli::app::run(args),
         Command::Flash(args) => cli::flash::run(args),
         Command::Listen(args) => cli::listen::run(args),
         Command::Log(args) => cli::log::run(args),

@@ -251,7 +251,16 @@ pub fn run(args: Args) -> Result<ExitCode> {
             }
         };
         last_tree = Some(tree_id);
-        let record = TreeRecord::from_reading(&reading, &plot_id, tree_id, &species, &device_id);
+        let record = TreeRecord::from_reading(
+            &reading,
+            fieldlog::Filing {
+                plot_id: &plot_id,
+                tree_id,
+                species: &species,
+                device_id: &device_id,
+                time: &fieldlog::now_rfc3339(),
+            },
+        );
         // Write-ahead: on disk before it is shown.
         log.append(Record::Tree(record.clone()))?;
         println!("{}", describe(&record, &reading));

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{Context, Result};
-use tangent_host::fieldlog::{self, ExportFormat, FieldLog, Record, Scan};
+use tangent_host::fieldlog::{self, ExportFormat, FieldLog, Scan};
 
 /// The exit status of `log export` and `log check` (also in their `--help`).
 const EXIT_STATUS: &str = "Exit status: 0 the log is intact; 1 it could not be read; 2 bad \
@@ -132,22 +132,13 @@ fn export(a: ExportArgs) -> Result<ExitCode> {
         .with_context(|| format!("cannot read the field log {}", a.log.display()))?;
     let scan = FieldLog::scan_bytes(&a.log, &bytes)?;
     report_damage(&a.log, &bytes, &scan);
-    let mut records = scan.records();
-    if let Some(id) = &a.plot_id {
-        records.retain(|r| match r {
-            Record::Plot(p) => &p.plot_id == id,
-            Record::Tree(t) => &t.plot_id == id,
-        });
-        if records.is_empty() {
-            anyhow::bail!("no plot {id} in {}", a.log.display());
-        }
-    }
     let format = match a.format {
         Format::Csv => ExportFormat::Csv,
         Format::Tsv => ExportFormat::Tsv,
         Format::Json => ExportFormat::Json,
     };
-    let text = fieldlog::export(&records, format);
+    let text = fieldlog::export_records(&scan.records(), a.plot_id.as_deref(), format)
+        .with_context(|| format!("{}", a.log.display()))?;
     match &a.out {
         Some(path) => std::fs::write(path, text)
             .with_context(|| format!("cannot write {}", path.display()))?,

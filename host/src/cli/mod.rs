@@ -7,6 +7,7 @@
 //! context only where the library's message does not already name the path.
 
 pub mod accuracy;
+pub mod app;
 pub mod calibrate;
 pub mod device_calibration;
 pub mod devices;

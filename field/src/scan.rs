@@ -13,7 +13,7 @@ use std::fmt;
 
 use crc::{Crc, Digest};
 
-use super::{Record, MAGIC_LINE};
+use crate::record::{decode_line, Record, MAGIC_LINE};
 
 /// The UTF-8 byte-order mark some editors put at the start of a text file.
 const BOM: &[u8] = b"\xEF\xBB\xBF";
@@ -291,7 +291,7 @@ pub fn scan(bytes: &[u8]) -> Scan {
             s.good_len = next;
         } else if line.is_empty() {
             blank += usize::from(has_newline);
-        } else if let Some(record) = super::decode_line(line) {
+        } else if let Some(record) = decode_line(line) {
             s.records.push(Located {
                 line: line_no,
                 offset: pos,

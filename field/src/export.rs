@@ -2,11 +2,11 @@
 
 use serde::Serialize;
 
-use super::flag_names;
+use crate::record::flag_names;
 use tangent_core::protocol::codes;
 use tangent_core::solvers::result::Flags;
 
-use super::{Record, TreeRecord};
+use crate::record::{Record, TreeRecord};
 
 /// Export formats.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -194,4 +194,35 @@ fn export_json(plots: &[ExportPlot]) -> String {
     let mut s = serde_json::to_string_pretty(&doc).unwrap_or_default();
     s.push('\n');
     s
+}
+
+/// The plot asked for is not in the log.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct NoSuchPlot(pub String);
+
+impl std::fmt::Display for NoSuchPlot {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "no plot {}", self.0)
+    }
+}
+
+impl std::error::Error for NoSuchPlot {}
+
+/// What `tangent log export` writes for the records read from a log: every plot, or only
+/// `plot_id`'s.
+pub fn export_records(
+    records: &[Record],
+    plot_id: Option<&str>,
+    format: ExportFormat,
+) -> Result<String, NoSuchPlot> {
+    match plot_id {
+        None => Ok(export(records, format)),
+        Some(id) => {
+            let selected = crate::record::select_plot(records, id);
+            if selected.is_empty() {
+                return Err(NoSuchPlot(id.to_string()));
+            }
+            Ok(export(&selected, format))
+        }
+    }
 }
