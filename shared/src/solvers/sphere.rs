@@ -278,21 +278,21 @@ pub fn solve(
     let mut tangents = [None::<Section>; MAX_PLANES];
     let edge_sigma = 0.5 / params.focal_px;
     let mut offset = 0;
-    for k in 0..n {
-        let curve = input.curves[k];
+    for ((slot, curve), plane) in tangents
+        .iter_mut()
+        .zip(input.curves)
+        .zip(input.planes)
+        .take(n)
+    {
         let flat = &mut flat_all[offset..offset + curve.len()];
         offset += curve.len();
         if curve.len() < params.min_points {
             continue;
         }
-        if let Ok((section, _)) = three_tangent_section(
-            &input.planes[k],
-            curve,
-            &params.three_tangent,
-            edge_sigma,
-            flat,
-        ) {
-            tangents[k] = Some(section);
+        if let Ok((section, _)) =
+            three_tangent_section(plane, curve, &params.three_tangent, edge_sigma, flat)
+        {
+            *slot = Some(section);
         }
     }
     let (list_tt, count_tt) = compact(&tangents);
