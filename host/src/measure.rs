@@ -12,11 +12,13 @@ use serde::Serialize;
 use tangent_core::calibration::Calibration;
 use tangent_core::curve::CurvePoint;
 use tangent_core::image::{Frame, Pixel};
+use tangent_core::instrument::sphere::SphereMeasurement;
 use tangent_core::instrument::stem::StemMeasurement;
-use tangent_core::instrument::{self, Stem};
-use tangent_core::pipeline::{OwnedBuffers, PipelineConfig, PipelineError};
+use tangent_core::instrument::{self, Instrument, Measured, Sphere, Stem};
+use tangent_core::pipeline::{OwnedBuffers, PipelineConfig, PipelineError, Profile};
 use tangent_core::protocol::codes::{self, Failure};
 use tangent_core::real::Vec3;
+use tangent_core::solvers::sphere::SphereParams;
 use tangent_core::solvers::stem::CylinderParams;
 
 use crate::capture::{Capture, CaptureError, Mode};
@@ -33,7 +35,7 @@ pub enum MeasureError {
     #[error(transparent)]
     Capture(#[from] CaptureError),
     /// The capture is not of a mode this command measures.
-    #[error("capture mode {0:?} is not measured yet (only cylinder captures are)")]
+    #[error("capture mode {0:?} is not measured yet (only cylinder and sphere captures are)")]
     UnsupportedMode(Mode),
     /// No frame lit every plane of the calibration.
     #[error("no laser-on frame lights all {0} planes of the calibration")]
@@ -54,11 +56,26 @@ pub struct TiltReport {
     pub phi_deg: f64,
 }
 
-/// One capture's result, as printed and as JSON (`--json`).
+/// One capture's result, as printed and as JSON (`--json`). The keys are the stem's; a
+/// sphere's reading adds `instrument = "sphere"`, `centre_m` and `sections_diameter_m`, and
+/// gives its joint fit as `fit_diameter_m`, its three-tangent construction as
+/// `three_tangent_diameter_m` and its centre's distance from the camera as `distance_m`.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Reading {
     /// The capture directory.
     pub capture: String,
+    /// The instrument, for every reading but the stem's (`"sphere"`, …).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub instrument: Option<&'static str>,
+    /// A sphere's centre (camera frame, metres).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub centre_m: Option<[f64; 3]>,
+    /// A sphere's diameter from its circle sections (metres), when they gave one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sections_diameter_m: Option<f64>,
+    /// The random part of a sphere's `uncertainty_m` (without the calibration's; metres).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub random_uncertainty_m: Option<f64>,
     /// Reported diameter (metres), absent on error.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub diameter_m: Option<f64>,
@@ -102,15 +119,42 @@ pub struct Reading {
 impl Reading {
     fn from_result(
         capture: &str,
-        result: &Result<StemMeasurement, PipelineError>,
+        result: &Result<Solved, PipelineError>,
         truth: Option<f64>,
     ) -> Self {
         let capture = capture.to_string();
         match result {
-            Ok(m) => {
+            Ok(Solved::Sphere(m)) => {
                 let s = &m.solution;
                 Reading {
                     capture,
+                    instrument: Some("sphere"),
+                    centre_m: Some([s.centre.x, s.centre.y, s.centre.z]),
+                    sections_diameter_m: s.sections.map(|e| e.diameter),
+                    random_uncertainty_m: Some(s.random_uncertainty),
+                    diameter_m: Some(s.diameter),
+                    uncertainty_m: Some(s.uncertainty),
+                    method: Some(codes::method_name(s.method)),
+                    flags: codes::flag_names(s.flags).collect(),
+                    tilt: None,
+                    axes_m: None,
+                    three_tangent_diameter_m: s.three_tangent.map(|e| e.diameter),
+                    fit_diameter_m: s.joint_fit.map(|e| e.diameter),
+                    distance_m: Some(s.distance),
+                    points: Some(m.profile.plane_points.iter().map(|(a, b)| b - a).sum()),
+                    error: None,
+                    truth_diameter_m: truth,
+                    truth_curve_unreadable: None,
+                }
+            }
+            Ok(Solved::Stem(m)) => {
+                let s = &m.solution;
+                Reading {
+                    capture,
+                    instrument: None,
+                    centre_m: None,
+                    sections_diameter_m: None,
+                    random_uncertainty_m: None,
                     diameter_m: Some(s.diameter),
                     uncertainty_m: Some(s.uncertainty),
                     method: Some(codes::method_name(s.method)),
@@ -132,6 +176,10 @@ impl Reading {
             }
             Err(e) => Reading {
                 capture,
+                instrument: None,
+                centre_m: None,
+                sections_diameter_m: None,
+                random_uncertainty_m: None,
                 diameter_m: None,
                 uncertainty_m: None,
                 method: None,
@@ -161,6 +209,25 @@ impl Reading {
 
     fn result_text(&self) -> String {
         match (self.diameter_m, &self.error) {
+            (Some(d), _) if self.instrument == Some("sphere") => {
+                // `sphere d = 101.6 mm ± 0.4 mm (joint_fit), centre at 0.82 m`
+                let mut s = format!(
+                    "sphere d = {:.1} mm ± {:.1} mm ({})",
+                    d * 1e3,
+                    self.uncertainty_m.unwrap_or(f64::NAN) * 1e3,
+                    self.method.unwrap_or("?")
+                );
+                if let Some(z) = self.distance_m {
+                    s += &format!(", centre at {z:.2} m");
+                }
+                if !self.flags.is_empty() {
+                    s += &format!(" [{}]", self.flags.join(", "));
+                }
+                if let Some(t) = self.truth_diameter_m {
+                    s += &format!(" (truth {:.1} mm, error {:+.1} mm)", t * 1e3, (d - t) * 1e3);
+                }
+                s
+            }
             (Some(d), _) => {
                 let mut s = format!(
                     "d = {:.1} mm ± {:.1} mm ({})",
@@ -191,12 +258,31 @@ impl Reading {
     }
 }
 
+/// The core's detailed solution of one capture, per instrument.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Solved {
+    /// A stem ([`Mode::Cylinder`]).
+    Stem(StemMeasurement),
+    /// A sphere ([`Mode::Sphere`]).
+    Sphere(SphereMeasurement),
+}
+
+impl Solved {
+    /// The image part of the chain.
+    pub fn profile(&self) -> &Profile {
+        match self {
+            Solved::Stem(m) => &m.profile,
+            Solved::Sphere(m) => &m.profile,
+        }
+    }
+}
+
 /// What a measurement of one capture produced, with the buffers for plots.
 pub struct Outcome {
     /// The result, for printing and JSON.
     pub reading: Reading,
     /// The core's result.
-    pub result: Result<StemMeasurement, PipelineError>,
+    pub result: Result<Solved, PipelineError>,
     /// The difference frame (as 16-bit, whatever the sensor depth) and its size.
     pub diff: Vec<u16>,
     /// The curve points (all planes).
@@ -267,14 +353,17 @@ pub fn composite_on_frame(capture: &Capture, planes: usize) -> Option<Pgm> {
     }
 }
 
-fn run<P: Pixel>(
+fn run<I: Instrument, P: Pixel>(
     off: &[P],
     on: &[P],
     pgm: &Pgm,
     calibration: &Calibration,
     config: &PipelineConfig,
-    params: &CylinderParams,
-) -> (Result<StemMeasurement, PipelineError>, OwnedBuffers<P>) {
+    params: &I::Params,
+) -> (
+    Result<Measured<I::Solution>, PipelineError>,
+    OwnedBuffers<P>,
+) {
     let planes = calibration.planes.len();
     let mut hw = OwnedBuffers::<P>::for_frame(pgm.width, pgm.height, pgm.bit_depth(), planes);
     let result = (|| {
@@ -282,7 +371,7 @@ fn run<P: Pixel>(
             Frame::new(off, pgm.width, pgm.height, pgm.width)?.with_bit_depth(pgm.bit_depth())?;
         let on =
             Frame::new(on, pgm.width, pgm.height, pgm.width)?.with_bit_depth(pgm.bit_depth())?;
-        instrument::measure_with::<Stem, P>(
+        instrument::measure_with::<I, P>(
             &off,
             &on,
             calibration,
@@ -292,6 +381,54 @@ fn run<P: Pixel>(
         )
     })();
     (result, hw)
+}
+
+/// The instrument of a capture's mode on one frame pair, its detailed solution kept.
+fn run_mode<P: Pixel>(
+    mode: Mode,
+    off: &[P],
+    on: &[P],
+    pgm: &Pgm,
+    calibration: &Calibration,
+    config: &PipelineConfig,
+    params: &CylinderParams,
+) -> Result<(Result<Solved, PipelineError>, OwnedBuffers<P>), MeasureError> {
+    Ok(match mode {
+        Mode::Cylinder => {
+            let (r, hw) = run::<Stem, P>(off, on, pgm, calibration, config, params);
+            (r.map(Solved::Stem), hw)
+        }
+        Mode::Sphere => {
+            let params = sphere_params(params);
+            let (r, hw) = run::<Sphere, P>(off, on, pgm, calibration, config, &params);
+            (r.map(Solved::Sphere), hw)
+        }
+        mode @ (Mode::Wall | Mode::Road) => return Err(MeasureError::UnsupportedMode(mode)),
+    })
+}
+
+/// The sphere solver's settings with the noise model and focal length of the stem's (one
+/// head, one noise model).
+pub fn sphere_params(params: &CylinderParams) -> SphereParams {
+    SphereParams {
+        noise: params.noise,
+        focal_px: params.focal_px,
+        ..SphereParams::default()
+    }
+}
+
+/// The true diameter of the ball of a synthetic sphere capture: the sphere whose centre is
+/// nearest the optical axis.
+pub fn truth_sphere_diameter(capture: &Capture) -> Option<f64> {
+    let objects = &capture.meta.truth.as_ref()?.objects;
+    objects
+        .iter()
+        .filter_map(|o| match o {
+            Object::Sphere(s) => Some((s.centre_m[0].hypot(s.centre_m[1]), 2.0 * s.radius_m)),
+            _ => None,
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, d)| d)
 }
 
 /// The true diameter of the aimed stem of a synthetic capture, when it carries ground truth:
@@ -353,13 +490,9 @@ pub fn measure_loaded(
     config: &PipelineConfig,
     params: &CylinderParams,
 ) -> Result<Outcome, MeasureError> {
-    // The instruments the host reports on (the stem's detailed solution feeds the extra
-    // keys of `Reading`).
-    match capture.meta.mode {
-        Mode::Cylinder => {}
-        mode @ (Mode::Sphere | Mode::Wall | Mode::Road) => {
-            return Err(MeasureError::UnsupportedMode(mode))
-        }
+    let mode = capture.meta.mode;
+    if let Mode::Wall | Mode::Road = mode {
+        return Err(MeasureError::UnsupportedMode(mode));
     }
     let calibration = calibration
         .cloned()
@@ -367,7 +500,7 @@ pub fn measure_loaded(
     let (off, on) = frame_pair(capture, calibration.planes.len())?;
     let (result, diff, curve, points) = match (&off.samples, &on.samples) {
         (PgmSamples::U8(a), PgmSamples::U8(b)) => {
-            let (r, hw) = run(a, b, &on, &calibration, config, params);
+            let (r, hw) = run_mode(mode, a, b, &on, &calibration, config, params)?;
             (
                 r,
                 hw.diff().iter().map(|&v| v as u16).collect(),
@@ -376,7 +509,7 @@ pub fn measure_loaded(
             )
         }
         (PgmSamples::U16(a), PgmSamples::U16(b)) => {
-            let (r, hw) = run(a, b, &on, &calibration, config, params);
+            let (r, hw) = run_mode(mode, a, b, &on, &calibration, config, params)?;
             (
                 r,
                 hw.diff().to_vec(),
@@ -386,7 +519,11 @@ pub fn measure_loaded(
         }
         _ => return Err(MeasureError::MixedDepth),
     };
-    let mut reading = Reading::from_result(name, &result, truth_diameter(capture));
+    let truth = match mode {
+        Mode::Sphere => truth_sphere_diameter(capture),
+        _ => truth_diameter(capture),
+    };
+    let mut reading = Reading::from_result(name, &result, truth);
     reading.truth_curve_unreadable = capture.truth_curve_unreadable.clone();
     Ok(Outcome {
         reading,

@@ -11,7 +11,7 @@ use plotters::prelude::*;
 use plotters::style::{register_font, FontStyle};
 use tangent_core::real::Vec2;
 
-use crate::measure::Outcome;
+use crate::measure::{Outcome, Solved};
 
 static FONT: Once = Once::new();
 
@@ -67,7 +67,7 @@ pub fn measurement_png(path: &Path, outcome: &Outcome, title: &str) -> Result<()
         }
     }
     let (planes, ranges) = match &outcome.result {
-        Ok(m) => (m.profile.planes, m.profile.plane_points),
+        Ok(m) => (m.profile().planes, m.profile().plane_points),
         Err(_) => (0, Default::default()),
     };
     for (k, &(s, e)) in ranges.iter().enumerate().take(planes) {
@@ -89,10 +89,27 @@ pub fn measurement_png(path: &Path, outcome: &Outcome, title: &str) -> Result<()
             pts.push((k, plane0.to_plane_coords(*p)));
         }
     }
-    let circle = outcome.result.as_ref().ok().map(|m| {
-        let c = plane0.to_plane_coords(m.solution.centre);
-        (c, m.solution.diameter / 2.0)
-    });
+    // The solution's traces in plane 0's coordinates: the stem's circle; for a sphere, the
+    // circle it cuts in each plane (centre `C − h·n`, radius `√(R² − h²)`; the reference
+    // design's planes are parallel, so each lies flat in this view).
+    let mut circles: Vec<(Vec2, f64)> = Vec::new();
+    match &outcome.result {
+        Ok(Solved::Stem(m)) => circles.push((
+            plane0.to_plane_coords(m.solution.centre),
+            m.solution.diameter / 2.0,
+        )),
+        Ok(Solved::Sphere(m)) => {
+            let (c, r) = (m.solution.centre, m.solution.diameter / 2.0);
+            for plane in cal.planes.iter().take(planes) {
+                let h = plane.signed_distance(c);
+                if h.abs() < r {
+                    let foot = c - plane.normal * h;
+                    circles.push((plane0.to_plane_coords(foot), (r * r - h * h).sqrt()));
+                }
+            }
+        }
+        Err(_) => {}
+    }
     let (mut a0, mut a1, mut b0, mut b1) = (
         f64::INFINITY,
         f64::NEG_INFINITY,
@@ -105,7 +122,7 @@ pub fn measurement_png(path: &Path, outcome: &Outcome, title: &str) -> Result<()
         b0 = b0.min(q.y);
         b1 = b1.max(q.y);
     }
-    if let Some((c, r)) = circle {
+    for &(c, r) in &circles {
         a0 = a0.min(c.x - r);
         a1 = a1.max(c.x + r);
         b0 = b0.min(c.y - r);
@@ -121,7 +138,10 @@ pub fn measurement_png(path: &Path, outcome: &Outcome, title: &str) -> Result<()
         .margin(10)
         .x_label_area_size(35)
         .y_label_area_size(55)
-        .caption("section in laser plane 0", ("sans-serif", 16))
+        .caption(
+            "sections, in laser plane 0's coordinates",
+            ("sans-serif", 16),
+        )
         .build_cartesian_2d(
             (am - span / 2.0)..(am + span / 2.0),
             (bm + span / 2.0)..(bm - span / 2.0),
@@ -139,7 +159,7 @@ pub fn measurement_png(path: &Path, outcome: &Outcome, title: &str) -> Result<()
                 .map(|(k, q)| Circle::new((q.x, q.y), 1, PLANE_COLOURS[k % 4].filled())),
         )
         .map_err(err)?;
-    if let Some((c, r)) = circle {
+    for &(c, r) in &circles {
         chart
             .draw_series(LineSeries::new(
                 (0..=360).map(|i| {

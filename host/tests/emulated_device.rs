@@ -491,6 +491,103 @@ fn the_mode_is_set_from_the_host_and_read_back() {
     }
 }
 
+/// The sphere issue's CI check: in sphere mode the emulated firmware (f32) gives the host's
+/// sphere (f64) on the same frames — same method, diameters within 1e-4 relative (the
+/// argument of `on_device_measurements_equal_the_hosts`), same flags — or the same refusal.
+#[test]
+fn on_device_spheres_equal_the_hosts() {
+    use tangent_core::instrument::{measure_with, Sphere};
+    use tangent_core::measurement::{Measurement, Mode};
+    use tangent_core::pipeline::{OwnedBuffers, PipelineConfig};
+    use tangent_core::solvers::sphere::SphereParams;
+    use tangent_host::simulate::{simulate, sphere_corpus};
+
+    let Some(elf) = firmware_elf() else { return };
+    let wanted = [
+        "sphere-d100-z080-matt-2p",
+        "sphere-d150-z100-offcentre-2p",
+        "sphere-d250-z150-shiny-offcentre-2p",
+        "sphere-d400-z200-matt-2p",
+        "notsphere-wall-z120-2p",
+    ];
+    let dir = tempfile::tempdir().unwrap();
+    let mut pairs = Vec::new();
+    let mut cases = Vec::new();
+    for entry in sphere_corpus::entries()
+        .into_iter()
+        .filter(|e| wanted.contains(&e.name.as_str()))
+    {
+        let (capture, _) = simulate(&entry.spec).expect("simulate the sphere capture");
+        let off_pgm = capture.off_frame();
+        let (_, on_pgm) = capture.on_frames().next().expect("an on frame");
+        let (w, h) = (off_pgm.width, off_pgm.height);
+        let (off, on) = (to_u8(off_pgm), to_u8(on_pgm));
+        let off_path = dir.path().join(format!("{}-off.pgm", entry.name));
+        let on_path = dir.path().join(format!("{}-on.pgm", entry.name));
+        write_pgm(&off_path, w, h, &off);
+        write_pgm(&on_path, w, h, &on);
+        pairs.push((off_path, on_path));
+        let off_f = tangent_core::image::Frame::new(&off, w, h, w).unwrap();
+        let on_f = tangent_core::image::Frame::new(&on, w, h, w).unwrap();
+        let mut ws = OwnedBuffers::<u8>::for_frame(w, h, 8, capture.calibration.planes.len());
+        let host = measure_with::<Sphere, u8>(
+            &off_f,
+            &on_f,
+            &capture.calibration,
+            &PipelineConfig::default(),
+            &SphereParams::default(),
+            &mut ws.workspace(),
+        );
+        cases.push((entry.name.clone(), capture.calibration.clone(), host));
+    }
+    assert_eq!(cases.len(), wanted.len(), "sphere corpus entries missing");
+
+    let mut dev = Device::boot(&elf, &pairs, None);
+    dev.request(Request::SetMode(Mode::Sphere), |r| {
+        assert_eq!(r, Response::Ack)
+    });
+    let mut compared = 0;
+    for (name, cal, host) in &cases {
+        dev.request(Request::WriteCalibration(WireCalibration::from(cal)), |r| {
+            assert_eq!(r, Response::Ack, "{name}")
+        });
+        dev.request(Request::Measure, |r| match (host, r) {
+            (Ok(h), Response::Reading(reading)) => {
+                let hs = &h.solution;
+                let Measurement::Sphere(d) = reading.measurement else {
+                    panic!("{name}: a sphere reading in sphere mode, got {reading:?}")
+                };
+                let rel = (d.diameter - hs.diameter).abs() / hs.diameter;
+                eprintln!(
+                    "{name}: host {:.4} mm {:?}, device {:.4} mm {:?}, relative difference {rel:.2e}",
+                    hs.diameter * 1e3,
+                    hs.method,
+                    d.diameter * 1e3,
+                    d.method
+                );
+                assert_eq!(d.method, hs.method, "{name}: method");
+                assert!(rel <= 1e-4, "{name}: device {} m vs host {} m", d.diameter, hs.diameter);
+                assert_eq!(d.flags, hs.flags, "{name}: flags");
+                compared += 1;
+            }
+            (Err(e), Response::Error(DeviceError { code, detail })) => {
+                eprintln!("{name}: host and device both refuse ({e})");
+                assert_eq!(code, ErrorCode::MeasurementFailed, "{name}");
+                assert_eq!(
+                    Failure::from_detail(detail).to_string(),
+                    Failure::of(e).to_string(),
+                    "{name}"
+                );
+            }
+            (h, r) => panic!("{name}: host {h:?}, device {r:?}"),
+        });
+    }
+    assert!(
+        compared >= 3,
+        "only {compared} balls measured on both sides"
+    );
+}
+
 /// 8-bit version of a capture frame: 8-bit data as is, deeper data reduced to its top 8
 /// bits (what the device's 8-bit DCMI bus on D9..D2 sees, and what the emulated camera does
 /// with a 16-bit PGM).

@@ -51,7 +51,7 @@ fn sample() -> Vec<Record> {
         tree("P-017", 1, "PIAB", 314.06, 0, 1),
         tree("P-017", 2, "PISY", 201.96, 0x0006, 2),
         plot("P 18, \"north\""),
-        tree("P 18, \"north\"", 1, "50", 88.0, 0x8000, 3),
+        tree("P 18, \"north\"", 1, "50", 88.0, 0x8400, 3),
     ]
 }
 
@@ -116,7 +116,7 @@ note,
 trees,1
 
 tree_id,species,dbh_mm,uncertainty_mm,tilt_deg,flags,time,device_id,calib_id,seq,plot_id,kind
-1,50,88.0,1.2,3.0,0x8000,2025-06-01T08:01:00Z,H743-0001,7,3,\"P 18, \"\"north\"\"\",stem
+1,50,88.0,1.2,3.0,NEAR_POLE+NOT_SPHERICAL,2025-06-01T08:01:00Z,H743-0001,7,3,\"P 18, \"\"north\"\"\",stem
 ";
     assert_eq!(fieldlog::export(&sample(), ExportFormat::Csv), want);
 }

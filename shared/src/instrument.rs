@@ -9,6 +9,7 @@
 //! tests).
 //!
 //! * [`stem`]: [`Mode::Cylinder`], the stem's diameter.
+//! * [`sphere`]: [`Mode::Sphere`], a ball's diameter and centre.
 
 use crate::calibration::{Calibration, MAX_PLANES};
 use crate::image::{Frame, Pixel};
@@ -19,10 +20,13 @@ use crate::pipeline::{
     extract_profile, point_sigmas, PipelineConfig, PipelineError, Profile, Workspace,
 };
 use crate::real::{Real, Vec2, Vec3};
+use crate::solvers::sphere::SphereParams;
 use crate::solvers::stem::CylinderParams;
 
+pub mod sphere;
 pub mod stem;
 
+pub use sphere::Sphere;
 pub use stem::Stem;
 
 /// What an instrument's solver reads: per laser plane, the 3-D points of its curve (camera
@@ -130,6 +134,8 @@ pub struct Measured<S> {
 pub struct InstrumentParams {
     /// [`Mode::Cylinder`] ([`Stem`]).
     pub cylinder: CylinderParams,
+    /// [`Mode::Sphere`] ([`Sphere`]).
+    pub sphere: SphereParams,
 }
 
 /// Measures a frame pair with the instrument of `mode`: [`extract_profile`], then its solver.
@@ -177,8 +183,8 @@ pub fn measure<P: Pixel>(
 /// (the device refuses to be set to any other).
 pub fn supports(mode: Mode) -> bool {
     match mode {
-        Mode::Cylinder => true,
-        Mode::Sphere | Mode::Wall | Mode::Road => false,
+        Mode::Cylinder | Mode::Sphere => true,
+        Mode::Wall | Mode::Road => false,
     }
 }
 
@@ -198,7 +204,11 @@ pub fn solve<P: Pixel>(
             solve_with::<Stem, P>(profile, full_scale, calibration, &params.cylinder, ws)
                 .map(|s| Measurement::from(&s))
         }
-        Mode::Sphere | Mode::Wall | Mode::Road => Err(PipelineError::UnsupportedMode(mode)),
+        Mode::Sphere => {
+            solve_with::<Sphere, P>(profile, full_scale, calibration, &params.sphere, ws)
+                .map(|s| Measurement::from(&s))
+        }
+        Mode::Wall | Mode::Road => Err(PipelineError::UnsupportedMode(mode)),
     }
 }
 

@@ -51,6 +51,8 @@ impl Mode {
 pub enum Measurement {
     /// A stem diameter ([`Mode::Cylinder`]).
     Stem(StemReading),
+    /// A sphere's diameter and centre ([`Mode::Sphere`]).
+    Sphere(SphereReading),
 }
 
 impl Measurement {
@@ -58,6 +60,7 @@ impl Measurement {
     pub fn mode(&self) -> Mode {
         match self {
             Measurement::Stem(_) => Mode::Cylinder,
+            Measurement::Sphere(_) => Mode::Sphere,
         }
     }
 
@@ -65,6 +68,7 @@ impl Measurement {
     pub fn flags(&self) -> Flags {
         match self {
             Measurement::Stem(s) => s.flags,
+            Measurement::Sphere(s) => s.flags,
         }
     }
 
@@ -72,6 +76,7 @@ impl Measurement {
     pub fn method(&self) -> Method {
         match self {
             Measurement::Stem(s) => s.method,
+            Measurement::Sphere(s) => s.method,
         }
     }
 
@@ -79,14 +84,16 @@ impl Measurement {
     pub fn kind(&self) -> &'static str {
         match self {
             Measurement::Stem(_) => "stem",
+            Measurement::Sphere(_) => "sphere",
         }
     }
 
     /// The reading's headline number (metres): what running statistics average and the
-    /// field log's size column keeps — a stem's diameter.
+    /// field log's size column keeps — a stem's or a sphere's diameter.
     pub fn value(&self) -> Real {
         match self {
             Measurement::Stem(s) => s.diameter,
+            Measurement::Sphere(s) => s.diameter,
         }
     }
 
@@ -94,6 +101,7 @@ impl Measurement {
     pub fn uncertainty(&self) -> Real {
         match self {
             Measurement::Stem(s) => s.uncertainty,
+            Measurement::Sphere(s) => s.uncertainty,
         }
     }
 }
@@ -118,6 +126,40 @@ pub struct StemReading {
     pub axes: Option<Axes>,
     /// Quality flags (solver and image).
     pub flags: Flags,
+}
+
+/// A sphere's diameter, where it is, and what qualifies it (`docs/sphere.md`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SphereReading {
+    /// Diameter (metres).
+    #[serde(with = "wire_real")]
+    pub diameter: Real,
+    /// Predicted 1σ uncertainty of the diameter (metres).
+    #[serde(with = "wire_real")]
+    pub uncertainty: Real,
+    /// The computation the diameter comes from (joint fit, sections, three-tangent).
+    pub method: Method,
+    /// The centre (camera frame, metres).
+    pub centre: Point,
+    /// Distance of the centre from the camera (metres).
+    #[serde(with = "wire_real")]
+    pub distance: Real,
+    /// Quality flags (solver and image).
+    pub flags: Flags,
+}
+
+/// A point in the camera frame (metres).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Point {
+    /// Right.
+    #[serde(with = "wire_real")]
+    pub x: Real,
+    /// Down.
+    #[serde(with = "wire_real")]
+    pub y: Real,
+    /// Forward.
+    #[serde(with = "wire_real")]
+    pub z: Real,
 }
 
 /// A stem's lean relative to plane 0 (`docs/cylinder.md`, "Tilt angles"), radians.
@@ -188,7 +230,9 @@ mod tests {
         // 4 bytes per scalar whatever `Real` is.
         assert_eq!(bytes.len(), 1 + 12 + 1 + 1 + 12 + 1 + 1);
         let back: Measurement = postcard::from_bytes(bytes).expect("decodes");
-        let Measurement::Stem(b) = back;
+        let Measurement::Stem(b) = back else {
+            panic!("a stem comes back a stem")
+        };
         assert_eq!(b.diameter, 0.3001f32 as Real);
         assert_eq!(b.method, Method::CircleFit);
         assert_eq!(back.mode(), Mode::Cylinder);

@@ -38,10 +38,24 @@ pub struct Args {
     /// Write the Markdown report here instead of printing it.
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Random balls to simulate for the sphere section (`docs/accuracy.md`, "Spheres"; seeds
+    /// from `--sphere-seed`).
+    #[arg(long, default_value_t = 0)]
+    spheres: u64,
+    /// First seed of the balls.
+    #[arg(long, default_value_t = 2_000_000)]
+    sphere_seed: u64,
+    /// Report the spheres only (no stems).
+    #[arg(long)]
+    spheres_only: bool,
 }
 
 /// Runs `tangent evaluate`.
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
+    if args.spheres_only {
+        let doc = sphere_section(&args)?;
+        return write(&args, &doc);
+    }
     if args.count > SeedSet::MAX_CAPTURES || args.tilted_count > SeedSet::MAX_CAPTURES {
         anyhow::bail!(
             "--n and --tilted-count are at most {} (the seed sets' ranges would overlap)",
@@ -100,11 +114,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         ),
         &tilted,
     );
-    match &args.out {
-        Some(path) => {
-            std::fs::write(path, &doc).with_context(|| format!("writing {}", path.display()))?
-        }
-        None => print!("{doc}"),
+    if args.spheres > 0 {
+        doc += &sphere_section(&args)?;
     }
     eprintln!(
         "evaluated {} captures (set {}) in {elapsed:.1} s ({:.2} s per capture)",
@@ -112,5 +123,30 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         args.set.name(),
         elapsed / (transversal.len() + tilted.len()).max(1) as f64
     );
+    write(&args, &doc)
+}
+
+/// The sphere section: `--spheres` random balls from `--sphere-seed`.
+fn sphere_section(args: &Args) -> anyhow::Result<String> {
+    let samples = tangent_host::evaluate_sphere::run(args.sphere_seed, args.spheres)?;
+    Ok(tangent_host::evaluate_sphere::section(
+        &format!(
+            "{} random balls (seeds {}–{}): 20–400 mm, centre 0.3–2 m, matt and steel, in the \
+             air and on a floor, two laser planes",
+            args.spheres,
+            args.sphere_seed,
+            args.sphere_seed + args.spheres.saturating_sub(1)
+        ),
+        &samples,
+    ))
+}
+
+fn write(args: &Args, doc: &str) -> anyhow::Result<ExitCode> {
+    match &args.out {
+        Some(path) => {
+            std::fs::write(path, doc).with_context(|| format!("writing {}", path.display()))?
+        }
+        None => print!("{doc}"),
+    }
     Ok(ExitCode::SUCCESS)
 }

@@ -586,6 +586,9 @@ pub fn entries() -> Vec<CorpusEntry> {
             },
         );
     }
+    // --- spheres on two planes (`sphere_corpus`; seeds of their own, so the order above is
+    // untouched) ---------------------------------------------------------------------------
+    b.entries.extend(super::sphere_corpus::entries());
     b.entries
 }
 

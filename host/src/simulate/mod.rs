@@ -16,6 +16,7 @@ pub mod reflectance;
 pub mod render;
 pub mod scene;
 pub mod sensor;
+pub mod sphere_corpus;
 
 use rand::{RngExt, SeedableRng};
 use rand_pcg::Pcg64;

@@ -32,8 +32,8 @@ pub const USB_PID: u16 = 0x7A6E;
 pub const HISTORY_LEN: usize = 64;
 
 /// Every quality flag with its name as printed, exported and logged (stable: exports and
-/// scripts read them). Bit 10 is unused.
-pub const FLAG_NAMES: [(Flags, &str); 14] = [
+/// scripts read them).
+pub const FLAG_NAMES: [(Flags, &str); 16] = [
     (Flags::ARC_TOO_SHORT, "arc_too_short"),
     (Flags::POOR_FIT, "poor_fit"),
     (Flags::TILT_IGNORED, "tilt_ignored"),
@@ -48,6 +48,8 @@ pub const FLAG_NAMES: [(Flags, &str); 14] = [
     (Flags::AMBIENT_BRIGHT, "ambient_bright"),
     (Flags::OTHER_OBJECTS, "other_objects"),
     (Flags::ELLIPTIC, "elliptic"),
+    (Flags::NEAR_POLE, "near_pole"),
+    (Flags::NOT_SPHERICAL, "not_spherical"),
 ];
 
 /// The names of the flags set in `flags`, in bit order (bits without a name are skipped:
@@ -71,6 +73,9 @@ pub fn method_name(method: Method) -> &'static str {
         Method::CircleFit => "circle_fit",
         Method::CylinderFit => "cylinder_fit",
         Method::GeneralisedThreeTangent => "generalised_three_tangent",
+        Method::JointFit => "joint_fit",
+        Method::SphereSections => "sections",
+        Method::SphereThreeTangent => "sphere_three_tangent",
     }
 }
 
@@ -317,6 +322,8 @@ fn solve_error_number(e: SolveError) -> u32 {
         SolveError::InvalidParameter => 7,
         SolveError::PlaneCount => 8,
         SolveError::NotRound => 9,
+        SolveError::OneSection => 10,
+        SolveError::NotSpherical => 11,
     }
 }
 
@@ -333,6 +340,8 @@ fn solve_error_of_number(n: u32) -> Option<SolveError> {
         7 => SolveError::InvalidParameter,
         8 => SolveError::PlaneCount,
         9 => SolveError::NotRound,
+        10 => SolveError::OneSection,
+        11 => SolveError::NotSpherical,
         _ => return None,
     })
 }

@@ -14,6 +14,10 @@
 //!   "Three-tangent method").
 //! * [`result`]: what every solver reports besides its number — [`result::Method`],
 //!   [`result::Flags`], [`result::Tilt`].
+//! * [`sphere_sections`], [`sphere_three_tangent`], [`sphere_fit`]: a sphere from its planar
+//!   sections (circle fits or the three-tangent construction) and the joint fit to every point
+//!   (`docs/sphere.md`); [`sphere`]: the sphere of one capture — the methods' σ, the choice,
+//!   the flags and refusals.
 //! * [`stem`]: the stem diameter of one capture — the methods' σ, the choice of the reported
 //!   diameter, the flags (`docs/cylinder.md`, "Choosing the method").
 //!
@@ -34,6 +38,10 @@ pub mod cylinder_fit;
 pub mod ellipse;
 pub mod lm;
 pub mod result;
+pub mod sphere;
+pub mod sphere_fit;
+pub mod sphere_sections;
+pub mod sphere_three_tangent;
 pub mod stem;
 pub mod three_tangent;
 
@@ -64,6 +72,12 @@ pub enum SolveError {
     /// The section is detectably not round and one view cannot resolve its axes: measure
     /// across two directions (`docs/cylinder.md`, "Elliptic stems").
     NotRound,
+    /// Only one laser plane's curve crosses the object: a sphere's radius is not observable
+    /// from one section (`docs/sphere.md`, "One section").
+    OneSection,
+    /// The sections cannot belong to one sphere: two objects, or a flat or elongated one
+    /// (`docs/sphere.md`, "Is it a sphere?").
+    NotSpherical,
 }
 
 impl fmt::Display for SolveError {
@@ -79,6 +93,12 @@ impl fmt::Display for SolveError {
             SolveError::InvalidParameter => "solver parameter out of range",
             SolveError::PlaneCount => "wrong number of laser planes for this solution",
             SolveError::NotRound => "section not round: measure across two directions",
+            SolveError::OneSection => {
+                "only one laser line crosses the object: a sphere's size needs both lines on it"
+            }
+            SolveError::NotSpherical => {
+                "the laser lines do not lie on one sphere (two objects in view, or not a ball)"
+            }
         };
         f.write_str(s)
     }

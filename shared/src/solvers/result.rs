@@ -20,6 +20,12 @@ pub enum Method {
     CylinderFit,
     /// Three-tangent method on the curves projected along the fitted axis (tilt measured).
     GeneralisedThreeTangent,
+    /// Sphere fitted to every point of every plane at once, σ-weighted (`docs/sphere.md`).
+    JointFit,
+    /// Sphere from the circle fits of its sections, `R² = rᵢ² + hᵢ²` (`docs/sphere.md`).
+    SphereSections,
+    /// Sphere from the three-tangent circles of its sections (`docs/sphere.md`).
+    SphereThreeTangent,
 }
 
 /// Quality flags of a solution (a bit set; `Flags::ARC_TOO_SHORT.0 | …`).
@@ -69,6 +75,13 @@ impl Flags {
     /// diameter is the mean of the fitted axes (as cross-calipering), its σ covers the unseen
     /// back, and [`super::stem::CylinderSolution::axes`] gives the two diameters.
     pub const ELLIPTIC: Flags = Flags(1 << 14);
+    /// Sphere: a section lies near a pole (its radius below `pole_ratio·R`), where the
+    /// sphere's radius rests on the section's distance from the centre alone
+    /// (`docs/sphere.md`, "Near a pole").
+    pub const NEAR_POLE: Flags = Flags(1 << 10);
+    /// Sphere: the object fails the sphere test — its sections are not round, or do not lie
+    /// on one sphere within their noise (`docs/sphere.md`, "Is it a sphere?").
+    pub const NOT_SPHERICAL: Flags = Flags(1 << 15);
 
     /// Whether every flag of `other` is set.
     pub fn contains(self, other: Flags) -> bool {

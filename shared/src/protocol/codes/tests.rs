@@ -128,7 +128,7 @@ fn failure_codes_are_the_documented_ones() {
         got,
         [
             1, 2, 3, 4, 5, 1, 6, 6, 1, 1, 15, 7, 8, 9, 1, 10, 10, 8, 11, 12, 13, 14, 14, 14, 14,
-            14, 14, 14, 14, 14, 14, 16
+            14, 14, 14, 14, 14, 14, 14, 14, 16
         ]
     );
     assert_eq!(
@@ -183,9 +183,9 @@ fn every_flag_has_one_name_and_known_flags_are_all_of_them() {
         bits |= f.0;
     }
     assert_eq!(known_flags(), Flags(bits));
-    let set = Flags(Flags::TILT_IGNORED.0 | Flags::ELLIPTIC.0 | 1 << 10);
+    let set = Flags(Flags::TILT_IGNORED.0 | Flags::ELLIPTIC.0 | Flags::NOT_SPHERICAL.0);
     let got: Vec<&str> = flag_names(set).collect();
-    assert_eq!(got, ["tilt_ignored", "elliptic"]);
+    assert_eq!(got, ["tilt_ignored", "elliptic", "not_spherical"]);
 }
 
 #[test]
@@ -195,6 +195,9 @@ fn every_method_has_a_distinct_name() {
         Method::CircleFit,
         Method::CylinderFit,
         Method::GeneralisedThreeTangent,
+        Method::JointFit,
+        Method::SphereSections,
+        Method::SphereThreeTangent,
     ]
     .iter()
     .map(|m| method_name(*m).to_string())
@@ -205,7 +208,10 @@ fn every_method_has_a_distinct_name() {
             "three_tangent",
             "circle_fit",
             "cylinder_fit",
-            "generalised_three_tangent"
+            "generalised_three_tangent",
+            "joint_fit",
+            "sections",
+            "sphere_three_tangent"
         ]
     );
 }

@@ -1,0 +1,237 @@
+//! Sphere scenes (`docs/sphere.md`, "Simulated spheres"): the sphere captures of the corpus
+//! and random balls for the accuracy evaluation, on the two-plane reference head.
+//!
+//! A ball is measured when both laser planes cut it; the reference planes are parallel,
+//! 50 mm apart, and descend by `z/15` with distance (`y = e − z·e₀/z₀`), so a ball is placed
+//! with its centre between the two planes' lines at its distance (`y ≈ 0.125 − z/15`),
+//! shifted by a fraction of the free play `R − 25 mm` so that the sections differ.
+
+use rand::{RngExt, SeedableRng};
+use rand_pcg::Pcg64;
+
+use super::corpus::{two_plane_calibration, CorpusEntry};
+use super::{SimParams, SimSpec};
+use crate::capture::Mode;
+use crate::truth::{Cylinder, Object, Plane, Sphere, Texture};
+
+/// The finish of a ball.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Finish {
+    /// Stone or painted: diffuse, textured.
+    Matt,
+    /// Polished steel: bright, untextured, smooth (fully developed speckle).
+    Shiny,
+}
+
+/// Height `y` (metres, down) midway between the two reference planes at distance `z`.
+pub fn mid_plane_y(z: f64) -> f64 {
+    let cal = two_plane_calibration();
+    let y = |k: usize| {
+        let p = &cal.planes[k];
+        (p.offset - p.normal.z * z) / p.normal.y
+    };
+    0.5 * (y(0) + y(1))
+}
+
+/// A ball of diameter `d_mm` whose centre is `z` ahead, `x` to the right and `shift` (as a
+/// fraction of `R`) below the mid-plane between the lasers.
+pub fn ball(d_mm: f64, z: f64, x: f64, shift: f64, finish: Finish) -> Object {
+    let r = d_mm * 5e-4;
+    let (albedo, texture, contrast) = match finish {
+        Finish::Matt => (0.5, Texture::Stone, 0.2),
+        Finish::Shiny => (0.85, Texture::Stone, 0.02),
+    };
+    Object::Sphere(Sphere {
+        centre_m: [x, mid_plane_y(z) + shift * r, z],
+        radius_m: r,
+        albedo,
+        texture,
+        texture_contrast: contrast,
+    })
+}
+
+/// The floor a ball at `(centre, r)` rests on.
+pub fn floor_under(centre_y: f64, r: f64) -> Object {
+    Object::Plane(Plane {
+        point_m: [0.0, centre_y + r, 0.0],
+        normal: [0.0, -1.0, 0.0],
+        albedo: 0.2,
+        texture: Texture::Stone,
+        texture_contrast: 0.5,
+    })
+}
+
+fn params(seed: u64, finish: Finish) -> SimParams {
+    let mut p = SimParams {
+        seed,
+        lit_planes: vec![0, 1],
+        ..SimParams::default()
+    };
+    if finish == Finish::Shiny {
+        // A polished surface: speckle without the spectral averaging of a rough one.
+        p.surface_roughness_m = 2e-6;
+    }
+    p
+}
+
+fn entry(
+    name: &str,
+    description: &str,
+    objects: Vec<Object>,
+    seed: u64,
+    finish: Finish,
+) -> CorpusEntry {
+    CorpusEntry {
+        name: name.to_string(),
+        spec: SimSpec {
+            mode: Mode::Sphere,
+            description: description.to_string(),
+            timestamp: "2025-06-04T10:00:00Z".to_string(),
+            calibration: two_plane_calibration(),
+            objects,
+            params: params(seed, finish),
+        },
+    }
+}
+
+/// The sphere captures of the corpus (two planes; seeds 3000 + index): balls of 60–400 mm
+/// at 0.6–2 m, centred and off-centre, matt and shiny, in the air and on a floor, and objects
+/// that are not one ball (an elliptic post, a wall, two balls) that must be refused or
+/// flagged.
+pub fn entries() -> Vec<CorpusEntry> {
+    let mut out = Vec::new();
+    let mut add = |name: &str, description: &str, objects: Vec<Object>, finish: Finish| {
+        let seed = 3000 + out.len() as u64;
+        out.push(entry(name, description, objects, seed, finish));
+    };
+    for (d, z, x, finish, tag) in [
+        (100.0, 0.8, 0.0, Finish::Matt, "matt"),
+        (200.0, 1.2, 0.0, Finish::Matt, "matt"),
+        (400.0, 2.0, 0.0, Finish::Matt, "matt"),
+        (60.0, 0.6, 0.0, Finish::Matt, "matt"),
+        (150.0, 1.0, 0.12, Finish::Matt, "offcentre"),
+        (120.0, 1.0, 0.0, Finish::Shiny, "shiny"),
+        (250.0, 1.5, -0.15, Finish::Shiny, "shiny-offcentre"),
+    ] {
+        let name = format!(
+            "sphere-d{:03}-z{:03}-{tag}-2p",
+            d as u32,
+            (z * 100.0) as u32
+        );
+        let description = format!(
+            "{} ball {d:.0} mm, centre {z:.1} m ahead{}, two planes",
+            if finish == Finish::Shiny {
+                "steel"
+            } else {
+                "matt"
+            },
+            if x != 0.0 {
+                format!(", {x:+.2} m across")
+            } else {
+                String::new()
+            }
+        );
+        add(
+            &name,
+            &description,
+            vec![ball(d, z, x, 0.2, finish)],
+            finish,
+        );
+    }
+    // On a floor: the ball rests on it, the floor's stripe beside the ball's.
+    let b = ball(160.0, 1.0, 0.0, 0.2, Finish::Matt);
+    let Object::Sphere(s) = &b else {
+        unreachable!("ball() makes a sphere")
+    };
+    let floor = floor_under(s.centre_m[1], s.radius_m);
+    add(
+        "sphere-d160-z100-floor-2p",
+        "matt ball 160 mm resting on a floor, centre 1.0 m ahead, two planes",
+        vec![b, floor],
+        Finish::Matt,
+    );
+    // Not one ball.
+    add(
+        "notsphere-elliptic-post-z100-2p",
+        "an upright post of elliptic section 240 × 160 mm (major axis across), 1.0 m ahead, in \
+         sphere mode: its sections are ellipses",
+        vec![Object::Cylinder(Cylinder {
+            axis_point_m: [0.0, 0.0, 1.1],
+            axis_direction: [0.0, 1.0, 0.0],
+            radius_m: None,
+            semi_axes_m: Some([0.12, 0.08]),
+            major_axis_direction: Some([1.0, 0.0, 0.0]),
+            extent_m: None,
+            albedo: 0.4,
+            texture: Texture::Stone,
+            texture_contrast: 0.2,
+        })],
+        Finish::Matt,
+    );
+    add(
+        "notsphere-wall-z120-2p",
+        "a flat wall 1.2 m ahead in sphere mode: straight sections",
+        vec![Object::Plane(Plane {
+            point_m: [0.0, 0.0, 1.2],
+            normal: [0.3, 0.0, -1.0],
+            albedo: 0.5,
+            texture: Texture::Stone,
+            texture_contrast: 0.2,
+        })],
+        Finish::Matt,
+    );
+    add(
+        "notsphere-two-balls-z100-2p",
+        "two matt balls of 80 mm side by side at different heights, 1.0 m ahead, one laser \
+         on each",
+        vec![
+            ball(80.0, 1.0, -0.06, -1.125, Finish::Matt),
+            ball(80.0, 1.0, 0.06, 1.125, Finish::Matt),
+        ],
+        Finish::Matt,
+    );
+    out
+}
+
+/// A random ball for the accuracy evaluation (not the corpus): diameter log-uniform in
+/// 20–400 mm, centre 0.3–2 m ahead, across the central half of the view, up to ±0.5 of the
+/// free play off the mid-plane, matt or shiny, on a floor one time in three; the two-plane
+/// reference head.
+pub fn random_sphere(seed: u64) -> SimSpec {
+    let mut rng = Pcg64::seed_from_u64(super::scene::splitmix(seed ^ 0x5a5a_5a5a));
+    let d_mm = 20.0 * (20f64).powf(rng.random::<f64>());
+    let z = 0.3 + 1.7 * rng.random::<f64>();
+    let r = d_mm * 5e-4;
+    let x = (rng.random::<f64>() - 0.5) * 0.35 * z;
+    let play = ((r - 0.025) / r).max(0.0);
+    let shift = (rng.random::<f64>() - 0.5) * play;
+    let finish = if rng.random::<f64>() < 0.3 {
+        Finish::Shiny
+    } else {
+        Finish::Matt
+    };
+    let on_floor = rng.random::<f64>() < 1.0 / 3.0;
+    let b = ball(d_mm, z, x, shift, finish);
+    let mut objects = vec![b.clone()];
+    if on_floor {
+        if let Object::Sphere(s) = &b {
+            objects.push(floor_under(s.centre_m[1], s.radius_m));
+        }
+    }
+    SimSpec {
+        mode: Mode::Sphere,
+        description: format!(
+            "random ball {d_mm:.1} mm, centre {z:.3} m ahead, {x:+.3} m across, {}{}",
+            if finish == Finish::Shiny {
+                "steel"
+            } else {
+                "matt"
+            },
+            if on_floor { ", on a floor" } else { "" }
+        ),
+        timestamp: "2025-06-04T12:00:00Z".into(),
+        calibration: two_plane_calibration(),
+        objects,
+        params: params(seed & (u64::MAX >> 1), finish),
+    }
+}

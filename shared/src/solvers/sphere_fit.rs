@@ -1,0 +1,232 @@
+//! The joint fit of a sphere to every 3-D point of every laser plane (`docs/sphere.md`,
+//! "Joint fit"; thesis §10.5's "gradient-descent" method, here by the shared
+//! Levenberg–Marquardt): minimises `Σ wⱼ·(|Xⱼ − C| − R)²/σⱼ²` over `(C, R)`, with Tukey
+//! weights `wⱼ` re-computed from the previous round's residuals so that a stray object does
+//! not pull the sphere.
+
+// `!(x > 0.0)` is deliberate throughout: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+#[allow(unused_imports)]
+use crate::real::Float;
+use crate::real::{norm, sqrt, Real, Vec3};
+
+use nalgebra::{SMatrix, SVector};
+
+use super::lm::{minimise, Evaluated, LeastSquares, LmParams, NormalEquations};
+use super::sphere_sections::{correlation_inflation, Sphere};
+use super::SolveError;
+
+/// Settings of [`fit_sphere`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SphereFitParams {
+    /// The inner Levenberg–Marquardt settings.
+    pub lm: LmParams,
+    /// Tukey constant in units of the robust scale of the σ-normalised residuals.
+    pub tuning: Real,
+    /// Reweighting rounds after the first (plain weighted) fit.
+    pub rounds: u32,
+}
+
+impl Default for SphereFitParams {
+    fn default() -> Self {
+        SphereFitParams {
+            lm: LmParams::default(),
+            tuning: 4.685,
+            rounds: 3,
+        }
+    }
+}
+
+/// Result of [`fit_sphere`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SphereFit {
+    /// The sphere.
+    pub sphere: Sphere,
+    /// Covariance of `(Cx, Cy, Cz, R)` (m²): `(JᵀWJ)⁻¹` scaled by the residuals' own variance
+    /// (`χ²/ν`: the σ-weights set the points' relative weights, the data their scale) and by
+    /// the curves' lag-one correlation (`docs/sphere.md`, "Uncertainty of the joint fit").
+    pub covariance: SMatrix<Real, 4, 4>,
+    /// `Σw·(d/σ)² / (Σw − 4)`: 1 when the residuals are as large as the points' σ predict.
+    pub reduced_chi2: Real,
+    /// Points with non-zero weight.
+    pub inliers: usize,
+    /// Points given.
+    pub points: usize,
+}
+
+impl SphereFit {
+    /// 1σ of the radius (metres).
+    pub fn sigma_radius(&self) -> Real {
+        sqrt(self.covariance[(3, 3)].max(0.0))
+    }
+}
+
+/// The problem: residuals `(|Xⱼ − C| − R)/σⱼ` with weights frozen at the previous round.
+struct Joint<'a> {
+    curves: &'a [&'a [Vec3]],
+    sigmas: &'a [&'a [Real]],
+    /// Previous round's sphere and Tukey cut (in σ units); `None` in the first round.
+    reference: Option<(Sphere, Real)>,
+}
+
+fn tukey(u: Real) -> Real {
+    if u.abs() < 1.0 {
+        let t = 1.0 - u * u;
+        t * t
+    } else {
+        0.0
+    }
+}
+
+impl Joint<'_> {
+    /// Each point with its σ and weight.
+    fn each(&self, mut f: impl FnMut(Vec3, Real, Real)) {
+        for (curve, sigmas) in self.curves.iter().zip(self.sigmas) {
+            for (p, s) in curve.iter().zip(sigmas.iter()) {
+                let w = match self.reference {
+                    None => 1.0,
+                    Some((sphere, cut)) => {
+                        tukey((norm(&(p - sphere.centre)) - sphere.radius) / (s * cut))
+                    }
+                };
+                f(*p, *s, w);
+            }
+        }
+    }
+}
+
+impl LeastSquares<4> for Joint<'_> {
+    type Params = SVector<Real, 4>;
+    type Extra = ();
+
+    fn evaluate(&self, p: &Self::Params) -> Result<(NormalEquations<4>, ()), SolveError> {
+        let centre = Vec3::new(p[0], p[1], p[2]);
+        let radius = p[3];
+        let mut jtj = SMatrix::<Real, 4, 4>::zeros();
+        let mut jtr = SVector::<Real, 4>::zeros();
+        let mut cost = 0.0;
+        let mut bad = false;
+        self.each(|x, sigma, w| {
+            if !(w > 0.0) {
+                return;
+            }
+            let d = x - centre;
+            let len = norm(&d);
+            if !(len > 0.0 && sigma > 0.0) {
+                bad = true;
+                return;
+            }
+            let inv = 1.0 / sigma;
+            let e = (len - radius) * inv;
+            let u = d / len;
+            let j = SVector::<Real, 4>::new(-u.x * inv, -u.y * inv, -u.z * inv, -inv);
+            jtj += j * j.transpose() * w;
+            jtr += j * (w * e);
+            cost += w * e * e;
+        });
+        if bad || !cost.is_finite() || !(radius > 0.0) {
+            return Err(SolveError::Degenerate);
+        }
+        Ok((NormalEquations { jtj, jtr, cost }, ()))
+    }
+
+    fn step(&self, p: &Self::Params, delta: &SVector<Real, 4>) -> Self::Params {
+        p + delta
+    }
+
+    fn step_scale(&self, p: &Self::Params) -> Real {
+        1.0 + p.norm()
+    }
+}
+
+/// Fits a sphere to the points of every curve (`curves[k]` with 1σ `sigmas[k]`, same
+/// lengths) from `start` (the sections' sphere): a σ-weighted fit, then `rounds` Tukey
+/// reweightings at the robust scale of the normalised residuals (at least 1, so that points
+/// as noisy as predicted are all kept). `scratch` (at least the total point count) holds the
+/// residuals for the median.
+///
+/// Errors: fewer than 5 points, a point with a non-positive σ, non-finite data, a singular
+/// normal matrix, no convergence.
+pub fn fit_sphere(
+    curves: &[&[Vec3]],
+    sigmas: &[&[Real]],
+    start: Sphere,
+    params: &SphereFitParams,
+    scratch: &mut [Real],
+) -> Result<SphereFit, SolveError> {
+    params.lm.validate()?;
+    if !(params.tuning > 0.0) || curves.len() != sigmas.len() {
+        return Err(SolveError::InvalidParameter);
+    }
+    let total: usize = curves.iter().map(|c| c.len()).sum();
+    if curves.iter().zip(sigmas).any(|(c, s)| c.len() != s.len()) {
+        return Err(SolveError::InvalidParameter);
+    }
+    if total < 5 {
+        return Err(SolveError::TooFewPoints);
+    }
+    let buf = scratch
+        .get_mut(..total)
+        .ok_or(SolveError::ScratchTooSmall)?;
+    let mut problem = Joint {
+        curves,
+        sigmas,
+        reference: None,
+    };
+    let p0 = SVector::<Real, 4>::new(start.centre.x, start.centre.y, start.centre.z, start.radius);
+    let (mut min, _) = minimise(&problem, Evaluated::at(&problem, p0)?, &params.lm)?;
+    for _ in 0..params.rounds {
+        let sphere = sphere_of(&min.params);
+        let mut k = 0;
+        problem.each(|x, s, _| {
+            buf[k] = ((norm(&(x - sphere.centre)) - sphere.radius) / s).abs();
+            k += 1;
+        });
+        let mid = buf.len() / 2;
+        let (_, median, _) = buf.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
+        let scale = (1.4826 * *median).max(1.0);
+        problem.reference = Some((sphere, params.tuning * scale));
+        let start = Evaluated::at(&problem, min.params)?;
+        min = minimise(&problem, start, &params.lm)?.0;
+    }
+    let sphere = sphere_of(&min.params);
+    let (mut weight_sum, mut inliers) = (0.0, 0usize);
+    problem.each(|_, _, w| {
+        weight_sum += w;
+        if w > 0.0 {
+            inliers += 1;
+        }
+    });
+    if !(weight_sum > 4.0) {
+        return Err(SolveError::TooFewPoints);
+    }
+    let reduced_chi2 = min.normal.cost / (weight_sum - 4.0);
+    // Residual correlation along each curve (speckle, stripe bending) over the inliers.
+    let cut = problem.reference.map_or(Real::INFINITY, |(_, c)| c);
+    let mut inflation: Real = 1.0;
+    for (curve, sig) in curves.iter().zip(sigmas) {
+        let residuals = curve
+            .iter()
+            .zip(sig.iter())
+            .map(|(x, s)| (norm(&(x - sphere.centre)) - sphere.radius) / s);
+        let f = correlation_inflation(residuals, cut);
+        inflation = inflation.max(f);
+    }
+    let covariance =
+        min.normal.jtj.try_inverse().ok_or(SolveError::Degenerate)? * (reduced_chi2 * inflation);
+    Ok(SphereFit {
+        sphere,
+        covariance,
+        reduced_chi2,
+        inliers,
+        points: total,
+    })
+}
+
+fn sphere_of(p: &SVector<Real, 4>) -> Sphere {
+    Sphere {
+        centre: Vec3::new(p[0], p[1], p[2]),
+        radius: p[3],
+    }
+}
