@@ -19,7 +19,7 @@ use embassy_futures::select::{select, select3, Either, Either3};
 use heapless::Deque;
 use tangent_core::calibration::Calibration;
 use tangent_core::instrument;
-use tangent_core::measurement::Mode;
+use tangent_core::measurement::{Measurement, Mode};
 use tangent_core::protocol::codes::Failure;
 use tangent_core::protocol::codes::HISTORY_LEN;
 use tangent_core::protocol::{
@@ -29,10 +29,10 @@ use tangent_core::protocol::{
 };
 
 use crate::exposure::{self, Exposure};
-use crate::measure::{FramePair, Measurer};
+use crate::measure::{FramePair, Measurer, StreamMeasurer};
 use crate::ports::{
-    Board, CalibrationStore, Camera, CameraError, Clock, Devices, Laser, Link, Strobe, Trigger,
-    Watchdog,
+    Board, CalibrationStore, Camera, CameraError, Clock, Devices, Laser, Link, RowSink, Strobe,
+    Trigger, Watchdog,
 };
 use crate::stats::Welford;
 
@@ -452,45 +452,112 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
         }
     }
 
-    /// Captures a pair and runs the pipeline on it.
+    /// Captures a pair and runs the pipeline on it: streamed when the measurer streams (the
+    /// laser-off frame into the measurer's memory, the laser-on frame through it as it is
+    /// read out), else stored in the frame buffers and measured afterwards.
     pub async fn measure_once(&mut self) -> Result<Reading, DeviceError> {
-        if self.calibration.is_none() {
-            return Err(DeviceError {
-                code: ErrorCode::NoCalibration,
-                detail: 0,
-            });
-        }
-        let info = self.capture_pair().await?;
-        let cal = self.calibration.as_ref().ok_or(DeviceError {
+        let no_calibration = DeviceError {
             code: ErrorCode::NoCalibration,
             detail: 0,
-        })?;
-        let pair = FramePair {
-            off: self.off,
-            on: self.on,
-            width: info.width as usize,
-            height: info.height as usize,
-            row_offset: info.row_offset as usize,
-            laser_mask: info.laser_mask,
         };
-        let t0 = self.dev.clock.now_us();
-        let result = self.measurer.measure(self.mode, &pair, cal);
-        let t1 = self.dev.clock.now_us();
-        self.last_pipeline_us = t1.saturating_sub(t0);
+        if self.calibration.is_none() {
+            return Err(no_calibration);
+        }
+        let (info, result) = if self.measurer.streaming().is_some() {
+            self.measure_streamed().await?
+        } else {
+            let info = self.capture_pair().await?;
+            let cal = self.calibration.as_ref().ok_or(no_calibration)?;
+            let pair = FramePair {
+                off: self.off,
+                on: self.on,
+                width: info.width as usize,
+                height: info.height as usize,
+                row_offset: info.row_offset as usize,
+                laser_mask: info.laser_mask,
+            };
+            let t0 = self.dev.clock.now_us();
+            let result = self.measurer.measure(self.mode, &pair, cal);
+            self.last_pipeline_us = self.dev.clock.now_us().saturating_sub(t0);
+            (info, result)
+        };
         B::log(format_args!(
             "pipeline capture={} time_us={}",
             info.capture, self.last_pipeline_us
         ));
         let measurement = result.map_err(|failure| failure.device_error())?;
+        let calib_id = self.calibration.as_ref().ok_or(no_calibration)?.id;
         self.seq = self.seq.wrapping_add(1).max(1);
         Ok(Reading {
             seq: self.seq,
             timestamp_ms: info.timestamp_ms,
-            calib_id: cal.id,
+            calib_id,
             exposure_us: info.exposure_us,
             measurement,
             stats: None,
         })
+    }
+
+    /// The streamed measurement: the laser-off frame into the measurer, the laser-on frame's
+    /// rows through it as they arrive. `last_pipeline_us` is the work after the last pixel.
+    /// The frame buffers do not hold this pair (`ReadFrameChunk` answers `NoFrames`).
+    async fn measure_streamed(
+        &mut self,
+    ) -> Result<(FrameSetInfo, Result<Measurement, Failure>), DeviceError> {
+        let g = self.dev.camera.geometry();
+        let exposure_us = self.exposure.current();
+        let mask = self.laser_mask();
+        self.frames = None;
+        let cal = self.calibration.as_ref().ok_or(DeviceError {
+            code: ErrorCode::NoCalibration,
+            detail: 0,
+        })?;
+        let Some(measurer) = self.measurer.streaming() else {
+            return Err(DeviceError {
+                code: ErrorCode::CameraFailure,
+                detail: CameraError::BufferSize.code(),
+            });
+        };
+        let d = &mut self.dev;
+        let off = measurer
+            .begin(g, cal)
+            .map_err(|failure| failure.device_error())?;
+        expose(&mut d.camera, &mut d.laser, &d.clock, 0, exposure_us, off).await?;
+        let timestamp_ms = d.clock.now_ms();
+        let mut sink = PeakSink {
+            measurer: &mut *measurer,
+            width: g.width as usize,
+            row: 0,
+            peak: 0,
+        };
+        expose_rows(
+            &mut d.camera,
+            &mut d.laser,
+            &d.clock,
+            mask,
+            exposure_us,
+            self.on,
+            &mut sink,
+        )
+        .await?;
+        let peak = sink.peak;
+        self.exposure.update(peak);
+        let t0 = d.clock.now_us();
+        let result = measurer.finish(self.mode);
+        self.last_pipeline_us = d.clock.now_us().saturating_sub(t0);
+        self.capture_no = self.capture_no.wrapping_add(1);
+        let info = FrameSetInfo {
+            capture: self.capture_no,
+            width: g.width,
+            height: g.height,
+            row_offset: g.row_offset,
+            bit_depth: 8,
+            exposure_us,
+            timestamp_ms,
+            laser_mask: mask,
+            calib_id: self.calibration.as_ref().map(|c| c.id),
+        };
+        Ok((info, result))
     }
 
     /// Lasers to light: one per calibrated plane that the board can drive (all the
@@ -570,7 +637,29 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
     }
 }
 
-/// One exposure with the lasers of `mask`, guarded (see the module documentation).
+/// Forwards the laser-on rows to the measurer and keeps the brightest pixel of every
+/// [`PEAK_ROW_STEP`]-th row, for the auto-exposure.
+struct PeakSink<'m> {
+    measurer: &'m mut dyn StreamMeasurer,
+    width: usize,
+    row: usize,
+    peak: u8,
+}
+
+impl RowSink for PeakSink<'_> {
+    fn rows(&mut self, rows: &[u8]) {
+        for row in rows.chunks_exact(self.width.max(1)) {
+            if self.row.is_multiple_of(PEAK_ROW_STEP) {
+                self.peak = self.peak.max(exposure::peak(row, self.width, 1));
+            }
+            self.row += 1;
+        }
+        self.measurer.rows(rows);
+    }
+}
+
+/// One exposure with the lasers of `mask`, guarded (see the module documentation), read
+/// into `buf`.
 pub async fn expose<C: Camera, L: Laser, K: Clock>(
     camera: &mut C,
     laser: &mut L,
@@ -578,6 +667,32 @@ pub async fn expose<C: Camera, L: Laser, K: Clock>(
     mask: u8,
     exposure_us: u32,
     buf: &mut [u8],
+) -> Result<(), DeviceError> {
+    guarded::<C, L, K, dyn RowSink>(camera, laser, clock, mask, exposure_us, buf, None).await
+}
+
+/// One exposure like [`expose`] whose rows go to `sink` as they are read out
+/// ([`Camera::capture_rows`]; `buf` is the frame buffer of a camera that does not stream).
+pub async fn expose_rows<C: Camera, L: Laser, K: Clock, S: RowSink + ?Sized>(
+    camera: &mut C,
+    laser: &mut L,
+    clock: &K,
+    mask: u8,
+    exposure_us: u32,
+    buf: &mut [u8],
+    sink: &mut S,
+) -> Result<(), DeviceError> {
+    guarded(camera, laser, clock, mask, exposure_us, buf, Some(sink)).await
+}
+
+async fn guarded<C: Camera, L: Laser, K: Clock, S: RowSink + ?Sized>(
+    camera: &mut C,
+    laser: &mut L,
+    clock: &K,
+    mask: u8,
+    exposure_us: u32,
+    buf: &mut [u8],
+    sink: Option<&mut S>,
 ) -> Result<(), DeviceError> {
     enum Guard {
         Laser,
@@ -598,7 +713,13 @@ pub async fn expose<C: Camera, L: Laser, K: Clock>(
                 }
             }
         };
-        let r = select(camera.capture(exposure_us, &strobe, buf), guard).await;
+        let capture = async {
+            match sink {
+                Some(sink) => camera.capture_rows(exposure_us, &strobe, buf, sink).await,
+                None => camera.capture(exposure_us, &strobe, buf).await,
+            }
+        };
+        let r = select(capture, guard).await;
         let tripped = strobe.tripped();
         let err = |code, detail| Err(DeviceError { code, detail });
         match r {

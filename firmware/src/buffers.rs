@@ -1,6 +1,7 @@
-//! The firmware's static buffers: frames, the protocol's receive buffer and the pipeline's
-//! working memory, declared for every board by one macro, [`board_buffers!`], in the RAM
-//! regions the board chooses.
+//! The firmware's static buffers: stored frames, the protocol's receive buffer and the
+//! pipeline's working memory (the laser-off frame that becomes the difference frame, the run
+//! tables, the per-point buffers, the object features), declared for every board by one
+//! macro, [`board_buffers!`], in the RAM regions the board chooses.
 
 /// A frame buffer, aligned for DMA (32 bytes: a word for the DCMI's word transfers, a cache
 /// line of the Cortex-M7).
@@ -9,18 +10,22 @@
 pub struct FrameBuffer<const N: usize>(pub [u8; N]);
 
 /// Defines `take_buffers(pixels)`, which hands out the board's buffers once (`None`
-/// afterwards): the application's [`crate::app::Buffers`] (two frames of `frame_bytes` bytes
-/// and the protocol receive buffer) and the pipeline's [`tangent_core::pipeline::Workspace`]
-/// for `pixels` pixels (at most `frame_bytes`) and `points` curve points. Each buffer is a
-/// static, with the attributes given before its name (e.g. the link section of a RAM region).
+/// afterwards): the application's [`crate::app::Buffers`] (a stored laser-off frame of
+/// `off_bytes` and laser-on frame of `on_bytes` — for raw captures and cameras that do not
+/// stream; either may be 0 — and the protocol receive buffer) and the pipeline's
+/// [`tangent_core::pipeline::Workspace`] for frames of `pixels` pixels (at most
+/// `diff_bytes`: the laser-off frame the streamed subtraction turns into the difference) and
+/// `points` curve points. Each buffer is a static, with the attributes given before its name
+/// (e.g. the link section of a RAM region).
 ///
 /// ```ignore
 /// crate::buffers::board_buffers! {
-///     frame_bytes = FRAME_BYTES, points = POINTS;
-///     #[link_section = ".axisram"] frames;
+///     off_bytes = 0, on_bytes = WINDOW_BYTES, diff_bytes = FRAME_BYTES, points = POINTS;
+///     #[link_section = ".axisram"] off;
+///     #[link_section = ".axisram"] on;
 ///     #[link_section = ".axisram"] diff;
-///     #[link_section = ".sram123"] labels;
-///     #[link_section = ".axisram"] small;
+///     #[link_section = ".sram123"] runs;
+///     #[link_section = ".sram123"] small;
 ///     objects;
 /// }
 /// ```
@@ -30,10 +35,12 @@ pub struct FrameBuffer<const N: usize>(pub [u8; N]);
 )]
 macro_rules! board_buffers {
     (
-        frame_bytes = $frame_bytes:expr, points = $points:expr;
-        $(#[$frames:meta])* frames;
+        off_bytes = $off_bytes:expr, on_bytes = $on_bytes:expr, diff_bytes = $diff_bytes:expr,
+        points = $points:expr;
+        $(#[$off:meta])* off;
+        $(#[$on:meta])* on;
         $(#[$diff:meta])* diff;
-        $(#[$labels:meta])* labels;
+        $(#[$runs:meta])* runs;
         $(#[$small:meta])* small;
         $(#[$objects:meta])* objects;
     ) => {
@@ -49,18 +56,22 @@ macro_rules! board_buffers {
             use core::sync::atomic::{AtomicBool, Ordering};
             use tangent_core::protocol::MAX_FRAME_LEN;
             use $crate::buffers::FrameBuffer;
-            use tangent_core::pipeline::{Objects, SmallBuffers, Workspace, NO_OBJECTS};
+            use tangent_core::pipeline::{
+                Objects, RunBuffers, SmallBuffers, Workspace, NO_OBJECTS,
+            };
 
-            // (Not `FRAME_BYTES`: the caller's constant may have that name.)
-            const BYTES: usize = $frame_bytes;
+            const OFF_BYTES: usize = $off_bytes;
+            const ON_BYTES: usize = $on_bytes;
+            const DIFF_BYTES: usize = $diff_bytes;
             static TAKEN: AtomicBool = AtomicBool::new(false);
-            $(#[$frames])*
-            static mut FRAMES: [FrameBuffer<BYTES>; 2] =
-                [FrameBuffer([0; BYTES]), FrameBuffer([0; BYTES])];
+            $(#[$off])*
+            static mut OFF: FrameBuffer<OFF_BYTES> = FrameBuffer([0; OFF_BYTES]);
+            $(#[$on])*
+            static mut ON: FrameBuffer<ON_BYTES> = FrameBuffer([0; ON_BYTES]);
             $(#[$diff])*
-            static mut DIFF: [u8; BYTES] = [0; BYTES];
-            $(#[$labels])*
-            static mut LABELS: [u16; BYTES] = [0; BYTES];
+            static mut DIFF: FrameBuffer<DIFF_BYTES> = FrameBuffer([0; DIFF_BYTES]);
+            $(#[$runs])*
+            static mut RUNS: RunBuffers = RunBuffers::new();
             $(#[$small])*
             static mut SMALL: SmallBuffers<{ $points }> = SmallBuffers::new();
             $(#[$objects])*
@@ -70,29 +81,28 @@ macro_rules! board_buffers {
             if TAKEN.swap(true, Ordering::AcqRel) {
                 return None;
             }
-            let pixels = pixels.min(BYTES);
+            let pixels = pixels.min(DIFF_BYTES);
             // SAFETY: `TAKEN` lets this point be reached once, so these are the only
             // references to the statics, for the program's life. A board may place them in
             // NOLOAD sections (not initialised at reset): they are zeroed in place (all-zero
             // bytes are a valid value of every buffer type) rather than built on the stack.
             unsafe {
-                write_bytes(addr_of_mut!(FRAMES), 0, 1);
+                write_bytes(addr_of_mut!(OFF), 0, 1);
+                write_bytes(addr_of_mut!(ON), 0, 1);
                 write_bytes(addr_of_mut!(DIFF), 0, 1);
-                write_bytes(addr_of_mut!(LABELS), 0, 1);
+                write_bytes(addr_of_mut!(RUNS), 0, 1);
                 write_bytes(addr_of_mut!(SMALL), 0, 1);
                 write_bytes(addr_of_mut!(OBJECTS), 0, 1);
-                let [off, on] = &mut *addr_of_mut!(FRAMES);
                 let buffers = $crate::app::Buffers {
-                    off: &mut off.0,
-                    on: &mut on.0,
+                    off: &mut (*addr_of_mut!(OFF)).0,
+                    on: &mut (*addr_of_mut!(ON)).0,
                     rx: &mut *addr_of_mut!(RX),
                 };
-                let diff = &mut *addr_of_mut!(DIFF);
-                let labels = &mut *addr_of_mut!(LABELS);
+                let diff = &mut (*addr_of_mut!(DIFF)).0;
                 let workspace = Workspace::from_parts(
                     &mut diff[..pixels],
-                    &mut labels[..pixels],
                     &mut *addr_of_mut!(OBJECTS),
+                    &mut *addr_of_mut!(RUNS),
                     &mut *addr_of_mut!(SMALL),
                 );
                 Some((buffers, workspace))
@@ -110,10 +120,11 @@ pub(crate) use board_buffers;
 mod tests {
     mod board {
         crate::buffers::board_buffers! {
-            frame_bytes = 64, points = 8;
-            frames;
+            off_bytes = 64, on_bytes = 0, diff_bytes = 64, points = 8;
+            off;
+            on;
             diff;
-            labels;
+            runs;
             small;
             objects;
         }
@@ -122,10 +133,12 @@ mod tests {
     #[test]
     fn buffers_are_handed_out_once() {
         let (buffers, workspace) = board::take_buffers(48).expect("the first time");
-        assert_eq!((buffers.off.len(), buffers.on.len()), (64, 64));
+        assert_eq!((buffers.off.len(), buffers.on.len()), (64, 0));
         assert_eq!(buffers.off.as_ptr() as usize % 32, 0, "aligned for DMA");
+        assert_eq!(workspace.diff.as_ptr() as usize % 32, 0, "aligned for DMA");
         assert_eq!(buffers.rx.len(), tangent_core::protocol::MAX_FRAME_LEN);
-        assert_eq!((workspace.diff.len(), workspace.labels.len()), (48, 48));
+        assert_eq!(workspace.diff.len(), 48);
+        assert!(!workspace.runs.is_empty() && !workspace.candidate_runs.is_empty());
         assert_eq!(workspace.curve.len(), 8);
         assert!(board::take_buffers(48).is_none(), "the second time");
     }

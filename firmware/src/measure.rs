@@ -2,15 +2,23 @@
 //!
 //! [`Measurer`] is the seam between the application and the shared pipeline
 //! (`tangent_core::pipeline`), so the application can be tested with a measurer of known
-//! behaviour and the pipeline's working memory stays owned by the board's `main`.
+//! behaviour and the pipeline's working memory stays owned by the board's `main`. A measurer
+//! that streams ([`StreamMeasurer`], the pipeline's) takes the laser-off frame into its own
+//! memory and the laser-on frame row block by row block as the camera reads it out
+//! (`tangent_core::pipeline::ProfileStream`), so only the work after the last pixel is left
+//! when the frame is in.
 
 use tangent_core::calibration::Calibration;
 use tangent_core::image::Frame;
 use tangent_core::instrument::{self, InstrumentParams};
 use tangent_core::measurement::{Measurement, Mode};
-use tangent_core::pipeline::{self, PipelineConfig, PipelineError, Stage, Workspace};
+use tangent_core::pipeline::{
+    self, PipelineConfig, PipelineError, ProfileStream, Stage, Workspace,
+};
 use tangent_core::protocol::codes::Failure;
 use tangent_core::real::Real;
+
+use crate::ports::{Geometry, RowSink};
 
 /// A captured frame pair, 8-bit, row-major, `width` bytes per row.
 #[derive(Debug, Clone, Copy)]
@@ -40,6 +48,29 @@ pub trait Measurer {
         pair: &FramePair<'_>,
         calibration: &Calibration,
     ) -> Result<Measurement, Failure>;
+
+    /// The streaming form of this measurer, if it has one: the application then captures
+    /// the laser-off frame into it and streams the laser-on frame through it instead of
+    /// storing the pair.
+    fn streaming(&mut self) -> Option<&mut dyn StreamMeasurer> {
+        None
+    }
+}
+
+/// A measurer fed as the frames are read out: [`StreamMeasurer::begin`] gives the buffer the
+/// laser-off frame is captured into, the laser-on frame's rows arrive through [`RowSink`],
+/// and [`StreamMeasurer::finish`] does the work after the last pixel.
+pub trait StreamMeasurer: RowSink {
+    /// Starts a pair of frames of `geometry` measured with `calibration` (of the full
+    /// sensor); returns where the laser-off frame goes (`geometry.frame_len()` bytes).
+    fn begin(
+        &mut self,
+        geometry: Geometry,
+        calibration: &Calibration,
+    ) -> Result<&mut [u8], Failure>;
+    /// The measurement with the instrument of `mode`, once the laser-on frame's last row is
+    /// in.
+    fn finish(&mut self, mode: Mode) -> Result<Measurement, Failure>;
 }
 
 /// The shared pipeline (`tangent_core::instrument`, the instrument of the device's mode) with
@@ -55,14 +86,22 @@ pub struct PipelineMeasurer<'w> {
     /// Durations of the last measurement's stages (µs of `stage_clock`; zero without a clock
     /// and for the stages a failure kept from running).
     pub last_stages: StageTimes,
+    /// The pair being streamed: its state, its calibration (of the frames' window) and the
+    /// first error the rows met.
+    stream: Option<(ProfileStream, Calibration, Option<PipelineError>)>,
 }
 
 /// Durations of the stages of the last measurement (µs of the measurer's `stage_clock`), for
-/// the instruction-count benchmark: the image stages in the order of
-/// [`pipeline::Stage`] (each from the end of the previous one), then the solver.
+/// the instruction-count benchmark: the work during the read-out, then the image stages in
+/// the order of [`pipeline::Stage`] (each from the end of the previous one), then the solver.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct StageTimes {
-    /// Subtraction, threshold, segmentation, selection, curve extraction, triangulation.
+    /// Work on the laser-on rows as they arrive (subtraction, histogram, candidate runs):
+    /// the sum over the row blocks, 0 for a stored pair.
+    pub readout_us: u64,
+    /// After the last pixel: statistics and darkness tests, threshold, segmentation,
+    /// selection, curve extraction, triangulation (for a stored pair the first includes the
+    /// whole subtraction).
     pub image_us: [u64; 6],
     /// The mode's solver ([`instrument::solve`]).
     pub solver_us: u64,
@@ -77,7 +116,40 @@ impl<'w> PipelineMeasurer<'w> {
             params: InstrumentParams::default(),
             stage_clock: None,
             last_stages: StageTimes::default(),
+            stream: None,
         }
+    }
+
+    fn now(&self) -> u64 {
+        self.stage_clock.map_or(0, |clock| clock())
+    }
+
+    /// The image stages' times from `start` and the solver's, then the reading: the part of a
+    /// measurement after the profile's stages have been probed.
+    fn solve(
+        &mut self,
+        mode: Mode,
+        profile: Result<pipeline::Profile, PipelineError>,
+        cal: &Calibration,
+    ) -> Result<Measurement, Failure> {
+        let profile = profile.map_err(|e| Failure::of(&e))?;
+        let t = self.now();
+        // 8-bit frames: full scale 255.
+        let solved = instrument::solve(mode, &profile, 255, cal, &self.params, &mut self.ws);
+        self.last_stages.solver_us = self.now().saturating_sub(t);
+        solved.map_err(|e| Failure::of(&e))
+    }
+}
+
+/// Index of a stage in [`StageTimes::image_us`].
+fn stage_index(stage: Stage) -> usize {
+    match stage {
+        Stage::Subtracted => 0,
+        Stage::Thresholded => 1,
+        Stage::Segmented => 2,
+        Stage::Selected => 3,
+        Stage::Extracted => 4,
+        Stage::Triangulated => 5,
     }
 }
 
@@ -121,29 +193,80 @@ impl Measurer for PipelineMeasurer<'_> {
         let profile =
             pipeline::extract_profile_probed(&off, &on, cal, &self.config, &mut self.ws, |stage| {
                 let t = now();
-                let i = match stage {
-                    Stage::Subtracted => 0,
-                    Stage::Thresholded => 1,
-                    Stage::Segmented => 2,
-                    Stage::Selected => 3,
-                    Stage::Extracted => 4,
-                    Stage::Triangulated => 5,
-                };
-                stages.image_us[i] = t.saturating_sub(last);
+                stages.image_us[stage_index(stage)] = t.saturating_sub(last);
                 last = t;
             });
         self.last_stages = stages;
-        let profile = profile.map_err(|e| Failure::of(&e))?;
-        let t = now();
-        let solved = instrument::solve(
-            mode,
-            &profile,
-            on.max_value(),
-            cal,
-            &self.params,
-            &mut self.ws,
-        );
-        self.last_stages.solver_us = now().saturating_sub(t);
-        solved.map_err(|e| Failure::of(&e))
+        self.solve(mode, profile, cal)
+    }
+
+    fn streaming(&mut self) -> Option<&mut dyn StreamMeasurer> {
+        Some(self)
+    }
+}
+
+impl RowSink for PipelineMeasurer<'_> {
+    fn rows(&mut self, rows: &[u8]) {
+        let t = self.now();
+        if let Some((stream, _, error @ None)) = &mut self.stream {
+            if let Err(e) = stream.push_rows(&mut self.ws, rows) {
+                *error = Some(e);
+            }
+        }
+        self.last_stages.readout_us += self.now().saturating_sub(t);
+    }
+}
+
+impl StreamMeasurer for PipelineMeasurer<'_> {
+    fn begin(
+        &mut self,
+        geometry: Geometry,
+        calibration: &Calibration,
+    ) -> Result<&mut [u8], Failure> {
+        let (height, row_offset) = (geometry.height as usize, geometry.row_offset as usize);
+        let cal = if row_offset == 0 && calibration.camera.height as usize == height {
+            calibration.clone()
+        } else {
+            window_calibration(calibration, row_offset, height)
+        };
+        self.last_stages = StageTimes::default();
+        let stream = ProfileStream::begin(&mut self.ws, &cal, &self.config, 8)
+            .map_err(|e| Failure::of(&e))?;
+        self.stream = Some((stream, cal, None));
+        let len = geometry.frame_len();
+        let n = self.ws.diff.len();
+        self.ws
+            .diff
+            .get_mut(..len)
+            .ok_or(Failure::of(&PipelineError::WorkspaceTooSmall {
+                buffer: "diff",
+                needed: len,
+                actual: n,
+            }))
+    }
+
+    fn finish(&mut self, mode: Mode) -> Result<Measurement, Failure> {
+        if !instrument::supports(mode) {
+            return Err(Failure::UnsupportedMode(mode));
+        }
+        let Some((stream, cal, error)) = self.stream.take() else {
+            return Err(Failure::of(&PipelineError::Frame(
+                tangent_core::image::FrameError::Empty,
+            )));
+        };
+        if let Some(e) = error {
+            return Err(Failure::of(&e));
+        }
+        let clock = self.stage_clock;
+        let now = move || clock.map_or(0, |clock| clock());
+        let mut stages = self.last_stages;
+        let mut last = now();
+        let profile = stream.finish_probed(&mut self.ws, &cal, &self.config, |stage| {
+            let t = now();
+            stages.image_us[stage_index(stage)] = t.saturating_sub(last);
+            last = t;
+        });
+        self.last_stages = stages;
+        self.solve(mode, profile, &cal)
     }
 }

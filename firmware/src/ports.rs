@@ -102,6 +102,17 @@ impl CameraError {
     }
 }
 
+/// Rows per block in which a camera hands a frame over ([`Camera::capture_rows`]): the
+/// pipeline's ([`tangent_core::pipeline::BLOCK_ROWS`]).
+pub const BLOCK_ROWS: usize = tangent_core::pipeline::BLOCK_ROWS;
+
+/// Receives a frame's rows as the camera reads them out: whole rows of the geometry's
+/// width, in order, in blocks ([`BLOCK_ROWS`] rows but the last).
+pub trait RowSink {
+    /// The next rows.
+    fn rows(&mut self, rows: &[u8]);
+}
+
 /// The camera: exposes and reads 8-bit frames of a fixed [`Geometry`].
 pub trait Camera {
     /// Size and position of the frames.
@@ -115,6 +126,27 @@ pub trait Camera {
         strobe: &Strobe<'_, L, C>,
         buf: &mut [u8],
     ) -> Result<(), CameraError>;
+
+    /// Exposes one frame like [`Camera::capture`] and hands its rows to `sink` in blocks of
+    /// [`BLOCK_ROWS`] rows as they are read out, so the pipeline works during the read-out.
+    /// This default reads the whole frame into `buf` first and hands it over afterwards;
+    /// a camera that streams (the H743's DCMI line blocks, the emulated board) overrides it
+    /// and needs no `buf`.
+    async fn capture_rows<L: Laser, C: Clock, S: RowSink + ?Sized>(
+        &mut self,
+        exposure_us: u32,
+        strobe: &Strobe<'_, L, C>,
+        buf: &mut [u8],
+        sink: &mut S,
+    ) -> Result<(), CameraError> {
+        self.capture(exposure_us, strobe, buf).await?;
+        let g = self.geometry();
+        let frame = buf.get(..g.frame_len()).ok_or(CameraError::BufferSize)?;
+        for block in frame.chunks(BLOCK_ROWS * (g.width as usize).max(1)) {
+            sink.rows(block);
+        }
+        Ok(())
+    }
 }
 
 /// Where the calibration lives between power cycles.

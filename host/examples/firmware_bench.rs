@@ -2,9 +2,12 @@
 //!
 //! Renders a few corpus captures with the simulator, writes them as 8-bit PGMs, runs the
 //! emulated firmware (`cargo firmware-qemu` first) with `-icount shift=0` in `--bench`
-//! mode, and prints the pipeline's instructions per frame pair, per pixel and per stage —
-//! once on the full 752 × 480 frames and once on the H743 board's read-out window (rows
-//! 160–319, `--window 160`). Under `-icount shift=0` QEMU advances its virtual clock 1 ns per
+//! mode, and prints the pipeline's instructions per frame pair — during the read-out (the
+//! emulated camera hands the laser-on frame over in line blocks, as the H743's DMA does; per
+//! pixel, against the pixel clock's budget) and after the last pixel (per stage) — and the
+//! trigger → reading latency from the sensor's timing, on the H743 board's read-out window
+//! (`h743::WINDOW`: the whole 752 × 480 frame).
+//! Under `-icount shift=0` QEMU advances its virtual clock 1 ns per
 //! guest instruction, and the firmware times the pipeline with SysTick (25 MHz: one tick per
 //! 40 instructions), so the microseconds it reports are thousands of instructions. The
 //! firmware first times a loop of known length to check that scale. Method and results:
@@ -18,13 +21,26 @@ use std::path::{Path, PathBuf};
 use tangent_core::protocol::codes::Failure;
 use tangent_core::protocol::{calibration_record, WireCalibration};
 use tangent_firmware::board::h743;
+use tangent_firmware::exposure::DEFAULT_EXPOSURE_US;
+use tangent_firmware::mt9v034::{HBLANK, VBLANK, WIDTH};
 use tangent_host::simulate::{corpus, simulate};
 
-/// The H743 board's read-out window: (first sensor row, rows).
+/// The H743 board's read-out window: (first sensor row, rows) — the whole frame.
 const WINDOW: (usize, usize) = (h743::WINDOW.first_row as usize, h743::WINDOW.rows as usize);
 
+/// Core clock of the H743 (Hz) and pixel clock of the sensor: the read-out's budget per pixel.
+const CORE_HZ: f64 = 480e6;
+/// Pixel clock of the sensor module (Hz).
+const PIXCLK_HZ: f64 = h743::PIXCLK_HZ as f64;
+
+/// Read-out time of a frame of `rows` rows (s): `(rows + VBLANK)` row times of
+/// `(WIDTH + HBLANK)` pixel clocks (MT9V034 datasheet, frame timing).
+fn readout_s(rows: usize) -> f64 {
+    (rows as f64 + VBLANK as f64) * (WIDTH as f64 + HBLANK as f64) / PIXCLK_HZ
+}
+
 const STAGES: [&str; 7] = [
-    "subtraction + histogram",
+    "statistics + darkness tests",
     "threshold",
     "segmentation",
     "selection",
@@ -86,9 +102,13 @@ fn main() {
     std::fs::write(&cal_path, &rec[..n]).expect("write calibration");
 
     let mut failed = false;
-    for (label, window) in [("full frame", None), ("H743 window", Some(WINDOW))] {
+    {
+        let (label, window) = (
+            "H743 layout: 752 × 480, streamed in 16-row blocks",
+            Some(WINDOW),
+        );
         let mut args = format!("--bench --calib {}", cal_path.display());
-        if let Some((row, _)) = window {
+        if let Some((row, _)) = window.filter(|&(row, _)| row > 0) {
             args += &format!(" --window {row}");
         }
         let mut sizes = Vec::new();
@@ -111,8 +131,10 @@ fn main() {
         failed |= !out.status.success();
         let text = String::from_utf8_lossy(&out.stderr).into_owned();
         println!("## {label}\n\n{text}");
-        println!("| capture | pixels | instructions (pipeline) | per pixel | at 480 MHz, 1 IPC | result |");
-        println!("|---|---|---|---|---|---|");
+        println!(
+            "| capture | pixels | during read-out | per pixel | after the last pixel | at 480 MHz, 1 IPC | trigger → reading | result |"
+        );
+        println!("|---|---|---|---|---|---|---|---|");
         let mut stage_rows = Vec::new();
         for line in text.lines().filter(|l| l.starts_with("bench scene=")) {
             let field = |k: &str| {
@@ -122,8 +144,15 @@ fn main() {
             };
             let i: usize = field("scene=").parse().unwrap_or(0);
             let us: f64 = field("pipeline_us=").parse().unwrap_or(0.0);
+            let readout: f64 = field("readout_us=").parse::<f64>().unwrap_or(0.0) * 1000.0;
             let (name, pixels) = &sizes[i.min(sizes.len() - 1)];
             let instr = us * 1000.0;
+            // Snapshot mode: exposure, read-out, exposure, read-out, then the work after the
+            // last pixel (at 1 instruction per cycle).
+            let rows = pixels / WIDTH as usize;
+            let latency_ms = (2.0 * (DEFAULT_EXPOSURE_US as f64 * 1e-6 + readout_s(rows))
+                + instr / CORE_HZ)
+                * 1e3;
             let result = match field("diameter_m=").parse::<f64>() {
                 Ok(d) => format!("d = {:.1} mm", d * 1e3),
                 Err(_) => match field("detail=").parse::<u32>() {
@@ -132,10 +161,12 @@ fn main() {
                 },
             };
             println!(
-                "| {name} | {pixels} | {:.2} M | {:.2} | {:.1} ms | {result} |",
+                "| {name} | {pixels} | {:.2} M | {:.2} (budget {:.1}) | {:.2} M | {:.2} ms | {latency_ms:.1} ms | {result} |",
+                readout / 1e6,
+                readout / *pixels as f64,
+                CORE_HZ / PIXCLK_HZ,
                 instr / 1e6,
-                instr / *pixels as f64,
-                instr / 480e6 * 1e3
+                instr / CORE_HZ * 1e3
             );
             // "stages_us=[a, b, c, d, e, f]" (split by the whitespace after the commas).
             if let Some(start) = line.find("stages_us=[") {

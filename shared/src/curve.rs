@@ -213,7 +213,6 @@ pub fn extract_window<P: Pixel>(
     let saturation = params.saturation.unwrap_or(diff.max_value()) as Real;
     let (width, height) = (diff.width(), diff.height());
     let mut n = 0usize;
-    let mut profile = [0.0 as Real; PROFILE_CAP];
     let columns = columns.start.min(width)..columns.end.min(width);
     let rows = rows.start.min(height)..rows.end.min(height);
     for x in columns {
@@ -237,41 +236,7 @@ pub fn extract_window<P: Pixel>(
         }
         for (k, slot) in best.iter().enumerate().take(selected.len()) {
             let Some((row, _)) = *slot else { continue };
-            let lo = row.saturating_sub(hw);
-            let hi = (row + hw).min(height - 1);
-            let len = hi - lo + 1;
-            let Some(buf) = profile.get_mut(..len) else {
-                continue;
-            };
-            for (j, s) in buf.iter_mut().enumerate() {
-                *s = diff
-                    .get(x, lo + j)
-                    .map_or(0.0, |p| Into::<u32>::into(p) as Real);
-            }
-            // The labelled maximum may sit on a shoulder of a brighter unlabelled neighbour
-            // (a speckle filter or a multi-level threshold can leave that); climb to the
-            // local maximum of the profile, at most `hw` steps.
-            let mut peak = row - lo;
-            for _ in 0..hw {
-                let here = buf.get(peak).copied().unwrap_or(0.0);
-                let up = buf.get(peak + 1).copied().unwrap_or(Real::NEG_INFINITY);
-                let down = if peak > 0 {
-                    buf.get(peak - 1).copied()
-                } else {
-                    None
-                };
-                let down = down.unwrap_or(Real::NEG_INFINITY);
-                if up > here && up >= down {
-                    peak += 1;
-                } else if down > here {
-                    peak -= 1;
-                } else {
-                    break;
-                }
-            }
-            let peak = peaks::plateau_centre(buf, peak);
-            let Ok(p) = peaks::locate_with_saturation(buf, peak, params.estimator, saturation)
-            else {
+            let Some(point) = locate(diff, x, row, k, hw, params, saturation) else {
                 continue;
             };
             let Some(slot) = out.get_mut(n) else {
@@ -279,13 +244,7 @@ pub fn extract_window<P: Pixel>(
                     capacity: out.len(),
                 });
             };
-            *slot = CurvePoint {
-                column: x.min(u16::MAX as usize) as u16,
-                row: lo as Real + p.position,
-                amplitude: p.amplitude,
-                curve: k as u8,
-                saturated: p.saturated,
-            };
+            *slot = point;
             n += 1;
         }
     }
@@ -294,6 +253,113 @@ pub fn extract_window<P: Pixel>(
     } else {
         Ok(n)
     }
+}
+
+/// Column value of a [`extract_seeded`] seed: no pixel of that curve in that column.
+pub const NO_SEED: u16 = u16::MAX;
+
+/// [`extract`] from seeds instead of a label frame: `seeds[(x − columns.start) · curves + k]`
+/// is the row of curve `k`'s brightest pixel in column `x` (the first such row from the top
+/// when several are equally bright), or [`NO_SEED`]. With the seeds of the label frame's
+/// objects the points are exactly those of [`extract_window`]; the pipeline finds them from
+/// the objects' runs (`image::segment::Run`), so no label frame is needed.
+pub fn extract_seeded<P: Pixel>(
+    diff: &Frame<P, impl AsRef<[P]>>,
+    seeds: &[u16],
+    curves: usize,
+    columns: core::ops::Range<usize>,
+    params: &ExtractParams,
+    out: &mut [CurvePoint],
+) -> Result<usize, CurveError> {
+    if curves > MAX_CURVES {
+        return Err(CurveError::TooManyCurves { selected: curves });
+    }
+    let hw = params.half_window;
+    if hw == 0 || hw > MAX_HALF_WINDOW {
+        return Err(CurveError::WindowOutOfRange { half_window: hw });
+    }
+    let saturation = params.saturation.unwrap_or(diff.max_value()) as Real;
+    let columns = columns.start.min(diff.width())..columns.end.min(diff.width());
+    let mut n = 0usize;
+    if curves > 0 {
+        for (x, column) in columns.zip(seeds.chunks_exact(curves)) {
+            for (k, &row) in column.iter().enumerate() {
+                if row == NO_SEED || row as usize >= diff.height() {
+                    continue;
+                }
+                let Some(point) = locate(diff, x, row as usize, k, hw as usize, params, saturation)
+                else {
+                    continue;
+                };
+                let Some(slot) = out.get_mut(n) else {
+                    return Err(CurveError::OutputFull {
+                        capacity: out.len(),
+                    });
+                };
+                *slot = point;
+                n += 1;
+            }
+        }
+    }
+    if n == 0 {
+        Err(CurveError::NoCurve)
+    } else {
+        Ok(n)
+    }
+}
+
+/// The point of curve `k` in column `x` whose brightest labelled pixel is at `row`: the
+/// difference profile of `±hw` rows around it (clamped to the frame), climbed to its local
+/// maximum and located by the estimator; `None` where the estimator fails.
+fn locate<P: Pixel>(
+    diff: &Frame<P, impl AsRef<[P]>>,
+    x: usize,
+    row: usize,
+    k: usize,
+    hw: usize,
+    params: &ExtractParams,
+    saturation: Real,
+) -> Option<CurvePoint> {
+    let mut profile = [0.0 as Real; PROFILE_CAP];
+    let lo = row.saturating_sub(hw);
+    let hi = (row + hw).min(diff.height().checked_sub(1)?);
+    let len = (hi + 1).checked_sub(lo)?;
+    let buf = profile.get_mut(..len)?;
+    for (j, s) in buf.iter_mut().enumerate() {
+        *s = diff
+            .get(x, lo + j)
+            .map_or(0.0, |p| Into::<u32>::into(p) as Real);
+    }
+    // The labelled maximum may sit on a shoulder of a brighter unlabelled neighbour
+    // (a speckle filter or a multi-level threshold can leave that); climb to the
+    // local maximum of the profile, at most `hw` steps.
+    let mut peak = row - lo;
+    for _ in 0..hw {
+        let here = buf.get(peak).copied().unwrap_or(0.0);
+        let up = buf.get(peak + 1).copied().unwrap_or(Real::NEG_INFINITY);
+        let down = if peak > 0 {
+            buf.get(peak - 1).copied()
+        } else {
+            None
+        };
+        let down = down.unwrap_or(Real::NEG_INFINITY);
+        if up > here && up >= down {
+            peak += 1;
+        } else if down > here {
+            peak -= 1;
+        } else {
+            break;
+        }
+    }
+    let peak = peaks::plateau_centre(buf, peak);
+    let p = peaks::locate_with_saturation(buf, peak, params.estimator, saturation).ok()?;
+    Some(CurvePoint {
+        column: x.min(u16::MAX as usize) as u16,
+        row: lo as Real + p.position,
+        amplitude: p.amplitude,
+        curve: k as u8,
+        saturated: p.saturated,
+    })
 }
 
 /// Coefficient `j` of the quadratic Savitzky–Golay smoothing filter of half window `m`:

@@ -3,17 +3,21 @@
 //! ([`crate::instrument`]) turns them into one [`crate::measurement::Measurement`].
 //!
 //! ```text
-//! off, on ─► subtract ─► histogram ─► threshold ─► segment ─► select ─► assign to planes
-//!        ─► subpixel curve per column ─► smooth ─► undistort + triangulate ─► 3-D points
+//! off (stored), on (rows as they arrive) ─► subtract in place + histogram + candidate runs
+//!   ─► threshold ─► runs ─► label (union–find over runs) ─► select ─► assign to planes
+//!   ─► subpixel curve per column ─► smooth ─► undistort + triangulate ─► 3-D points
 //! ```
 //!
-//! * [`profile`]: the stages and their orchestrator, [`extract_profile`], and the image
-//!   summary [`Profile`] with its quality flags;
+//! * [`stream`]: the streaming front end, [`ProfileStream`] (`push_rows` as the camera
+//!   delivers the laser-on frame, `finish` after its last row);
+//! * [`profile`]: the stages after the segmentation, the orchestrator of a stored pair,
+//!   [`extract_profile`] (which feeds it through the stream), and the image summary
+//!   [`Profile`] with its quality flags;
 //! * `planes`: which object is which plane's curve;
 //! * [`workspace`] and [`buffers`]: the caller-owned working memory.
 //!
 //! Every buffer lives in a caller-owned [`Workspace`]; after a call the workspace still holds
-//! the intermediate results (difference frame, labels, curve points, 3-D points), so a host can
+//! the intermediate results (difference frame, runs, curve points, 3-D points), so a host can
 //! plot them and a device can report them. The steps and the choices made here (threshold
 //! floor, plane assignment, fragment merging, frame-edge rule) are derived in
 //! `docs/pipeline.md`.
@@ -33,12 +37,14 @@ use crate::solvers::SolveError;
 pub mod buffers;
 mod planes;
 pub mod profile;
+pub mod stream;
 pub mod workspace;
 
 #[cfg(any(test, feature = "alloc"))]
 pub use buffers::OwnedBuffers;
-pub use buffers::{Buffers, Objects, SmallBuffers, NO_OBJECTS};
+pub use buffers::{Buffers, Objects, RunBuffers, SmallBuffers, NO_OBJECTS};
 pub use profile::{extract_profile, extract_profile_probed, point_sigmas, Profile, Stage};
+pub use stream::{ProfileStream, BLOCK_ROWS};
 pub use workspace::{Workspace, WorkspaceSizes};
 
 /// Tunable parameters of the image part of the chain. [`Default`] suits the reference hardware

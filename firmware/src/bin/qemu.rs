@@ -5,8 +5,9 @@
 //! Runs the same application as the H743 on a busy-polling executor
 //! (`embassy_futures::block_on`: every future is polled in a loop, which costs nothing
 //! under emulation and needs no interrupt-driven time driver). With `--bench` it measures
-//! every frame pair once, prints the pipeline's instruction count (run QEMU with
-//! `-icount shift=0`) and exits instead of serving the link.
+//! every frame pair once, prints the pipeline's instruction counts — the work on the
+//! laser-on rows as they arrive, and the work after the last pixel, per stage (run QEMU with
+//! `-icount shift=0`) — and exits instead of serving the link.
 #![no_std]
 #![no_main]
 
@@ -62,8 +63,9 @@ fn bench(app: &mut App<'_, Qemu<'static>, PipelineMeasurer<'_>>, scenes: usize) 
                 Ok(r) => {
                     let m = r.measurement;
                     qemu::log(format_args!(
-                        "bench scene={} pipeline_us={} stages_us={:?} solver_us={} diameter_m={} uncertainty_m={} method={:?} flags={:#x}",
+                        "bench scene={} readout_us={} pipeline_us={} stages_us={:?} solver_us={} diameter_m={} uncertainty_m={} method={:?} flags={:#x}",
                         i,
+                        app.measurer().last_stages.readout_us,
                         app.last_pipeline_us,
                         app.measurer().last_stages.image_us,
                         app.measurer().last_stages.solver_us,
@@ -76,8 +78,12 @@ fn bench(app: &mut App<'_, Qemu<'static>, PipelineMeasurer<'_>>, scenes: usize) 
                 Err(e) => {
                     ok = false;
                     qemu::log(format_args!(
-                        "bench scene={} pipeline_us={} error={:?} detail={}",
-                        i, app.last_pipeline_us, e.code, e.detail
+                        "bench scene={} readout_us={} pipeline_us={} error={:?} detail={}",
+                        i,
+                        app.measurer().last_stages.readout_us,
+                        app.last_pipeline_us,
+                        e.code,
+                        e.detail
                     ))
                 }
             }

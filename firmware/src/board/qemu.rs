@@ -7,7 +7,9 @@
 //!   instruction counter;
 //! * camera: frame pairs from PGM files on the host, read by semihosting, one pair per
 //!   capture, cycling through the pairs named on the command line. The laser-on file is
-//!   used only when the strobe really lit a laser, the laser-off file otherwise;
+//!   used only when the strobe really lit a laser, the laser-off file otherwise. A streamed
+//!   capture (`capture_rows`) reads the file in blocks of [`ports::BLOCK_ROWS`] rows and
+//!   hands each over as it is read, as the H743's DCMI line blocks arrive;
 //! * lasers: a bitmask in RAM (no hardware), trigger: none, watchdog: none (QEMU's
 //!   CMSDK watchdog is not wired to reset on this machine model);
 //! * calibration store: RAM, initialised from a calibration record file (`--calib`).
@@ -41,15 +43,21 @@ pub const POINTS: usize = WorkspaceSizes::new(752, 480, 8, 2).points;
 /// Bytes of the semihosting command line the board reads.
 const MAX_COMMAND_LINE: usize = 4096;
 
-// Everything in .bss (the emulated RAM has no regions to choose from).
+// Everything in .bss (the emulated RAM has no regions to choose from). The stored frame
+// pair serves raw captures (`CaptureFrames`); measurements stream the laser-on frame.
 crate::buffers::board_buffers! {
-    frame_bytes = MAX_FRAME, points = POINTS;
-    frames;
+    off_bytes = MAX_FRAME, on_bytes = MAX_FRAME, diff_bytes = MAX_FRAME, points = POINTS;
+    off;
+    on;
     diff;
-    labels;
+    runs;
     small;
     objects;
 }
+
+/// Bytes of the block the emulated camera hands over at a time ([`ports::BLOCK_ROWS`] rows
+/// of up to 752 pixels), as the H743's DMA does.
+const BLOCK_BYTES: usize = ports::BLOCK_ROWS * 752;
 
 /// SysTick input clock of mps2-an500 (Hz).
 pub const SYSCLK_HZ: u64 = 25_000_000;
@@ -254,23 +262,50 @@ pub struct FileCamera<'c> {
     scenes: heapless::Vec<(&'c str, &'c str), MAX_SCENES>,
     next: usize,
     geometry: Geometry,
+    /// The block of rows a streamed capture hands over.
+    block: &'static mut [u8; BLOCK_BYTES],
 }
 
 impl<'c> FileCamera<'c> {
     /// A camera over `(off, on)` file pairs, all of the size of the first one.
     pub fn new(scenes: heapless::Vec<(&'c str, &'c str), MAX_SCENES>) -> Result<Self, CameraError> {
         let (off, _) = scenes.first().ok_or(CameraError::Source)?;
+        static TAKEN: AtomicBool = AtomicBool::new(false);
+        static mut BLOCK: [u8; BLOCK_BYTES] = [0; BLOCK_BYTES];
         let h = read_pgm_header(off)?;
         let geometry = Geometry {
             width: u16::try_from(h.width).map_err(|_| CameraError::Source)?,
             height: u16::try_from(h.height).map_err(|_| CameraError::Source)?,
             row_offset: 0,
         };
+        if geometry.width as usize > 752 || TAKEN.swap(true, Ordering::AcqRel) {
+            return Err(CameraError::BufferSize);
+        }
+        // SAFETY: `TAKEN` lets this point be reached once: the only reference.
+        let block = unsafe { &mut *addr_of_mut!(BLOCK) };
         Ok(FileCamera {
             scenes,
             next: 0,
             geometry,
+            block,
         })
+    }
+
+    /// Exposes like `capture` and returns the file to read: the laser-on file only when the
+    /// strobe really lit a laser.
+    fn expose<L: ports::Laser, C: ports::Clock>(
+        &mut self,
+        strobe: &Strobe<'_, L, C>,
+    ) -> Result<&'c str, CameraError> {
+        let (off, on) = *self.scenes.get(self.next).ok_or(CameraError::Source)?;
+        strobe.on();
+        let lit = strobe.is_lit();
+        strobe.off();
+        // A pair is (dark, lit): the lit frame completes it and the next pair begins.
+        if strobe.mask() != 0 {
+            self.next = (self.next + 1) % self.scenes.len().max(1);
+        }
+        Ok(if lit { on } else { off })
     }
 
     /// The files are a window of the sensor starting at row `row_offset` (the H743 board's
@@ -297,16 +332,27 @@ impl ports::Camera for FileCamera<'_> {
         strobe: &Strobe<'_, L, C>,
         buf: &mut [u8],
     ) -> Result<(), CameraError> {
-        let (off, on) = *self.scenes.get(self.next).ok_or(CameraError::Source)?;
-        strobe.on();
-        let lit = strobe.is_lit();
-        strobe.off();
-        let path = if lit { on } else { off };
-        // A pair is (dark, lit): the lit frame completes it and the next pair begins.
-        if strobe.mask() != 0 {
-            self.next = (self.next + 1) % self.scenes.len().max(1);
-        }
-        read_pgm_into(path, self.geometry, buf)
+        let path = self.expose(strobe)?;
+        let len = self.geometry.frame_len();
+        let dst = buf.get_mut(..len).ok_or(CameraError::BufferSize)?;
+        let mut at = 0;
+        read_pgm_rows(path, self.geometry, self.block, |rows| {
+            if let Some(d) = dst.get_mut(at..at + rows.len()) {
+                d.copy_from_slice(rows);
+            }
+            at += rows.len();
+        })
+    }
+
+    async fn capture_rows<L: ports::Laser, C: ports::Clock, S: ports::RowSink + ?Sized>(
+        &mut self,
+        _exposure_us: u32,
+        strobe: &Strobe<'_, L, C>,
+        _buf: &mut [u8],
+        sink: &mut S,
+    ) -> Result<(), CameraError> {
+        let path = self.expose(strobe)?;
+        read_pgm_rows(path, self.geometry, self.block, |rows| sink.rows(rows))
     }
 }
 
@@ -381,42 +427,55 @@ fn read_pgm_header(path: &str) -> Result<pgm::PgmHeader, CameraError> {
     pgm::parse_header(head.get(..n).ok_or(CameraError::Source)?).ok_or(CameraError::Source)
 }
 
-/// Reads an 8-bit PGM of exactly `geometry`'s size into `buf`. 16-bit files (10-bit
-/// sensor data) are reduced to their top 8 bits, as the DCMI's 8-bit bus wired to D9..D2
-/// of the sensor would see them.
-fn read_pgm_into(path: &str, geometry: Geometry, buf: &mut [u8]) -> Result<(), CameraError> {
+/// Reads an 8-bit PGM of exactly `geometry`'s size in blocks of up to `block.len()` bytes of
+/// whole rows, handing each block to `rows` as it is read. 16-bit files (10-bit sensor data)
+/// are reduced to their top 8 bits, as the DCMI's 8-bit bus wired to D9..D2 of the sensor
+/// would see them.
+fn read_pgm_rows(
+    path: &str,
+    geometry: Geometry,
+    block: &mut [u8],
+    mut rows: impl FnMut(&[u8]),
+) -> Result<(), CameraError> {
     let h = read_pgm_header(path)?;
     if h.width != geometry.width as usize || h.height != geometry.height as usize {
         return Err(CameraError::Source);
     }
+    let (w, height) = (geometry.width as usize, geometry.height as usize);
     let len = geometry.frame_len();
-    let dst = buf.get_mut(..len).ok_or(CameraError::BufferSize)?;
     let f = HostFile::open(path, nr::open::R_BINARY).ok_or(CameraError::Source)?;
     if f.len().ok_or(CameraError::Source)? < h.data_offset + len * h.bytes_per_sample() {
         return Err(CameraError::Source);
     }
+    if h.bytes_per_sample() == 1 && h.maxval < 255 {
+        // Scaling n-bit data to 8 bits is not what a sensor does; such files are not
+        // captures of this camera.
+        return Err(CameraError::Source);
+    }
     f.seek(h.data_offset).ok_or(CameraError::Source)?;
-    if h.bytes_per_sample() == 1 {
-        f.read_exact(dst).ok_or(CameraError::Source)?;
-        if h.maxval < 255 {
-            // Scale n-bit data to 8 bits is not what a sensor does; such files are not
-            // captures of this camera.
-            return Err(CameraError::Source);
-        }
-    } else {
-        // Significant bits of the samples (10 for maxval 1023); keep the top 8.
-        let bits = 32 - (h.maxval as u32).leading_zeros();
-        let down = bits.saturating_sub(8);
-        let mut row = [0u8; 2 * 1024];
-        let w = geometry.width as usize;
-        let row_bytes = row.get_mut(..2 * w).ok_or(CameraError::Source)?;
-        for dst_row in dst.chunks_exact_mut(w) {
-            f.read_exact(row_bytes).ok_or(CameraError::Source)?;
-            for (d, s) in dst_row.iter_mut().zip(row_bytes.chunks_exact(2)) {
-                let v = u16::from_be_bytes([s[0], s[1]]);
-                *d = (v >> down).min(255) as u8;
+    let block_rows = (block.len() / w.max(1)).max(1);
+    // Significant bits of 16-bit samples (10 for maxval 1023); keep the top 8.
+    let bits = 32 - (h.maxval as u32).leading_zeros();
+    let down = bits.saturating_sub(8);
+    let mut row16 = [0u8; 2 * 752];
+    let mut y = 0;
+    while y < height {
+        let n = block_rows.min(height - y);
+        let dst = block.get_mut(..n * w).ok_or(CameraError::BufferSize)?;
+        if h.bytes_per_sample() == 1 {
+            f.read_exact(dst).ok_or(CameraError::Source)?;
+        } else {
+            let row_bytes = row16.get_mut(..2 * w).ok_or(CameraError::Source)?;
+            for dst_row in dst.chunks_exact_mut(w) {
+                f.read_exact(row_bytes).ok_or(CameraError::Source)?;
+                for (d, s) in dst_row.iter_mut().zip(row_bytes.chunks_exact(2)) {
+                    let v = u16::from_be_bytes([s[0], s[1]]);
+                    *d = (v >> down).min(255) as u8;
+                }
             }
         }
+        rows(dst);
+        y += n;
     }
     Ok(())
 }

@@ -1,18 +1,21 @@
-//! Segmentation into connected objects with the thesis's 2×2 mask, and object features
-//! (thesis §5.4–5.5; derivation and connectivity discussion in `docs/image-processing.md`,
-//! sections "Segmentation" and "Object features").
+//! Segmentation into connected objects, by runs, and object features (thesis §5.4–5.5;
+//! derivation and connectivity discussion in `docs/image-processing.md`, sections
+//! "Segmentation" and "Object features").
 //!
-//! Two-pass connected-component labelling:
+//! Run-length labelling with union–find over runs, so that the memory grows with the lit
+//! runs, not with the pixels (no label frame):
 //!
-//! 1. **Scan.** A 2×2 window slides in raster order; its bottom-right pixel is the current one.
-//!    A foreground pixel takes the provisional label of a foreground neighbour already scanned,
-//!    or a new label; when two differently labelled neighbours meet (the two arms of a "U"),
-//!    their labels are recorded as equivalent in a union–find table (`table[l]` = parent of `l`,
-//!    always `<= l`, so the root of a class is its smallest label).
-//! 2. **Resolve and relabel.** The table is flattened in one ascending sweep into a map from
-//!    provisional to compact labels `1..=n` (objects numbered in raster order of their first
-//!    pixel), then a second scan rewrites the label frame and accumulates each object's
-//!    [`ObjectFeatures`] from the intensity frame.
+//! 1. **Runs.** [`row_runs`] turns each row into its maximal runs of pixels above the
+//!    threshold (a [`Run`]: row, first column, end column), in raster order. The streaming
+//!    front end (`pipeline::stream`) does this as the rows arrive.
+//! 2. **Union–find over runs.** [`label_runs`] joins each run to the runs of the row above
+//!    that it touches (a two-pointer sweep of the two rows' runs), in a union–find table kept
+//!    in the runs themselves (`label` = parent run, always `<=` the run's own index, so the
+//!    root of a class is its first run in raster order).
+//! 3. **Resolve and features.** One ascending sweep gives each root the next compact label
+//!    `1..=n` (objects numbered in raster order of their first pixel, as a pixel-by-pixel
+//!    labelling numbers them) and every run its object's label, while each object's
+//!    [`ObjectFeatures`] are accumulated from the intensity frame over its runs' pixels.
 //!
 //! [`Connectivity::Eight`] (the default) joins every pair of foreground pixels that share a 2×2
 //! window — that is full 8-connectivity. [`Connectivity::ThesisSix`] is the literal reading of
@@ -52,10 +55,10 @@ pub enum SegmentError {
         /// Frame height in pixels.
         height: usize,
     },
-    /// The scan needed more provisional labels than the equivalence table holds
-    /// (`table.len() - 1`, at most 65 535).
+    /// The frame has more runs of foreground pixels than the run table holds (at most
+    /// 65 535: a run's union–find parent is a `u16`).
     TooManyLabels {
-        /// Provisional labels the table can hold.
+        /// Runs the table can hold.
         capacity: usize,
     },
     /// The frame has more objects than the feature table holds.
@@ -80,7 +83,7 @@ impl fmt::Display for SegmentError {
             }
             SegmentError::TooManyLabels { capacity } => write!(
                 f,
-                "segmentation needs more than {capacity} provisional labels (image too cluttered)"
+                "segmentation needs more than {capacity} runs (image too cluttered)"
             ),
             SegmentError::TooManyObjects { capacity } => {
                 write!(
@@ -161,20 +164,33 @@ impl ObjectFeatures {
         }
     }
 
+    /// Adds the pixels of run `run`, whose intensities are `values` (`run.len()` of them).
     #[inline]
-    fn add(&mut self, x: u16, y: u16, intensity: u32) {
-        self.pixel_count += 1;
-        self.min_x = self.min_x.min(x);
-        self.max_x = self.max_x.max(x);
-        self.min_y = self.min_y.min(y);
-        self.max_y = self.max_y.max(y);
-        let i = intensity as u64;
-        self.intensity_sum += i;
-        self.intensity_x_sum += i * x as u64;
-        self.intensity_y_sum += i * y as u64;
-        self.x_sum += x as u64;
-        self.y_sum += y as u64;
-        self.peak_intensity = self.peak_intensity.max(intensity);
+    fn add_run<P: Pixel>(&mut self, run: &Run, values: &[P]) {
+        let (x0, x1, y) = (run.start as u64, run.end as u64, run.row as u64);
+        let n = x1.saturating_sub(x0);
+        if n == 0 {
+            return;
+        }
+        self.pixel_count += n as u32;
+        self.min_x = self.min_x.min(run.start);
+        self.max_x = self.max_x.max(run.end - 1);
+        self.min_y = self.min_y.min(run.row);
+        self.max_y = self.max_y.max(run.row);
+        // Σx over x0..x1 in closed form.
+        self.x_sum += (x0 + x1 - 1) * n / 2;
+        self.y_sum += y * n;
+        let (mut s, mut sx, mut peak) = (0u64, 0u64, self.peak_intensity);
+        for (x, &p) in (x0..).zip(values) {
+            let i: u32 = p.into();
+            s += i as u64;
+            sx += i as u64 * x;
+            peak = peak.max(i);
+        }
+        self.intensity_sum += s;
+        self.intensity_x_sum += sx;
+        self.intensity_y_sum += s * y;
+        self.peak_intensity = peak;
     }
 
     /// Bounding-box width in pixels, `max_x - min_x + 1` (0 for an empty object).
@@ -235,384 +251,346 @@ impl ObjectFeatures {
     }
 }
 
-/// Result of a segmentation.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Segmentation {
-    /// Number of objects `n`: the label frame holds `1..=n`, `features[..n]` their features
-    /// (`features[i].label == i + 1`).
-    pub objects: usize,
-    /// Provisional labels the scan used (what the equivalence table must hold; useful to size
-    /// it).
-    pub provisional_labels: usize,
+/// A maximal horizontal run of foreground pixels: row `row`, columns `start..end`. `label`
+/// is the run's object (`1..=n`) after [`label_runs`] (during it, its union–find parent).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Run {
+    /// Image row.
+    pub row: u16,
+    /// First column.
+    pub start: u16,
+    /// One past the last column.
+    pub end: u16,
+    /// Object label (`1..=n`) once labelled; 0 before.
+    pub label: u16,
 }
 
-/// Worst-case number of provisional labels for a `width × height` frame, i.e. the table length
-/// minus one that can never overflow (capped by the `u16` label range, 65 535):
-/// with 8-connectivity a new label needs its four scanned neighbours empty, so new-label pixels
-/// are at least 2 apart in both directions: `⌈w/2⌉·⌈h/2⌉`. With [`Connectivity::ThesisSix`]
-/// pixels on the anti-diagonals `x + y ≡ 0 (mod 3)` each start a label: `⌈w·h/3⌉` bounds it.
-pub fn worst_case_labels(width: usize, height: usize, connectivity: Connectivity) -> usize {
-    match connectivity {
-        Connectivity::Eight => width.div_ceil(2).saturating_mul(height.div_ceil(2)),
-        Connectivity::ThesisSix => width.saturating_mul(height).div_ceil(3),
+impl Run {
+    /// An all-zero run, for initialising caller-owned buffers (usable in `const`/`static`).
+    pub const ZERO: Run = Run {
+        row: 0,
+        start: 0,
+        end: 0,
+        label: 0,
+    };
+
+    /// Number of pixels.
+    pub fn len(&self) -> usize {
+        self.end.saturating_sub(self.start) as usize
+    }
+
+    /// True for a run without pixels.
+    pub fn is_empty(&self) -> bool {
+        self.end <= self.start
     }
 }
 
-/// Root of label `x` in the equivalence table, with path halving. The table invariant
-/// `table[l] <= l` makes the walk strictly decreasing, so it terminates on any table content.
+/// Result of a segmentation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Segmentation {
+    /// Number of objects `n`: the runs are labelled `1..=n`, `features[..n]` hold their
+    /// features (`features[i].label == i + 1`).
+    pub objects: usize,
+    /// Runs of foreground pixels (what the run table must hold; useful to size it).
+    pub runs: usize,
+}
+
+/// Appends to `runs[*count..]` the maximal runs of `values` above `threshold`, as runs of row
+/// `row` whose columns start at `x0` (`values` is `row[x0..x0 + values.len()]` of an image),
+/// and advances `*count`. A frame wider than 65 536 columns cannot be described
+/// ([`SegmentError::FrameTooLarge`]); a full table is [`SegmentError::TooManyLabels`] (the runs
+/// written so far stay valid).
+///
+/// Cost: background dominates a laser image, so 8-bit values are tested four to a `u32`
+/// word, four words per iteration ([`ByteGreater`]: one saturating subtraction per word on
+/// the Cortex-M7); only words holding foreground are looked at pixel by pixel.
+pub fn row_runs<P: Pixel>(
+    values: &[P],
+    row: u16,
+    x0: usize,
+    threshold: u32,
+    runs: &mut [Run],
+    count: &mut usize,
+) -> Result<(), SegmentError> {
+    if x0 + values.len() > 1 << 16 {
+        return Err(SegmentError::FrameTooLarge {
+            width: x0 + values.len(),
+            height: row as usize + 1,
+        });
+    }
+    let capacity = runs.len().min(u16::MAX as usize);
+    let mut push = |start: usize, end: usize| -> Result<(), SegmentError> {
+        let slot = runs
+            .get_mut(*count)
+            .filter(|_| *count < capacity)
+            .ok_or(SegmentError::TooManyLabels { capacity })?;
+        *slot = Run {
+            row,
+            start: (x0 + start) as u16,
+            end: (x0 + end) as u16,
+            label: 0,
+        };
+        *count += 1;
+        Ok(())
+    };
+    // Start of the open run, if any.
+    let mut open: Option<usize> = None;
+    let mut x = 0usize;
+    let n = values.len();
+    if P::STORAGE_BITS == 8 && threshold < 255 {
+        let greater = ByteGreater::new(threshold);
+        let words = n / 4;
+        while x < 4 * words {
+            if open.is_none() {
+                // Skip background four words at a time, then word by word.
+                while x + 16 <= 4 * words {
+                    let Some(chunk) = values.get(x..x + 16) else {
+                        break;
+                    };
+                    let (w01, w23) = chunk.split_at(8);
+                    let (w0, w1) = w01.split_at(4);
+                    let (w2, w3) = w23.split_at(4);
+                    let hit = greater.test(pack4(w0))
+                        | greater.test(pack4(w1))
+                        | greater.test(pack4(w2))
+                        | greater.test(pack4(w3));
+                    if hit != 0 {
+                        break;
+                    }
+                    x += 16;
+                }
+                while x < 4 * words && greater.test(pack4(&values[x..x + 4])) == 0 {
+                    x += 4;
+                }
+                if x >= 4 * words {
+                    break;
+                }
+            }
+            // A word with foreground, or inside an open run: pixel by pixel.
+            for (i, &p) in values[x..x + 4].iter().enumerate() {
+                let v: u32 = p.into();
+                match (v > threshold, open) {
+                    (true, None) => open = Some(x + i),
+                    (false, Some(s)) => {
+                        push(s, x + i)?;
+                        open = None;
+                    }
+                    _ => {}
+                }
+            }
+            x += 4;
+        }
+        x = 4 * words;
+    } else if P::STORAGE_BITS == 8 {
+        // No 8-bit value exceeds 255.
+        return Ok(());
+    }
+    for (i, &p) in values.iter().enumerate().skip(x) {
+        let v: u32 = p.into();
+        match (v > threshold, open) {
+            (true, None) => open = Some(i),
+            (false, Some(s)) => {
+                push(s, i)?;
+                open = None;
+            }
+            _ => {}
+        }
+    }
+    if let Some(s) = open {
+        push(s, n)?;
+    }
+    Ok(())
+}
+
+/// Root of run `x` in the union–find table kept in the runs' `label` fields, with path
+/// halving. The invariant `parent <= index` makes the walk strictly decreasing, so it
+/// terminates on any content.
 #[inline]
-fn find(table: &mut [u16], mut x: u16) -> u16 {
+fn find(runs: &mut [Run], mut x: usize) -> usize {
     loop {
-        let p = match table.get(x as usize) {
-            Some(&p) if p < x => p,
+        let p = match runs.get(x) {
+            Some(r) if (r.label as usize) < x => r.label as usize,
             _ => return x,
         };
-        let gp = match table.get(p as usize) {
-            Some(&gp) if gp < p => gp,
+        let gp = match runs.get(p) {
+            Some(r) if (r.label as usize) < p => r.label as usize,
             _ => return p,
         };
-        if let Some(slot) = table.get_mut(x as usize) {
-            *slot = gp;
+        if let Some(r) = runs.get_mut(x) {
+            r.label = gp as u16;
         }
         x = gp;
     }
 }
 
-/// Records that labels `a` and `b` are the same object; returns the common root (the smaller).
+/// Records that runs `a` and `b` are the same object (the larger root points to the
+/// smaller).
 #[inline]
-fn union(table: &mut [u16], a: u16, b: u16) -> u16 {
-    let ra = find(table, a);
-    let rb = find(table, b);
+fn union(runs: &mut [Run], a: usize, b: usize) {
+    let (ra, rb) = (find(runs, a), find(runs, b));
     let (lo, hi) = if ra < rb { (ra, rb) } else { (rb, ra) };
     if lo != hi {
-        if let Some(slot) = table.get_mut(hi as usize) {
-            *slot = lo;
+        if let Some(r) = runs.get_mut(hi) {
+            r.label = lo as u16;
         }
-    }
-    lo
-}
-
-/// Scan state of the first pass: the equivalence table and its fill level.
-struct Labeller<'t> {
-    table: &'t mut [u16],
-    next: u16,
-    capacity: usize,
-}
-
-impl Labeller<'_> {
-    #[inline]
-    fn new_label(&mut self) -> Result<u16, SegmentError> {
-        if self.next as usize >= self.capacity {
-            return Err(SegmentError::TooManyLabels {
-                capacity: self.capacity,
-            });
-        }
-        self.next += 1;
-        if let Some(slot) = self.table.get_mut(self.next as usize) {
-            *slot = self.next;
-        }
-        Ok(self.next)
     }
 }
 
-/// Index of the first 4-pixel word `k` in `from..words` of an 8-bit `row` holding a pixel
-/// above the level of `greater`, or `words` if none: the background scan of [`segment`],
-/// two words per iteration with the level's branch out of the loop. The labels (`labels`,
-/// the row's label row) of the words it passes over are set to 0 on the way — cheaper than
-/// clearing the whole row first, which costs as much again as the scan.
-#[inline(never)]
-fn next_foreground_word<P: Pixel>(
-    row: &[P],
-    labels: &mut [u16],
-    from: usize,
-    words: usize,
-    greater: ByteGreater,
-) -> usize {
-    let end = words.min(row.len() / 4).min(labels.len() / 4);
-    let from = from.min(end);
-    let (Some(words_row), Some(labels)) = (
-        row.get(4 * from..4 * end),
-        labels.get_mut(4 * from..4 * end),
-    ) else {
-        return words;
-    };
-    let mut k = from;
-    // Four words (16 pixels) per iteration; the rare chunk holding foreground is resolved
-    // word by word below.
-    let mut quads = words_row.chunks_exact(16);
-    let mut label_quads = labels.chunks_exact_mut(16);
-    for (quad, label_quad) in (&mut quads).zip(&mut label_quads) {
-        let (w01, w23) = quad.split_at(8);
-        let (w0, w1) = w01.split_at(4);
-        let (w2, w3) = w23.split_at(4);
-        let hit = greater.test(pack4(w0))
-            | greater.test(pack4(w1))
-            | greater.test(pack4(w2))
-            | greater.test(pack4(w3));
-        if hit != 0 {
-            break;
-        }
-        label_quad.fill(0);
-        k += 4;
-    }
-    // The chunk with foreground (if any) and the remainder, one word at a time.
-    let rest_start = 4 * (k - from);
-    for (word, label_word) in words_row[rest_start..]
-        .chunks_exact(4)
-        .zip(labels[rest_start..].chunks_exact_mut(4))
-    {
-        if greater.test(pack4(word)) != 0 {
-            return k;
-        }
-        label_word.fill(0);
-        k += 1;
-    }
-    words
-}
-
-/// Segments `image` into connected objects of pixels with `value > threshold`, writes compact
-/// labels (`0` = background, objects `1..=n`) into `labels` and the objects' features into
-/// `features[..n]`.
+/// Labels `runs` (maximal runs of one image in raster order, as [`row_runs`] writes them)
+/// into connected objects: each run's `label` becomes its object's compact label `1..=n`, and
+/// `features[..n]` the objects' features, with intensities read from `image` (the frame the
+/// runs were found in). Objects are numbered in raster order of their first pixel.
 ///
-/// - `image`: the difference image (the threshold is applied on the fly, which saves the
-///   mask frame and one pass), or a binary mask from
-///   [`threshold_mask`](super::threshold::threshold_mask) with `threshold = 0`. The values are
-///   also the intensities `I` of the features.
-/// - `labels`: same size as `image`; fully overwritten.
-/// - `table`: equivalence table, `table.len() - 1` provisional labels (at most 65 535);
-///   [`worst_case_labels`] gives a size that never overflows. A few thousand entries are
-///   plenty for laser images; clutter beyond that is reported, not truncated.
-/// - `features`: one entry per object.
+/// Errors: [`SegmentError::TooManyObjects`] when `features` is too short,
+/// [`SegmentError::TooManyLabels`] for more than 65 535 runs (their parents are `u16`),
+/// [`SegmentError::Frame`] for a run outside `image`.
+pub fn label_runs<P: Pixel>(
+    image: &Frame<P, impl AsRef<[P]>>,
+    runs: &mut [Run],
+    features: &mut [ObjectFeatures],
+    connectivity: Connectivity,
+) -> Result<Segmentation, SegmentError> {
+    if runs.len() > u16::MAX as usize {
+        return Err(SegmentError::TooManyLabels {
+            capacity: u16::MAX as usize,
+        });
+    }
+    // ---- Union–find: each run against the runs of the row above that it touches. ----
+    // `prev` = the previous row's runs, `cur` = this row's; both ordered by column.
+    let (mut prev_start, mut prev_end) = (0usize, 0usize);
+    let mut i = 0usize;
+    while i < runs.len() {
+        let row = runs[i].row;
+        let mut row_end = i;
+        while row_end < runs.len() && runs[row_end].row == row {
+            row_end += 1;
+        }
+        let touching_row = prev_end > prev_start && runs[prev_start].row.wrapping_add(1) == row;
+        let mut j = prev_start;
+        for k in i..row_end {
+            runs[k].label = k as u16;
+            if !touching_row {
+                continue;
+            }
+            let (start, end) = (runs[k].start, runs[k].end);
+            // Runs above that end before this one's reach: they cannot touch later ones.
+            while j < prev_end && runs[j].end < start {
+                j += 1;
+            }
+            let mut m = j;
+            while m < prev_end {
+                let above = runs[m];
+                let touches = match connectivity {
+                    Connectivity::Eight => above.start <= end,
+                    Connectivity::ThesisSix => above.start < end,
+                };
+                if !touches {
+                    break;
+                }
+                union(runs, m, k);
+                m += 1;
+            }
+        }
+        prev_start = i;
+        prev_end = row_end;
+        i = row_end;
+    }
+
+    // ---- Resolve: root → compact label, in place (ascending: parents come first). ----
+    let mut objects = 0usize;
+    for k in 0..runs.len() {
+        let p = runs[k].label as usize;
+        let compact = if p == k {
+            if objects >= features.len() {
+                return Err(SegmentError::TooManyObjects {
+                    capacity: features.len(),
+                });
+            }
+            objects += 1;
+            features[objects - 1] = ObjectFeatures::empty(objects as u16);
+            objects as u16
+        } else {
+            // The parent (p < k) already holds its compact label, which is this run's.
+            runs.get(p).map_or(0, |r| r.label)
+        };
+        runs[k].label = compact;
+    }
+
+    // ---- Features over each run's pixels. ----
+    for run in runs.iter() {
+        let row = run.row as usize;
+        if row >= image.height() {
+            return Err(SegmentError::Frame(FrameError::SizeMismatch {
+                expected: (image.width(), image.height()),
+                actual: (run.end as usize, row + 1),
+            }));
+        }
+        let values = image
+            .row(row)
+            .get(run.start as usize..run.end as usize)
+            .ok_or(SegmentError::Frame(FrameError::SizeMismatch {
+                expected: (image.width(), image.height()),
+                actual: (run.end as usize, row + 1),
+            }))?;
+        if let Some(f) = features.get_mut((run.label as usize).wrapping_sub(1)) {
+            f.add_run(run, values);
+        }
+    }
+    Ok(Segmentation {
+        objects,
+        runs: runs.len(),
+    })
+}
+
+/// Segments `image` into connected objects of pixels with `value > threshold`: its runs
+/// ([`row_runs`], every row) into `runs`, labelled by [`label_runs`], and the objects'
+/// features into `features[..n]`. Returns the segmentation; `runs[..result.runs]` are the
+/// labelled runs.
 ///
-/// Cost: background pixels dominate a laser image, so each row is first cleared at memset
-/// speed and, for 8-bit images, scanned four pixels per `u32` word for a value above the
-/// threshold (two words per loop iteration); only words holding foreground go through the
-/// labelling decision tree. Pass 2 visits only the rows between the first and the last
-/// foreground row and skips all-background words of four labels.
+/// `image` is the difference image (the threshold is applied on the fly) or a binary mask
+/// from [`threshold_mask`](super::threshold::threshold_mask) with `threshold = 0`; its values
+/// are also the intensities `I` of the features.
 ///
 /// Errors: [`SegmentError::TooManyLabels`] / [`SegmentError::TooManyObjects`] when a table is
 /// full. These are errors rather than a silent truncation because truncation would drop the
 /// objects scanned last (the bottom of the image) whatever they are — possibly the laser
 /// curve — and return a plausible but wrong measurement; an error lets the pipeline tell the
-/// user the scene is too cluttered or the threshold too low. On error `labels` holds partial
-/// provisional labels and must not be used.
+/// user the scene is too cluttered or the threshold too low.
 pub fn segment<P: Pixel>(
     image: &Frame<P, impl AsRef<[P]>>,
     threshold: u32,
-    labels: &mut Frame<u16, impl AsMut<[u16]>>,
-    table: &mut [u16],
+    runs: &mut [Run],
     features: &mut [ObjectFeatures],
     connectivity: Connectivity,
 ) -> Result<Segmentation, SegmentError> {
-    image.check_same_size(labels)?;
     let (width, height) = (image.width(), image.height());
     if width > 1 << 16 || height > 1 << 16 || width.saturating_mul(height) > u32::MAX as usize {
         return Err(SegmentError::FrameTooLarge { width, height });
     }
-    let capacity = table.len().saturating_sub(1).min(u16::MAX as usize);
-    if let Some(t0) = table.first_mut() {
-        *t0 = 0;
+    let mut count = 0usize;
+    for y in 0..height {
+        row_runs(image.row(y), y as u16, 0, threshold, runs, &mut count)?;
     }
-    let mut lab = Labeller {
-        table,
-        next: 0,
-        capacity,
-    };
-    let mut first_row = usize::MAX;
-    let mut last_row = 0usize;
+    let runs = runs.get_mut(..count).unwrap_or(&mut []);
+    label_runs(image, runs, features, connectivity)
+}
 
-    // ---- Pass 1: provisional labels and equivalences. ----
-    // Row 0 has no upper neighbours: a run of foreground pixels shares one label.
-    {
-        let mut left = 0u16;
-        let mut any = false;
-        for (c, &p) in labels.row_mut(0).iter_mut().zip(image.row(0)) {
-            let v: u32 = p.into();
-            left = if v > threshold {
-                any = true;
-                if left != 0 {
-                    left
-                } else {
-                    lab.new_label()?
-                }
-            } else {
-                0
-            };
-            *c = left;
-        }
-        if any {
-            first_row = 0;
-        }
+/// Writes the label of every pixel (0 = background) into `labels` from labelled `runs`
+/// (for plots and tests: the pipeline itself never needs a label frame).
+pub fn paint_labels(runs: &[Run], labels: &mut Frame<u16, impl AsMut<[u16]>>) {
+    for y in 0..labels.height() {
+        labels.row_mut(y).fill(0);
     }
-    for y in 1..height {
-        let Some((prev, cur)) = labels.previous_and_row_mut(y) else {
-            break; // unreachable: 1 <= y < height
-        };
-        let row = image.row(y);
-        // Equal-length re-slices (n = width for every well-formed frame). Neighbour labels are
-        // only read for foreground pixels.
-        let n = cur.len().min(row.len()).min(prev.len());
-        let (cur, row, prev) = (&mut cur[..n], &row[..n], &prev[..n]);
-        // Background is most of a laser image: visit only the 4-pixel words that hold a
-        // foreground pixel (8-bit pixels: one word test for 4 pixels; a background pixel's
-        // label is 0 whatever its neighbours are), zeroing the others' labels on the way.
-        let word_skip = P::STORAGE_BITS == 8 && threshold < 255;
-        let greater = ByteGreater::new(threshold);
-        if P::STORAGE_BITS == 8 && threshold >= 255 {
-            cur.fill(0);
-            continue; // no 8-bit value exceeds 255
-        }
-        let mut any = false;
-        // One pixel: writes its label given the label `left` of its left neighbour; returns it.
-        let mut pixel = |cur: &mut [u16], x: usize, left: u16| -> Result<u16, SegmentError> {
-            let v: u32 = row.get(x).map_or(0, |&p| p.into());
-            if v <= threshold {
-                if let Some(c) = cur.get_mut(x) {
-                    *c = 0;
-                }
-                return Ok(0);
-            }
-            let up = prev.get(x).copied().unwrap_or(0);
-            let up_left = if x > 0 {
-                prev.get(x - 1).copied().unwrap_or(0)
-            } else {
-                0
-            };
-            let up_right = prev.get(x + 1).copied().unwrap_or(0);
-            any = true;
-            let l = match connectivity {
-                // Decision tree of Wu, Otoo & Suzuki (2005): the upper neighbour is adjacent
-                // to all the others, so when it is set no equivalence can be new.
-                Connectivity::Eight => {
-                    if up != 0 {
-                        up
-                    } else if up_left != 0 {
-                        if up_right != 0 {
-                            union(lab.table, up_left, up_right)
-                        } else {
-                            up_left
-                        }
-                    } else if up_right != 0 {
-                        if left != 0 {
-                            union(lab.table, up_right, left)
-                        } else {
-                            up_right
-                        }
-                    } else if left != 0 {
-                        left
-                    } else {
-                        lab.new_label()?
-                    }
-                }
-                // Upper-left is adjacent to both upper and left in this connectivity.
-                Connectivity::ThesisSix => {
-                    if up_left != 0 {
-                        up_left
-                    } else if up != 0 {
-                        if left != 0 {
-                            union(lab.table, up, left)
-                        } else {
-                            up
-                        }
-                    } else if left != 0 {
-                        left
-                    } else {
-                        lab.new_label()?
-                    }
-                }
-            };
-            if let Some(c) = cur.get_mut(x) {
-                *c = l;
-            }
-            Ok(l)
-        };
-        let words = if word_skip { n / 4 } else { 0 };
-        let mut left = 0u16;
-        let mut k = 0;
-        loop {
-            let next = next_foreground_word(row, cur, k, words, greater);
-            if next >= words {
-                break;
-            }
-            if next > k {
-                left = 0; // the pixel left of word `next` is background
-            }
-            for x in 4 * next..4 * next + 4 {
-                left = pixel(cur, x, left)?;
-            }
-            k = next + 1;
-        }
-        if words > 0 && k < words {
-            left = 0;
-        }
-        for x in 4 * words..n {
-            left = pixel(cur, x, left)?;
-        }
-        if any {
-            first_row = first_row.min(y);
-            last_row = y;
-        }
-    }
-    let provisional = lab.next as usize;
-    let table = lab.table;
-
-    // ---- Resolve: provisional label -> compact label, in place. ----
-    // Ascending sweep: a root (table[l] == l) gets the next compact number; any other label's
-    // parent p < l has already been replaced by its compact number, which is its own.
-    let mut objects = 0usize;
-    for l in 1..=provisional {
-        let p = table.get(l).copied().unwrap_or(0) as usize;
-        let compact = if p == l {
-            objects += 1;
-            objects as u16
-        } else {
-            table.get(p).copied().unwrap_or(0)
-        };
-        if let Some(slot) = table.get_mut(l) {
-            *slot = compact;
-        }
-    }
-    if objects > features.len() {
-        return Err(SegmentError::TooManyObjects {
-            capacity: features.len(),
-        });
-    }
-    for (i, f) in features.iter_mut().take(objects).enumerate() {
-        *f = ObjectFeatures::empty(i as u16 + 1);
-    }
-
-    // ---- Pass 2: relabel and accumulate features (only rows holding foreground). ----
-    if first_row <= last_row {
-        for y in first_row..=last_row {
-            let row = image.row(y);
-            let yy = y as u16; // y < 2^16 checked above
-                               // Four labels at a time: most words of a foreground row are background.
-            for (k, (c4, p4)) in labels
-                .row_mut(y)
-                .chunks_mut(4)
-                .zip(row.chunks(4))
-                .enumerate()
+    for run in runs {
+        if (run.row as usize) < labels.height() {
+            if let Some(cells) = labels
+                .row_mut(run.row as usize)
+                .get_mut(run.start as usize..run.end as usize)
             {
-                if c4.iter().fold(0, |acc, &c| acc | c) == 0 {
-                    continue;
-                }
-                for (i, (c, &p)) in c4.iter_mut().zip(p4).enumerate() {
-                    if *c == 0 {
-                        continue;
-                    }
-                    let compact = table.get(*c as usize).copied().unwrap_or(0);
-                    *c = compact;
-                    if let Some(f) = features.get_mut((compact as usize).wrapping_sub(1)) {
-                        f.add((4 * k + i) as u16, yy, p.into());
-                    }
-                }
+                cells.fill(run.label);
             }
         }
     }
-    Ok(Segmentation {
-        objects,
-        provisional_labels: provisional,
-    })
 }
 
 #[cfg(test)]

@@ -277,7 +277,7 @@ mod tests {
     fn full_frame_chain_752x480() {
         extern crate std;
         use crate::image::filter::{gaussian_filter, scratch_len, GaussianKernel};
-        use crate::image::segment::{segment, worst_case_labels, Connectivity};
+        use crate::image::segment::{segment, Connectivity, Run};
         use crate::image::subtract::subtract;
         use crate::image::threshold::{histogram, otsu_threshold};
         use crate::image::Frame;
@@ -329,12 +329,9 @@ mod tests {
         assert!(t > 7 && t < 140, "t = {t}");
         let t_thr = t0.elapsed();
 
-        let mut labels = vec![0u16; w * h];
-        let mut lf = Frame::new(&mut labels, w, h, w).unwrap();
-        let mut table = vec![0u16; 4096];
+        let mut runs = vec![Run::ZERO; 4096];
         let mut feats = [ObjectFeatures::empty(0); 256];
-        let seg = segment(&fd, t, &mut lf, &mut table, &mut feats, Connectivity::Eight).unwrap();
-        assert!(seg.provisional_labels < worst_case_labels(w, h, Connectivity::Eight));
+        let seg = segment(&fd, t, &mut runs, &mut feats, Connectivity::Eight).unwrap();
         let t_seg = t0.elapsed();
 
         let mut out = [0u16; 1];
@@ -364,13 +361,13 @@ mod tests {
         let t_filt = t0.elapsed();
         std::println!(
             "752x480 u8: subtract {:?}, histogram+otsu {:?}, segment {:?}, gaussian σ=1 {:?}; \
-             threshold {t}, {} objects, {} provisional labels",
+             threshold {t}, {} objects, {} runs",
             t_sub,
             t_thr - t_sub,
             t_seg - t_thr,
             t_filt - t_seg,
             seg.objects,
-            seg.provisional_labels
+            seg.runs
         );
     }
 

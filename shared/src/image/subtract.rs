@@ -87,20 +87,157 @@ fn count_lanes(bins: &mut [u32; 256], d: u32) {
     }
 }
 
-/// The 8-bit word path of [`subtract_with_histogram`] for one word of 4 pixels: writes the
-/// difference, adds the laser-off lanes to `off_sum` and counts the differences, in `quads`
-/// when all four are below 4 (indexed by their 2-bit values, pixel 0 in the low bits), else
-/// in `bins`.
+/// The subtraction of a streamed frame pair and the histogram of its difference, gathered
+/// row by row: the laser-off frame is stored, the laser-on frame arrives in blocks of rows,
+/// and each row of it is subtracted into the stored laser-off row **in place** (the difference
+/// frame replaces the laser-off frame) while the histogram and the statistics accumulate.
+/// After the last row, [`DifferenceHistogram::finish`] completes the histogram and returns
+/// the pair's [`SubtractStats`] — exactly those of [`subtract`] and
+/// [`threshold::histogram`](super::threshold::histogram) of the difference.
+///
+/// Cost: for 8-bit frames of bit depth 8 (the reference sensor) the pixels are processed four
+/// to a `u32` word, two words per loop iteration (`image::lanes`: the saturating difference
+/// and the laser-off sum are one DSP instruction each on the Cortex-M7), and the four
+/// differences of a word that are all below 4 (most of a laser image: the difference of two
+/// exposures of an unlit scene is noise of a grey level or two) are counted with one
+/// increment of a 256-entry table indexed by the four 2-bit values, which is spread into the
+/// histogram at the end. The largest difference is then the highest non-empty bin. Other
+/// pixel types and bit depths take a plain per-pixel loop.
+#[derive(Debug, Clone)]
+pub struct DifferenceHistogram {
+    /// Counts of the words whose four differences are all < 4, by their 2-bit values.
+    quads: [u32; 256],
+    off_sum: u64,
+    pixels: u64,
+    levels: usize,
+    max_difference: u32,
+    /// The 8-bit word path applies.
+    words: bool,
+}
+
+impl DifferenceHistogram {
+    /// Starts a pair of frames of full scale `max_value` (`2^bit_depth − 1`) stored as `P`:
+    /// clears `bins[..max_value + 1]`. Errors: `bins` shorter than that.
+    pub fn new<P: Pixel>(max_value: u32, bins: &mut [u32]) -> Result<Self, ThresholdError> {
+        let levels = max_value as usize + 1;
+        let Some(bins) = bins.get_mut(..levels) else {
+            return Err(ThresholdError::HistogramTooSmall {
+                needed: levels,
+                actual: bins.len(),
+            });
+        };
+        bins.fill(0);
+        Ok(DifferenceHistogram {
+            quads: [0; 256],
+            off_sum: 0,
+            pixels: 0,
+            levels,
+            max_difference: 0,
+            words: P::STORAGE_BITS == 8 && max_value == 255,
+        })
+    }
+
+    /// Subtracts one row: `off_diff = max(on − off_diff, 0)` pixel by pixel (the common
+    /// length of the two), counting the differences in `bins` (the slice given to
+    /// [`DifferenceHistogram::new`]).
+    pub fn row<P: Pixel>(&mut self, on: &[P], off_diff: &mut [P], bins: &mut [u32]) {
+        let n = on.len().min(off_diff.len());
+        let (on, off_diff) = (&on[..n], &mut off_diff[..n]);
+        self.pixels += n as u64;
+        if self.words {
+            if let Some(bins) = bins.first_chunk_mut::<256>() {
+                self.row_words(on, off_diff, bins);
+                return;
+            }
+        }
+        let top = self.levels - 1;
+        let Some(bins) = bins.get_mut(..self.levels) else {
+            return;
+        };
+        let (mut max_d, mut sum) = (self.max_difference, 0u64);
+        for (o, &a) in off_diff.iter_mut().zip(on) {
+            let (a, b): (u32, u32) = (a.into(), (*o).into());
+            let d = a.saturating_sub(b);
+            *o = P::saturate_from(d);
+            max_d = max_d.max(d);
+            sum += b as u64;
+            if let Some(c) = bins.get_mut((d as usize).min(top)) {
+                *c += 1;
+            }
+        }
+        self.max_difference = max_d;
+        self.off_sum += sum;
+    }
+
+    /// The 8-bit word path of [`DifferenceHistogram::row`].
+    #[inline(always)]
+    fn row_words<P: Pixel>(&mut self, on: &[P], off_diff: &mut [P], bins: &mut [u32; 256]) {
+        let quads = &mut self.quads;
+        // Laser-off sums in u32 over chunks of 2^18 pixels (≤ 2^18 · 255 < 2^26), added into
+        // the u64 frame total (a row may be arbitrarily long here).
+        for (a_blk, o_blk) in on.chunks(1 << 18).zip(off_diff.chunks_mut(1 << 18)) {
+            let mut sum = 0u32;
+            let mut a8 = a_blk.chunks_exact(8);
+            let mut o8 = o_blk.chunks_exact_mut(8);
+            for (a, o) in (&mut a8).zip(&mut o8) {
+                let (a0, a1) = a.split_at(4);
+                let (o0, o1) = o.split_at_mut(4);
+                difference_word(a0, o0, &mut sum, quads, bins);
+                difference_word(a1, o1, &mut sum, quads, bins);
+            }
+            let (a, o) = (a8.remainder(), o8.into_remainder());
+            let split = a.len().min(o.len()) & !3;
+            if split == 4 {
+                difference_word(a, o, &mut sum, quads, bins);
+            }
+            for (o, &a) in o[split..].iter_mut().zip(&a[split..]) {
+                let (a, b): (u32, u32) = (a.into(), (*o).into());
+                let d = a.saturating_sub(b);
+                *o = P::saturate_from(d);
+                sum += b;
+                bins[(d & 0xFF) as usize] += 1;
+            }
+            self.off_sum += sum as u64;
+        }
+    }
+
+    /// Completes the histogram in `bins` and returns the statistics of the rows subtracted.
+    pub fn finish(&mut self, bins: &mut [u32]) -> SubtractStats {
+        if self.words {
+            if let Some(bins) = bins.first_chunk_mut::<256>() {
+                for (code, count) in self.quads.iter_mut().enumerate() {
+                    if *count != 0 {
+                        for i in 0..4 {
+                            bins[(code >> (2 * i)) & 3] += *count;
+                        }
+                        *count = 0;
+                    }
+                }
+                // No difference exceeds 255 = top, so the highest non-empty bin is the maximum.
+                self.max_difference = bins.iter().rposition(|&c| c != 0).unwrap_or(0) as u32;
+            }
+        }
+        let off_mean = (self.off_sum as f64 / self.pixels.max(1) as f64) as Real;
+        SubtractStats {
+            max_difference: self.max_difference,
+            off_mean,
+        }
+    }
+}
+
+/// The 8-bit word path of [`DifferenceHistogram::row`] for one word of 4 pixels: replaces the
+/// laser-off word `o` by the difference `a − o`, adds the laser-off lanes to `off_sum` and
+/// counts the differences, in `quads` when all four are below 4 (indexed by their 2-bit
+/// values, pixel 0 in the low bits), else in `bins`.
 #[inline(always)]
 fn difference_word<P: Pixel>(
     a: &[P],
-    b: &[P],
     o: &mut [P],
     off_sum: &mut u32,
     quads: &mut [u32; 256],
     bins: &mut [u32; 256],
 ) {
-    let (a, b) = (lanes::pack4(a), lanes::pack4(b));
+    let (a, b) = (lanes::pack4(a), lanes::pack4(o));
     let d = lanes::sub_sat(a, b);
     for (i, o) in o.iter_mut().take(4).enumerate() {
         *o = P::saturate_from((d >> (8 * i)) & 0xFF);
@@ -116,23 +253,14 @@ fn difference_word<P: Pixel>(
 }
 
 /// [`subtract`] and the histogram of the difference
-/// ([`threshold::histogram`](super::threshold::histogram) of `out`) in one pass over the
-/// frames: `bins` is cleared and then holds the count of each grey level of `out`, exactly as
-/// if `threshold::histogram(&out, bins)` had been called after [`subtract`]; the
-/// returned statistics and `out` are those of [`subtract`].
+/// ([`threshold::histogram`](super::threshold::histogram) of `out`) in one pass, through
+/// [`DifferenceHistogram`] (the laser-off rows copied into `out`, then subtracted in place):
+/// `bins` is cleared and then holds the count of each grey level of `out`; the returned
+/// statistics and `out` are those of [`subtract`].
 ///
 /// Errors: those of [`subtract`] (as [`ThresholdError::Frame`]) and of
 /// [`threshold::histogram`](super::threshold::histogram) (`bins` shorter than `2^bit_depth`
 /// of `out`, more than 2^32 − 1 pixels), checked before any pixel is written.
-///
-/// Cost: for 8-bit frames whose bit depth is 8 (the reference sensor) the pixels are processed
-/// four to a `u32` word, two words per loop iteration (`image::lanes`: the saturating difference
-/// and the laser-off sum are one DSP instruction each on the Cortex-M7), and the four
-/// differences of a word that are all below 4 (most of a laser image: the difference of two
-/// exposures of an unlit scene is noise of a grey level or two) are counted with one
-/// increment of a 256-entry table indexed by the four 2-bit values, which is spread into the
-/// histogram at the end. The largest difference is then the highest non-empty bin. Other
-/// pixel types and bit depths take a plain per-pixel loop.
 pub fn subtract_with_histogram<P: Pixel>(
     on: &Frame<P, impl AsRef<[P]>>,
     off: &Frame<P, impl AsRef<[P]>>,
@@ -148,7 +276,6 @@ pub fn subtract_with_histogram<P: Pixel>(
             actual: bins.len(),
         });
     }
-    let out_max = out.max_value();
     if out
         .width()
         .checked_mul(out.height())
@@ -158,80 +285,16 @@ pub fn subtract_with_histogram<P: Pixel>(
         return Err(ThresholdError::TooManyPixels);
     }
     bins.fill(0);
-    let top = levels - 1;
-    let bins = &mut bins[..levels];
-
-    let mut off_sum = 0u64;
-    let max_difference;
-    if P::STORAGE_BITS == 8 && on.max_value() == 255 && out_max == 255 {
-        // Fixed-size views: the byte-valued indices below need no bounds check.
-        let Some(bins) = bins.first_chunk_mut::<256>() else {
-            return Err(ThresholdError::HistogramTooSmall {
-                needed: 256,
-                actual: levels,
-            });
-        };
-        // Counts of the words whose four differences are all < 4, by their 2-bit values.
-        let mut quads = [0u32; 256];
-        for y in 0..on.height() {
-            let (a_row, b_row, o_row) = (on.row(y), off.row(y), out.row_mut(y));
-            let n = a_row.len().min(b_row.len()).min(o_row.len());
-            let (a_row, b_row, o_row) = (&a_row[..n], &b_row[..n], &mut o_row[..n]);
-            // Laser-off sums in u32 over chunks of 2^18 pixels (≤ 2^18 · 255 < 2^26), added
-            // into the u64 frame total (a row may be arbitrarily long here).
-            for ((a_blk, b_blk), o_blk) in a_row
-                .chunks(1 << 18)
-                .zip(b_row.chunks(1 << 18))
-                .zip(o_row.chunks_mut(1 << 18))
-            {
-                let mut sum = 0u32;
-                let mut a8 = a_blk.chunks_exact(8);
-                let mut b8 = b_blk.chunks_exact(8);
-                let mut o8 = o_blk.chunks_exact_mut(8);
-                for ((a, b), o) in (&mut a8).zip(&mut b8).zip(&mut o8) {
-                    let (a0, a1) = a.split_at(4);
-                    let (b0, b1) = b.split_at(4);
-                    let (o0, o1) = o.split_at_mut(4);
-                    difference_word(a0, b0, o0, &mut sum, &mut quads, bins);
-                    difference_word(a1, b1, o1, &mut sum, &mut quads, bins);
-                }
-                let (a, b, o) = (a8.remainder(), b8.remainder(), o8.into_remainder());
-                let split = a.len().min(b.len()).min(o.len()) & !3;
-                if split == 4 {
-                    difference_word(a, b, o, &mut sum, &mut quads, bins);
-                }
-                for ((o, &a), &b) in o[split..].iter_mut().zip(&a[split..]).zip(&b[split..]) {
-                    let (a, b): (u32, u32) = (a.into(), b.into());
-                    let d = a.saturating_sub(b);
-                    *o = P::saturate_from(d);
-                    sum += b;
-                    bins[(d & 0xFF) as usize] += 1;
-                }
-                off_sum += sum as u64;
-            }
+    let mut acc = DifferenceHistogram::new::<P>(out.max_value(), bins)?;
+    // The word path needs the laser-on frame at full 8-bit scale too.
+    acc.words &= on.max_value() == 255;
+    for y in 0..on.height() {
+        for (o, &b) in out.row_mut(y).iter_mut().zip(off.row(y)) {
+            *o = b;
         }
-        for (code, &count) in quads.iter().enumerate() {
-            if count != 0 {
-                for i in 0..4 {
-                    bins[(code >> (2 * i)) & 3] += count;
-                }
-            }
-        }
-        // No difference exceeds 255 = top, so the highest non-empty bin is the maximum.
-        max_difference = bins.iter().rposition(|&c| c != 0).unwrap_or(0) as u32;
-    } else {
-        let (max_d, sum) = subtract_pixels(on, off, out, |d| {
-            if let Some(c) = bins.get_mut((d as usize).min(top)) {
-                *c += 1;
-            }
-        });
-        max_difference = max_d;
-        off_sum = sum;
+        acc.row(on.row(y), out.row_mut(y), bins);
     }
-    Ok(SubtractStats {
-        max_difference,
-        off_mean: mean(off_sum, on),
-    })
+    Ok(acc.finish(bins))
 }
 
 #[cfg(test)]

@@ -1,17 +1,25 @@
 //! The pipeline's working memory, assembled once for everyone: a const-constructible set for
-//! statics ([`Buffers`], or its parts [`SmallBuffers`] and [`NO_OBJECTS`] for a board that
-//! spreads them over RAM regions) and, with the `alloc` feature, a heap set sized at run time
-//! (`OwnedBuffers`). Each lends the pipeline a [`Workspace`].
+//! statics ([`Buffers`], or its parts [`SmallBuffers`], [`RunBuffers`] and [`NO_OBJECTS`] for
+//! a board that spreads them over RAM regions) and, with the `alloc` feature, a heap set sized
+//! at run time (`OwnedBuffers`). Each lends the pipeline a [`Workspace`].
+//!
+//! Only one buffer grows with the pixels: the laser-off frame, which becomes the difference
+//! frame (`pipeline::stream`). The segmentation's memory grows with the lit runs.
 
-use crate::curve::CurvePoint;
-use crate::image::segment::ObjectFeatures;
+use crate::curve::{CurvePoint, MAX_CURVES};
+use crate::image::segment::{ObjectFeatures, Run};
 use crate::image::Pixel;
 use crate::real::{Real, Vec2, Vec3};
 
 use super::Workspace;
 
-/// Entries of the segmentation's equivalence table ([`super::WorkspaceSizes::new`]).
-pub const LABEL_TABLE_LEN: usize = 4096;
+/// Entries of each run table ([`super::WorkspaceSizes::new`]): 64 KB each. A laser image has
+/// a few hundred runs above the threshold (a 1 m stem's 559-column stripe: ≈ 600); the
+/// candidate table also holds the specks of noise above the streaming's provisional
+/// threshold, and when it fills the pipeline rescans the difference frame instead.
+pub const MAX_RUNS: usize = 8192;
+/// Seed entries for frames of the reference width (752 columns × [`MAX_CURVES`]).
+pub const SEEDS_752: usize = 752 * MAX_CURVES;
 /// Object-feature entries ([`super::WorkspaceSizes::new`]).
 pub const MAX_OBJECTS: usize = 1024;
 /// Histogram bins of 8-bit frames (the default of the const sets' `BINS`).
@@ -25,14 +33,39 @@ pub type Objects = [ObjectFeatures; MAX_OBJECTS];
 #[allow(clippy::large_const_arrays)] // only used to initialise statics (zeroed, in .bss)
 pub const NO_OBJECTS: Objects = [ObjectFeatures::ZERO; MAX_OBJECTS];
 
-/// Every buffer but the two per-pixel ones and the object features: the histogram
-/// (`BINS` bins), the label table, and `POINTS` entries of curve points, 3-D points, their σ
-/// and solver scratch. All-zero and const-constructible, so a board can place it in a static of its
+/// The segmentation's tables: candidate runs, labelled runs and the `SEEDS` column seeds
+/// (`width × MAX_CURVES`). All-zero and const-constructible.
+#[derive(Debug)]
+pub struct RunBuffers<const SEEDS: usize = SEEDS_752> {
+    candidates: [Run; MAX_RUNS],
+    runs: [Run; MAX_RUNS],
+    seeds: [u16; SEEDS],
+}
+
+impl<const SEEDS: usize> RunBuffers<SEEDS> {
+    /// Zeroed buffers.
+    pub const fn new() -> Self {
+        RunBuffers {
+            candidates: [Run::ZERO; MAX_RUNS],
+            runs: [Run::ZERO; MAX_RUNS],
+            seeds: [0; SEEDS],
+        }
+    }
+}
+
+impl<const SEEDS: usize> Default for RunBuffers<SEEDS> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Every buffer but the frame, the run tables and the object features: the histogram
+/// (`BINS` bins) and `POINTS` entries of curve points, 3-D points, their σ and solver
+/// scratch. All-zero and const-constructible, so a board can place it in a static of its
 /// choice (`#[link_section]`).
 #[derive(Debug)]
 pub struct SmallBuffers<const POINTS: usize, const BINS: usize = BINS_8BIT> {
     histogram: [u32; BINS],
-    label_table: [u16; LABEL_TABLE_LEN],
     curve: [CurvePoint; POINTS],
     points: [Vec3; POINTS],
     sigmas: [Real; POINTS],
@@ -45,7 +78,6 @@ impl<const POINTS: usize, const BINS: usize> SmallBuffers<POINTS, BINS> {
     pub const fn new() -> Self {
         SmallBuffers {
             histogram: [0; BINS],
-            label_table: [0; LABEL_TABLE_LEN],
             curve: [CurvePoint::ZERO; POINTS],
             points: [Vec3::new(0.0, 0.0, 0.0); POINTS],
             sigmas: [0.0; POINTS],
@@ -62,19 +94,20 @@ impl<const POINTS: usize, const BINS: usize> Default for SmallBuffers<POINTS, BI
 }
 
 impl<'a, P: Pixel> Workspace<'a, P> {
-    /// A workspace over buffers placed apart: the difference frame and the labels
-    /// (`width × height` each), the object features and the [`SmallBuffers`].
-    pub fn from_parts<const POINTS: usize, const BINS: usize>(
+    /// A workspace over buffers placed apart: the laser-off / difference frame
+    /// (`width × height`), the object features, the [`RunBuffers`] and the [`SmallBuffers`].
+    pub fn from_parts<const POINTS: usize, const BINS: usize, const SEEDS: usize>(
         diff: &'a mut [P],
-        labels: &'a mut [u16],
         objects: &'a mut [ObjectFeatures],
+        runs: &'a mut RunBuffers<SEEDS>,
         small: &'a mut SmallBuffers<POINTS, BINS>,
     ) -> Self {
         Workspace {
             diff,
-            labels,
             histogram: &mut small.histogram,
-            label_table: &mut small.label_table,
+            candidate_runs: &mut runs.candidates,
+            runs: &mut runs.runs,
+            seeds: &mut runs.seeds,
             objects,
             curve: &mut small.curve,
             points: &mut small.points,
@@ -98,6 +131,7 @@ impl<'a, P: Pixel> Workspace<'a, P> {
 /// let workspace = buffers.workspace();
 /// assert_eq!(workspace.diff.len(), 64 * 48);
 /// assert_eq!(workspace.points.len(), SIZES.points);
+/// assert!(workspace.seeds.len() >= SIZES.seeds);
 /// ```
 #[derive(Debug)]
 pub struct Buffers<
@@ -105,22 +139,23 @@ pub struct Buffers<
     const PIXELS: usize,
     const POINTS: usize,
     const BINS: usize = BINS_8BIT,
+    const SEEDS: usize = SEEDS_752,
 > {
     diff: [P; PIXELS],
-    labels: [u16; PIXELS],
     objects: Objects,
+    runs: RunBuffers<SEEDS>,
     small: SmallBuffers<POINTS, BINS>,
 }
 
-impl<P: Pixel, const PIXELS: usize, const POINTS: usize, const BINS: usize>
-    Buffers<P, PIXELS, POINTS, BINS>
+impl<P: Pixel, const PIXELS: usize, const POINTS: usize, const BINS: usize, const SEEDS: usize>
+    Buffers<P, PIXELS, POINTS, BINS, SEEDS>
 {
     /// Zeroed buffers.
     pub const fn new() -> Self {
         Buffers {
             diff: [P::ZERO; PIXELS],
-            labels: [0; PIXELS],
             objects: NO_OBJECTS,
+            runs: RunBuffers::new(),
             small: SmallBuffers::new(),
         }
     }
@@ -129,15 +164,15 @@ impl<P: Pixel, const PIXELS: usize, const POINTS: usize, const BINS: usize>
     pub fn workspace(&mut self) -> Workspace<'_, P> {
         Workspace::from_parts(
             &mut self.diff,
-            &mut self.labels,
             &mut self.objects,
+            &mut self.runs,
             &mut self.small,
         )
     }
 }
 
-impl<P: Pixel, const PIXELS: usize, const POINTS: usize, const BINS: usize> Default
-    for Buffers<P, PIXELS, POINTS, BINS>
+impl<P: Pixel, const PIXELS: usize, const POINTS: usize, const BINS: usize, const SEEDS: usize>
+    Default for Buffers<P, PIXELS, POINTS, BINS, SEEDS>
 {
     fn default() -> Self {
         Self::new()
@@ -155,7 +190,7 @@ mod owned {
 
     use super::super::{Workspace, WorkspaceSizes};
     use crate::curve::CurvePoint;
-    use crate::image::segment::ObjectFeatures;
+    use crate::image::segment::{ObjectFeatures, Run};
     use crate::image::Pixel;
     use crate::real::{Real, Vec2, Vec3};
 
@@ -171,9 +206,10 @@ mod owned {
     #[derive(Debug)]
     pub struct OwnedBuffers<P: Pixel> {
         diff: Vec<P>,
-        labels: Vec<u16>,
         histogram: Vec<u32>,
-        label_table: Vec<u16>,
+        candidate_runs: Vec<Run>,
+        runs: Vec<Run>,
+        seeds: Vec<u16>,
         objects: Vec<ObjectFeatures>,
         curve: Vec<CurvePoint>,
         points: Vec<Vec3>,
@@ -187,9 +223,10 @@ mod owned {
         pub fn new(sizes: WorkspaceSizes) -> Self {
             OwnedBuffers {
                 diff: vec![P::ZERO; sizes.pixels],
-                labels: vec![0; sizes.pixels],
                 histogram: vec![0; sizes.histogram],
-                label_table: vec![0; sizes.label_table],
+                candidate_runs: vec![Run::ZERO; sizes.runs],
+                runs: vec![Run::ZERO; sizes.runs],
+                seeds: vec![0; sizes.seeds],
                 objects: vec![ObjectFeatures::ZERO; sizes.objects],
                 curve: vec![CurvePoint::ZERO; sizes.points],
                 points: vec![Vec3::zeros(); sizes.points],
@@ -208,9 +245,10 @@ mod owned {
         pub fn workspace(&mut self) -> Workspace<'_, P> {
             Workspace {
                 diff: &mut self.diff,
-                labels: &mut self.labels,
                 histogram: &mut self.histogram,
-                label_table: &mut self.label_table,
+                candidate_runs: &mut self.candidate_runs,
+                runs: &mut self.runs,
+                seeds: &mut self.seeds,
                 objects: &mut self.objects,
                 curve: &mut self.curve,
                 points: &mut self.points,

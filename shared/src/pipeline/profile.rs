@@ -2,10 +2,9 @@
 //! plane's curve and a [`Profile`] summarising the image out.
 
 use crate::calibration::{Calibration, MAX_PLANES};
-use crate::curve::{self, CurvePoint};
-use crate::image::segment::{self, Connectivity, ObjectFeatures};
-use crate::image::subtract::{self, SubtractStats};
-use crate::image::threshold::{self, ThresholdError};
+use crate::curve::{self, CurvePoint, NO_SEED};
+use crate::image::segment::{ObjectFeatures, Run};
+use crate::image::subtract::SubtractStats;
 use crate::image::{Frame, Pixel};
 use crate::laser_plane::{triangulate, LaserPlane};
 use crate::noise::{self, NoiseModel};
@@ -13,6 +12,7 @@ use crate::real::{Real, Vec2, Vec3};
 use crate::solvers::result::Flags;
 
 use super::planes::{self, UsedCurves};
+use super::stream::{ProfileStream, BLOCK_ROWS};
 use super::workspace::need;
 use super::{PipelineConfig, PipelineError, Workspace};
 
@@ -149,85 +149,32 @@ pub fn extract_profile<P: Pixel>(
 /// [`extract_profile`] that calls `probe` as each [`Stage`] completes (the firmware's
 /// instruction-count benchmark time-stamps them; `docs/performance.md`). With an empty
 /// closure it compiles to [`extract_profile`].
+///
+/// The pair goes through the device's streaming front end ([`ProfileStream`]): `off` is
+/// copied into the workspace (where the device's DMA puts it) and `on` is fed in blocks of
+/// [`BLOCK_ROWS`] rows, as the camera delivers it.
 pub fn extract_profile_probed<P: Pixel>(
     off: &Frame<P, impl AsRef<[P]>>,
     on: &Frame<P, impl AsRef<[P]>>,
     calibration: &Calibration,
     config: &PipelineConfig,
     ws: &mut Workspace<'_, P>,
-    mut probe: impl FnMut(Stage),
+    probe: impl FnMut(Stage),
 ) -> Result<Profile, PipelineError> {
     let (width, height) = check_inputs(off, on, calibration, ws)?;
-    let pixels = width * height;
-
-    let mut diff =
-        Frame::new(&mut ws.diff[..pixels], width, height, width)?.with_bit_depth(on.bit_depth())?;
-    let light = subtract_pair(on, off, &mut diff, ws.histogram, config)?;
-    probe(Stage::Subtracted);
-
-    let histogram = &ws.histogram[..light.histogram_len];
-    let automatic = config.threshold.threshold(histogram)?;
-    let t = config
-        .floors
-        .apply(automatic, light.stats.max_difference, light.noise);
-    probe(Stage::Thresholded);
-
-    // Segmentation with the 2×2 mask (thesis §5.4) and feature extraction (§5.5).
-    let mut labels = Frame::new(&mut ws.labels[..pixels], width, height, width)?;
-    let segmentation = segment::segment(
-        &diff,
-        t,
-        &mut labels,
-        ws.label_table,
-        ws.objects,
-        Connectivity::Eight,
-    )?;
-    let objects = &ws.objects[..segmentation.objects.min(ws.objects.len())];
-    probe(Stage::Segmented);
-
-    // Selection (§5.6) and plane assignment (docs/pipeline.md).
-    let candidates = planes::select_and_assign(objects, width, calibration, config)?;
-    let used = candidates.used_curves();
-    probe(Stage::Selected);
-
-    let n = extract_curves(
-        &diff,
-        &labels,
-        objects,
-        &used,
-        &light.stats,
-        config,
-        ws.curve,
-    )?;
-    need("points", n, ws.points.len())?;
-    probe(Stage::Extracted);
-
-    let plane_points = group_by_plane(&mut ws.curve[..n], &used, calibration.planes.len());
-    let (saturated_points, touches_edge) = smooth_and_triangulate(
-        &mut ws.curve[..n],
-        &plane_points,
-        calibration,
-        config,
-        width,
-        ws.points,
-    )?;
-    probe(Stage::Triangulated);
-
-    let usage = candidates.usage();
-    let report = candidates.report;
-    Ok(Profile {
-        subtract: light.stats,
-        threshold: t,
-        objects: segmentation.objects,
-        candidates: report.candidates,
-        unused_candidates: usage.unused + report.candidates.saturating_sub(report.selected),
-        largest_unused: usage.largest_unused,
-        smallest_used: usage.smallest_used,
-        planes: calibration.planes.len(),
-        plane_points,
-        saturated_points,
-        touches_edge,
-    })
+    for (y, stored) in ws.diff[..width * height]
+        .chunks_exact_mut(width)
+        .enumerate()
+    {
+        stored.copy_from_slice(off.row(y));
+    }
+    let mut stream = ProfileStream::begin(ws, calibration, config, on.bit_depth())?;
+    for block in (0..height).step_by(BLOCK_ROWS) {
+        for y in block..(block + BLOCK_ROWS).min(height) {
+            stream.push_rows(ws, on.row(y))?;
+        }
+    }
+    stream.finish_probed(ws, calibration, config, probe)
 }
 
 /// A valid calibration whose camera has the frames' size, and room for them in the
@@ -251,68 +198,100 @@ fn check_inputs<P: Pixel>(
     }
     on.check_same_size(off)?;
     need("diff", width * height, ws.diff.len())?;
-    need("labels", width * height, ws.labels.len())?;
     Ok((width, height))
 }
 
-/// What the subtraction found: its statistics, the histogram's length and the difference
-/// image's noise.
-struct Light {
-    stats: SubtractStats,
-    histogram_len: usize,
-    noise: Real,
+/// What the streamed front end hands the rest of the chain ([`after_segmentation`]): the
+/// difference frame's layout (in `Workspace::diff`), the subtraction's statistics, the
+/// threshold, and the objects and labelled runs of the segmentation (in `Workspace::objects`
+/// and `Workspace::runs`).
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Segmented {
+    pub(super) width: usize,
+    pub(super) height: usize,
+    pub(super) bit_depth: u8,
+    pub(super) stats: SubtractStats,
+    pub(super) threshold: u32,
+    pub(super) objects: usize,
+    pub(super) runs: usize,
 }
 
-/// Subtraction (thesis §5.3.1) and the two "is there anything to see?" tests: enough laser
-/// light above the noise, and an ambient that does not blind the sensor. One pass writes the
-/// difference, its statistics and its histogram (`histogram`, exactly `threshold::histogram`
-/// of the difference).
-// Inlined into the orchestrator, the subtraction's per-row loop keeps the frames' layout in
-// registers: 8 % fewer instructions on the device than as a call (QEMU bench,
-// docs/performance.md); the other stages are indifferent.
-#[inline(always)]
-fn subtract_pair<P: Pixel>(
-    on: &Frame<P, impl AsRef<[P]>>,
-    off: &Frame<P, impl AsRef<[P]>>,
-    diff: &mut Frame<P, &mut [P]>,
-    histogram: &mut [u32],
+/// The chain after the segmentation: selection and plane assignment, subpixel curve,
+/// smoothing and triangulation.
+pub(super) fn after_segmentation<P: Pixel>(
+    ws: &mut Workspace<'_, P>,
+    seg: Segmented,
+    calibration: &Calibration,
     config: &PipelineConfig,
-) -> Result<Light, PipelineError> {
-    let stats =
-        subtract::subtract_with_histogram(on, off, diff, histogram).map_err(|e| match e {
-            ThresholdError::Frame(e) => PipelineError::Frame(e),
-            e => PipelineError::Threshold(e),
-        })?;
-    let full_scale = on.max_value();
-    let histogram_len = threshold::histogram_len(diff).min(histogram.len());
-    let noise = threshold::difference_noise(&histogram[..histogram_len]);
-    if !config.floors.is_lit(stats.max_difference, noise) {
-        return Err(PipelineError::NoLaserLight {
-            max_difference: stats.max_difference,
-        });
-    }
-    // The off frame's mean at full scale means most of it is clipped: nothing can be seen.
-    if stats.off_mean >= 0.9 * full_scale as Real {
-        return Err(PipelineError::AmbientSaturated {
-            fraction: stats.off_mean / full_scale as Real,
-        });
-    }
-    Ok(Light {
-        stats,
-        histogram_len,
-        noise,
+    mut probe: impl FnMut(Stage),
+) -> Result<Profile, PipelineError> {
+    let (width, height) = (seg.width, seg.height);
+    let diff = Frame::new(&ws.diff[..width * height], width, height, width)?
+        .with_bit_depth(seg.bit_depth)?;
+    let objects = &ws.objects[..seg.objects.min(ws.objects.len())];
+
+    // Selection (§5.6) and plane assignment (docs/pipeline.md).
+    let candidates = planes::select_and_assign(objects, width, calibration, config)?;
+    let used = candidates.used_curves();
+    probe(Stage::Selected);
+
+    let n = extract_curves(
+        &diff,
+        &ws.runs[..seg.runs.min(ws.runs.len())],
+        objects,
+        &used,
+        &seg.stats,
+        config,
+        ws.seeds,
+        ws.curve,
+    )?;
+    need("points", n, ws.points.len())?;
+    probe(Stage::Extracted);
+
+    let plane_points = group_by_plane(&mut ws.curve[..n], &used, calibration.planes.len());
+    let (saturated_points, touches_edge) = smooth_and_triangulate(
+        &mut ws.curve[..n],
+        &plane_points,
+        calibration,
+        config,
+        width,
+        ws.points,
+    )?;
+    probe(Stage::Triangulated);
+
+    let usage = candidates.usage();
+    let report = candidates.report;
+    Ok(Profile {
+        subtract: seg.stats,
+        threshold: seg.threshold,
+        objects: seg.objects,
+        candidates: report.candidates,
+        unused_candidates: usage.unused + report.candidates.saturating_sub(report.selected),
+        largest_unused: usage.largest_unused,
+        smallest_used: usage.smallest_used,
+        planes: calibration.planes.len(),
+        plane_points,
+        saturated_points,
+        touches_edge,
     })
 }
 
 /// Subpixel curve extraction (thesis §5.7.1) of the used objects into `out`; returns the
 /// number of points (column-major: each column's points in curve order).
+///
+/// Each column's brightest pixel of each used object (the seed the estimator starts from) is
+/// found from the objects' runs, in raster order so that the first of equally bright pixels
+/// from the top wins, over the union of the used objects' column ranges only
+/// (`docs/pipeline.md`, "Streaming").
+#[allow(clippy::too_many_arguments)]
 fn extract_curves<P: Pixel>(
-    diff: &Frame<P, &mut [P]>,
-    labels: &Frame<u16, &mut [u16]>,
+    diff: &Frame<P, &[P]>,
+    runs: &[Run],
     objects: &[ObjectFeatures],
     used: &UsedCurves,
     stats: &SubtractStats,
     config: &PipelineConfig,
+    seeds: &mut [u16],
     out: &mut [CurvePoint],
 ) -> Result<usize, PipelineError> {
     let mut params = config.extract;
@@ -321,10 +300,10 @@ fn extract_curves<P: Pixel>(
         // ExtractParams).
         params.saturation = Some(diff.max_value().saturating_sub(stats.off_mean as u32 + 1));
     }
-    // Only the union of the used objects' bounding boxes holds their labels: scanning it
-    // instead of every column's `height` labels gives the same points (curve::extract_window).
-    let (mut x0, mut x1, mut y0, mut y1) = (usize::MAX, 0usize, usize::MAX, 0usize);
-    for &label in &used.labels[..used.len] {
+    let labels = &used.labels[..used.len];
+    let curves = labels.len();
+    let (mut x0, mut x1) = (usize::MAX, 0usize);
+    for &label in labels {
         // features[i].label == i + 1 (segment::Segmentation).
         if let Some(f) = objects
             .get((label as usize).wrapping_sub(1))
@@ -332,16 +311,43 @@ fn extract_curves<P: Pixel>(
         {
             x0 = x0.min(f.min_x as usize);
             x1 = x1.max(f.max_x as usize + 1);
-            y0 = y0.min(f.min_y as usize);
-            y1 = y1.max(f.max_y as usize + 1);
         }
     }
-    Ok(curve::extract_window(
+    if x0 >= x1 || curves == 0 {
+        return Err(PipelineError::NoCurve);
+    }
+    let seeds = seeds
+        .get_mut(..(x1 - x0) * curves)
+        .ok_or(PipelineError::WorkspaceTooSmall {
+            buffer: "seeds",
+            needed: (x1 - x0) * curves,
+            actual: 0,
+        })?;
+    seeds.fill(NO_SEED);
+    for run in runs {
+        let Some(k) = labels.iter().position(|&l| l == run.label) else {
+            continue;
+        };
+        let row = diff.row(run.row as usize);
+        for x in run.start as usize..run.end as usize {
+            let (Some(&v), Some(slot)) = (row.get(x), seeds.get_mut((x - x0) * curves + k)) else {
+                continue;
+            };
+            let v: u32 = v.into();
+            let better = *slot == NO_SEED
+                || diff
+                    .get(x, *slot as usize)
+                    .is_some_and(|b| Into::<u32>::into(b) < v);
+            if better {
+                *slot = run.row;
+            }
+        }
+    }
+    Ok(curve::extract_seeded(
         diff,
-        labels,
-        &used.labels[..used.len],
+        seeds,
+        curves,
         x0..x1,
-        y0..y1,
         &params,
         out,
     )?)

@@ -268,3 +268,75 @@ fn contrast_test_is_relative_to_the_noise() {
     let err = extract_profile(&off_f, &noisy_f, &cal, &cfg, &mut ws).unwrap_err();
     assert!(matches!(err, PipelineError::NoLaserLight { .. }), "{err:?}");
 }
+
+/// The streamed front end gives the stored pair's profile whichever way the rows arrive and
+/// whether the runs above the threshold come from the candidate runs or, when the candidate
+/// table is full, from a rescan of the difference frame; and the labelled runs are those of
+/// segmenting the difference frame directly.
+#[test]
+fn streaming_matches_the_stored_pair() {
+    use crate::image::segment::{segment, Connectivity, ObjectFeatures, Run};
+
+    let cal = calibration(2);
+    let (off, mut on) = render(&cal, &[0, 1], 0.9, 180..560, 130.0, 9);
+    // Specks of noise above the provisional threshold, to give the candidates work.
+    for k in 0..400 {
+        let i = (k * 7919 + 13) % (W * H);
+        on[i] = on[i].saturating_add(9 + (k % 5) as u8);
+    }
+    let (off_f, on_f) = frames(&off, &on);
+    let config = PipelineConfig::default();
+    let mut b = buffers(2);
+    let mut ws = b.workspace();
+    let stored = extract_profile(&off_f, &on_f, &cal, &config, &mut ws).unwrap();
+    let points: Vec<_> = ws.points.to_vec();
+
+    // By hand, in blocks of 7 rows (not the replay's 16), with a one-run candidate table:
+    // the table overflows on the first specks and `finish` rescans the frame.
+    let mut b2 = buffers(2);
+    let mut ws2 = b2.workspace();
+    let candidates = core::mem::take(&mut ws2.candidate_runs);
+    ws2.candidate_runs = &mut candidates[..1];
+    ws2.diff[..W * H].copy_from_slice(&off);
+    let mut stream = ProfileStream::begin(&mut ws2, &cal, &config, 8).unwrap();
+    for block in on.chunks(7 * W) {
+        stream.push_rows(&mut ws2, block).unwrap();
+    }
+    assert_eq!(stream.rows_received(), H);
+    let streamed = stream.finish(&mut ws2, &cal, &config).unwrap();
+    assert_eq!(streamed, stored);
+    assert_eq!(&ws2.points[..points.len()], &points[..]);
+
+    // The labelled runs equal those of the difference frame segmented directly.
+    let diff = Frame::new(&ws.diff[..W * H], W, H, W).unwrap();
+    let mut runs = vec![Run::ZERO; 8192];
+    let mut feats = vec![ObjectFeatures::ZERO; 1024];
+    let seg = segment(
+        &diff,
+        stored.threshold,
+        &mut runs,
+        &mut feats,
+        Connectivity::Eight,
+    )
+    .unwrap();
+    assert_eq!(seg.objects, stored.objects);
+    assert_eq!(&feats[..seg.objects], &ws.objects[..seg.objects]);
+    assert_eq!(&runs[..seg.runs], &ws.runs[..seg.runs]);
+
+    // A partial row and rows beyond the frame are refused.
+    let mut b3 = buffers(2);
+    let mut ws3 = b3.workspace();
+    let mut stream = ProfileStream::begin(&mut ws3, &cal, &config, 8).unwrap();
+    assert!(stream.push_rows(&mut ws3, &on[..W + 1]).is_err());
+    stream.push_rows(&mut ws3, &on).unwrap();
+    assert!(stream.push_rows(&mut ws3, &on[..W]).is_err());
+    // An unfinished frame is refused too.
+    let mut b4 = buffers(2);
+    let mut ws4 = b4.workspace();
+    let mut stream = ProfileStream::begin(&mut ws4, &cal, &config, 8).unwrap();
+    stream.push_rows(&mut ws4, &on[..W * 10]).unwrap();
+    assert!(matches!(
+        stream.finish(&mut ws4, &cal, &config),
+        Err(PipelineError::Frame(_))
+    ));
+}

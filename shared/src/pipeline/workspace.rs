@@ -1,26 +1,30 @@
 //! The pipeline's working memory as it sees it: borrowed slices, and the lengths they need.
 
 use crate::calibration::MAX_PLANES;
-use crate::curve::CurvePoint;
-use crate::image::segment::ObjectFeatures;
+use crate::curve::{CurvePoint, MAX_CURVES};
+use crate::image::segment::{ObjectFeatures, Run};
 use crate::image::Pixel;
 use crate::real::{Real, Vec2, Vec3};
 
-use super::buffers::{LABEL_TABLE_LEN, MAX_OBJECTS};
+use super::buffers::{MAX_OBJECTS, MAX_RUNS};
 use super::PipelineError;
 
 /// Caller-owned working memory of the pipeline: borrowed from a [`Buffers`](super::Buffers) (static),
 /// an `OwnedBuffers` (heap, feature `alloc`), or any slices of the [`WorkspaceSizes`].
 #[derive(Debug)]
 pub struct Workspace<'a, P: Pixel> {
-    /// Difference frame (`width × height`).
+    /// The laser-off frame (`width × height`), which the streamed subtraction turns into the
+    /// difference frame in place (`pipeline::stream`).
     pub diff: &'a mut [P],
-    /// Segmentation labels (`width × height`).
-    pub labels: &'a mut [u16],
     /// Histogram bins (`2^bit_depth`).
     pub histogram: &'a mut [u32],
-    /// Equivalence table of the segmentation.
-    pub label_table: &'a mut [u16],
+    /// Runs above the streaming's provisional threshold, found as the rows arrive.
+    pub candidate_runs: &'a mut [Run],
+    /// Runs above the threshold, labelled by the segmentation.
+    pub runs: &'a mut [Run],
+    /// Each column's brightest pixel of each used curve (`width × MAX_CURVES`), for the
+    /// subpixel extraction.
+    pub seeds: &'a mut [u16],
     /// Features of the objects found.
     pub objects: &'a mut [ObjectFeatures],
     /// Curve points, all planes (about `width × planes`).
@@ -39,12 +43,14 @@ pub struct Workspace<'a, P: Pixel> {
 /// Buffer lengths a [`Workspace`] needs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct WorkspaceSizes {
-    /// Pixels of `diff` and `labels`.
+    /// Pixels of `diff`.
     pub pixels: usize,
     /// Histogram bins.
     pub histogram: usize,
-    /// Equivalence-table entries.
-    pub label_table: usize,
+    /// Entries of each of the two run tables (candidate runs, labelled runs).
+    pub runs: usize,
+    /// Seed entries (`width × MAX_CURVES`).
+    pub seeds: usize,
     /// Object-feature entries.
     pub objects: usize,
     /// Curve, 3-D point, point-σ and solver-scratch entries.
@@ -54,9 +60,9 @@ pub struct WorkspaceSizes {
 impl WorkspaceSizes {
     /// Sizes for a `width × height` frame of `bit_depth` bits with `planes` laser planes.
     ///
-    /// The label table is sized for a cluttered scene (4096 provisional labels), not for the
-    /// pathological worst case (a checkerboard needs `width × height / 2`): a scene with more
-    /// blobs than that is reported as `Segment(TooManyLabels)` instead of being measured.
+    /// The run tables are sized for a cluttered scene ([`MAX_RUNS`] runs), not for the
+    /// pathological worst case (a checkerboard has `width × height / 2`): a scene with more
+    /// runs than that is reported as `Segment(TooManyLabels)` instead of being measured.
     pub const fn new(width: usize, height: usize, bit_depth: u8, planes: usize) -> Self {
         // `Ord::min`/`clamp` are not `const`.
         let bits = if bit_depth > 16 { 16 } else { bit_depth };
@@ -70,7 +76,8 @@ impl WorkspaceSizes {
         WorkspaceSizes {
             pixels: width * height,
             histogram: 1usize << bits,
-            label_table: LABEL_TABLE_LEN,
+            runs: MAX_RUNS,
+            seeds: width * MAX_CURVES,
             objects: MAX_OBJECTS,
             points: width * planes * 2,
         }

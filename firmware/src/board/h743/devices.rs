@@ -1,12 +1,14 @@
 //! The H743 board's drivers: its implementations of the application's ports.
 
 use embassy_embedded_hal::adapter::BlockingAsync;
-use embassy_stm32::dcmi::{self, Dcmi};
+use embassy_stm32::dcmi::Dcmi;
+use embassy_stm32::dma::ReadableRingBuffer;
 use embassy_stm32::exti::ExtiInput;
 use embassy_stm32::flash::{Blocking, Flash};
 use embassy_stm32::gpio::Output;
 use embassy_stm32::i2c::{I2c, Master};
 use embassy_stm32::mode::Blocking as BlockingMode;
+use embassy_stm32::pac;
 use embassy_stm32::peripherals::DCMI;
 use embassy_stm32::peripherals::USB_OTG_FS;
 use embassy_stm32::usb::Driver;
@@ -199,16 +201,29 @@ pub type SensorBus = BlockingAsync<I2c<'static, BlockingMode, Master>>;
 /// The camera: the MT9V034 (set up over I²C) with its EXPOSURE pin, frames by DCMI + DMA.
 pub struct Mt9v034Dcmi {
     sensor: Mt9v034<SensorBus>,
-    dcmi: Dcmi<'static, DCMI>,
+    /// The DCMI's pins and configuration (snapshot mode, polarities); its one-transfer
+    /// capture is not used: frames arrive in line blocks through `ring`.
+    _dcmi: Dcmi<'static, DCMI>,
+    /// Circular DMA from the DCMI into two line blocks (half-transfer and transfer-complete
+    /// interrupts): a frame of any height, one block handed over while the other fills.
+    ring: ReadableRingBuffer<'static, u32>,
+    /// The block handed to the pipeline (read out of the ring).
+    block: &'static mut [u32; BLOCK_WORDS],
     exposure_pin: Output<'static>,
 }
 
+/// Words of one line block: [`ports::BLOCK_ROWS`] rows of the frame's width.
+pub const BLOCK_WORDS: usize = ports::BLOCK_ROWS * WIDTH as usize / 4;
+
 impl Mt9v034Dcmi {
-    /// Takes the sensor's buses and sets it up; a sensor that does not answer now is set up
-    /// again before the next capture.
+    /// Takes the sensor's buses and sets it up (a sensor that does not answer now is set up
+    /// again before the next capture); `ring` is the circular DMA from the DCMI's data
+    /// register into two blocks of [`BLOCK_WORDS`] words, `block` where each is read to.
     pub async fn new(
         i2c: I2c<'static, BlockingMode, Master>,
         dcmi: Dcmi<'static, DCMI>,
+        ring: ReadableRingBuffer<'static, u32>,
+        block: &'static mut [u32; BLOCK_WORDS],
         exposure_pin: Output<'static>,
     ) -> Self {
         let mut sensor = Mt9v034::new(BlockingAsync::new(i2c), WINDOW, PIXCLK_HZ);
@@ -217,9 +232,65 @@ impl Mt9v034Dcmi {
         }
         Mt9v034Dcmi {
             sensor,
-            dcmi,
+            _dcmi: dcmi,
+            ring,
+            block,
             exposure_pin,
         }
+    }
+
+    /// One snapshot: the exposure pulse, and the frame's line blocks handed to `each` as the
+    /// DMA fills them. A block overwritten before it was read (the pipeline too slow for the
+    /// pixel clock) is a transfer error.
+    async fn stream<L: ports::Laser, C: ports::Clock>(
+        &mut self,
+        exposure_us: u32,
+        strobe: &Strobe<'_, L, C>,
+        mut each: impl FnMut(&[u8]),
+    ) -> Result<(), CameraError> {
+        self.sensor.prepare(exposure_us).await?;
+        let blocks = FRAME_BYTES / (4 * BLOCK_WORDS);
+        // A frame is a whole number of ring turns (2 blocks each), so the DMA starts every
+        // frame at the ring's start.
+        self.ring.clear();
+        self.ring.start();
+        pac::DCMI.icr().write(|r| {
+            r.set_ovr_isc(true);
+            r.set_err_isc(true);
+            r.set_frame_isc(true);
+        });
+        // Snapshot mode (set up by `Dcmi::new_8bit`): CAPTURE clears itself after a frame.
+        pac::DCMI.cr().modify(|r| {
+            r.set_enable(true);
+            r.set_capture(true);
+        });
+        let pin = &mut self.exposure_pin;
+        let expose = async {
+            // Snapshot: the rising edge of EXPOSURE starts integration, which lasts the
+            // programmed shutter width; the lasers follow (and LED_OUT gates them).
+            strobe.on();
+            pin.set_high();
+            Timer::after(Duration::from_micros(exposure_us as u64)).await;
+            pin.set_low();
+            strobe.off();
+        };
+        let (ring, block) = (&mut self.ring, &mut *self.block);
+        let read = async {
+            for _ in 0..blocks {
+                ring.read_exact(&mut block[..])
+                    .await
+                    .map_err(|_| CameraError::Transfer)?;
+                each(bytemuck::cast_slice(&block[..]));
+            }
+            Ok(())
+        };
+        let (result, ()) = embassy_futures::join::join(read, expose).await;
+        pac::DCMI.cr().modify(|r| {
+            r.set_capture(false);
+            r.set_enable(false);
+        });
+        self.ring.stop().await;
+        result
     }
 }
 
@@ -238,26 +309,26 @@ impl ports::Camera for Mt9v034Dcmi {
         strobe: &Strobe<'_, L, C>,
         buf: &mut [u8],
     ) -> Result<(), CameraError> {
-        self.sensor.prepare(exposure_us).await?;
-        let words: &mut [u32] = bytemuck::try_cast_slice_mut(
-            buf.get_mut(..FRAME_BYTES).ok_or(CameraError::BufferSize)?,
-        )
-        .map_err(|_| CameraError::BufferSize)?;
-        let pin = &mut self.exposure_pin;
-        let expose = async {
-            // Snapshot: the rising edge of EXPOSURE starts integration, which lasts the
-            // programmed shutter width; the lasers follow (and LED_OUT gates them).
-            strobe.on();
-            pin.set_high();
-            Timer::after(Duration::from_micros(exposure_us as u64)).await;
-            pin.set_low();
-            strobe.off();
-        };
-        let (result, ()) = embassy_futures::join::join(self.dcmi.capture(words), expose).await;
-        result.map_err(|e| match e {
-            dcmi::Error::Overrun => CameraError::Transfer,
-            _ => CameraError::Transfer,
+        let frame = buf.get_mut(..FRAME_BYTES).ok_or(CameraError::BufferSize)?;
+        let mut at = 0;
+        self.stream(exposure_us, strobe, |rows| {
+            if let Some(dst) = frame.get_mut(at..at + rows.len()) {
+                dst.copy_from_slice(rows);
+            }
+            at += rows.len();
         })
+        .await
+    }
+
+    async fn capture_rows<L: ports::Laser, C: ports::Clock, S: ports::RowSink + ?Sized>(
+        &mut self,
+        exposure_us: u32,
+        strobe: &Strobe<'_, L, C>,
+        _buf: &mut [u8],
+        sink: &mut S,
+    ) -> Result<(), CameraError> {
+        self.stream(exposure_us, strobe, |rows| sink.rows(rows))
+            .await
     }
 }
 

@@ -4,9 +4,9 @@
 //! * trigger: EXTI input, debounced by re-reading the level after [`DEBOUNCE_US`];
 //! * camera: MT9V034 set up over I²C ([`crate::mt9v034`], register table in
 //!   `docs/hardware.md`), snapshot mode started by a pulse on its EXPOSURE pin, frames
-//!   received by DCMI + DMA into AXI SRAM. One DMA transfer moves at most 65,535 words
-//!   (262,140 bytes), and RAM holds two frames plus the pipeline's per-pixel buffers, so the
-//!   sensor reads out a window of [`WINDOW_ROWS`] rows (752 × 160 = 120,320 bytes);
+//!   received by DCMI + circular DMA in double-buffered line blocks (16 rows) in AXI SRAM:
+//!   the laser-off frame is stored whole, the laser-on frame goes through the pipeline block
+//!   by block as it is read out, so the whole 752 × 480 frame fits ([`WINDOW_ROWS`]);
 //! * link: USB CDC-ACM (embassy-usb);
 //! * calibration: a record in the last flash sector (`protocol::calibration_record`);
 //! * watchdog: IWDG1, fed by the application's main loop.
@@ -28,13 +28,13 @@ pub use devices::*;
 #[cfg(feature = "h743")]
 pub use start::*;
 
-/// Rows read out per frame. The DMA limit alone allows 348 rows of 752 bytes; RAM decides:
-/// two frames, the pipeline's difference frame (1 B/px) and labels (2 B/px) are
-/// 5 B/px = 601,600 B for 160 rows, in AXI SRAM (frames, difference) and SRAM1–3 (labels).
-/// See `docs/hardware.md` for the working range this window covers.
-pub const WINDOW_ROWS: u16 = 160;
-/// First sensor row of the window: centred on the 480-row sensor.
-pub const WINDOW_ROW_OFFSET: u16 = (mt9v034::HEIGHT - WINDOW_ROWS) / 2;
+/// Rows read out per frame: the whole sensor. Frames arrive in double-buffered DMA line
+/// blocks, so the one-transfer limit (65,535 words) does not apply, and the pipeline keeps
+/// one per-pixel buffer (the laser-off frame, turned into the difference in place):
+/// `docs/hardware.md`, "Memory map".
+pub const WINDOW_ROWS: u16 = mt9v034::HEIGHT;
+/// First sensor row of the window.
+pub const WINDOW_ROW_OFFSET: u16 = 0;
 /// The sensor rows read out.
 pub const WINDOW: Window = Window {
     first_row: WINDOW_ROW_OFFSET,
@@ -42,7 +42,8 @@ pub const WINDOW: Window = Window {
 };
 /// Frame width: the whole sensor width.
 pub const WIDTH: u16 = mt9v034::WIDTH;
-/// Bytes of one frame.
+/// Bytes of one frame: the laser-off frame the pipeline stores and turns into the difference
+/// frame in place (`docs/hardware.md`, "Memory map").
 pub const FRAME_BYTES: usize = WIDTH as usize * WINDOW_ROWS as usize;
 /// Curve/point entries of the pipeline's workspace: every column, two planes.
 pub const POINTS: usize = WorkspaceSizes::new(WIDTH as usize, WINDOW_ROWS as usize, 8, 2).points;

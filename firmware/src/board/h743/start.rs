@@ -1,7 +1,9 @@
 //! Bringing the H743 board up: the clock tree, the pin map (`docs/hardware.md`, "Wiring"),
 //! the USB descriptors, and the buffers' places in RAM.
 
+use core::ptr::addr_of_mut;
 use embassy_stm32::dcmi::{self, Dcmi};
+use embassy_stm32::dma::ReadableRingBuffer;
 use embassy_stm32::exti::{self, ExtiInput};
 use embassy_stm32::flash::Flash;
 use embassy_stm32::gpio::{Level, Output, Pull, Speed};
@@ -16,35 +18,41 @@ use embassy_usb::{Builder, UsbDevice};
 use static_cell::StaticCell;
 use tangent_core::pipeline::Workspace;
 
+use super::devices::BLOCK_WORDS;
 use super::devices::{
     Button, EmbassyClock, FlashStore, GpioLasers, Iwdg, Mt9v034Dcmi, UsbLink, H743,
 };
 use super::{FRAME_BYTES, POINTS, USB_PID, USB_VID, WATCHDOG_US};
 use crate::app::Buffers;
+use crate::buffers::FrameBuffer;
 use crate::ports::Devices;
 
 bind_interrupts!(struct Irqs {
     OTG_FS => usb::InterruptHandler<peripherals::USB_OTG_FS>;
     DCMI => dcmi::InterruptHandler<peripherals::DCMI>;
     DMA1_STREAM0 => dma::InterruptHandler<peripherals::DMA1_CH0>;
+    DMA1_STREAM1 => dma::InterruptHandler<peripherals::DMA1_CH1>;
     EXTI15_10 => exti::InterruptHandler<interrupt::typelevel::EXTI15_10>;
 });
 
-// Frames, difference frame and the small buffers in AXI SRAM (DMA1 cannot reach DTCM), the
-// labels in SRAM1–3 (240,640 of its 294,912 bytes), the object features in DTCM (.bss:
-// CPU-only, which the pipeline is). See `memory.x` and `docs/hardware.md`.
+// The laser-off frame (752 × 480, turned into the difference in place) in AXI SRAM (DMA1
+// cannot reach DTCM), with the DMA's line blocks (below); the run tables and the per-point
+// buffers in SRAM1–3; the object features in DTCM (.bss: CPU-only, which the pipeline is).
+// No stored frame pair for raw captures. See `memory.x` and `docs/hardware.md`, "Memory map".
 crate::buffers::board_buffers! {
-    frame_bytes = FRAME_BYTES, points = POINTS;
-    #[link_section = ".axisram"] frames;
+    off_bytes = 0, on_bytes = 0, diff_bytes = FRAME_BYTES, points = POINTS;
+    #[link_section = ".axisram"] off;
+    #[link_section = ".axisram"] on;
     #[link_section = ".axisram"] diff;
-    #[link_section = ".sram123"] labels;
-    #[link_section = ".axisram"] small;
+    #[link_section = ".sram123"] runs;
+    #[link_section = ".sram123"] small;
     objects;
 }
 
-/// The clock tree: 64 MHz HSI → PLL1: 400 MHz core (voltage scale 1), 200 MHz AHB (DCMI
-/// kernel clock ≥ 2.5 × 26.66 MHz PIXCLK), APB 100 MHz, HSI48 trimmed from USB SOF for the
-/// OTG FS.
+/// The clock tree: 64 MHz HSI → PLL1 (÷4 × 60 ÷ 2): 480 MHz core at voltage scale 0 (the
+/// STM32H743's rated maximum, revision V silicon; embassy raises VOS1 → VOS0 through the
+/// SYSCFG over-drive), 240 MHz AHB (DCMI kernel clock ≥ 2.5 × 26.66 MHz PIXCLK), APB 120 MHz,
+/// HSI48 trimmed from USB SOF for the OTG FS.
 pub fn clock_tree() -> embassy_stm32::Config {
     use embassy_stm32::rcc::*;
     let mut config = embassy_stm32::Config::default();
@@ -56,7 +64,7 @@ pub fn clock_tree() -> embassy_stm32::Config {
     config.rcc.pll1 = Some(Pll {
         source: PllSource::HSI,
         prediv: PllPreDiv::DIV4,
-        mul: PllMul::MUL50,
+        mul: PllMul::MUL60,
         fracn: None,
         divp: Some(PllDiv::DIV2),
         divq: None,
@@ -68,7 +76,7 @@ pub fn clock_tree() -> embassy_stm32::Config {
     config.rcc.apb2_pre = APBPrescaler::DIV2;
     config.rcc.apb3_pre = APBPrescaler::DIV2;
     config.rcc.apb4_pre = APBPrescaler::DIV2;
-    config.rcc.voltage_scale = VoltageScale::Scale1;
+    config.rcc.voltage_scale = VoltageScale::Scale0;
     config.rcc.mux.usbsel = mux::Usbsel::HSI48;
     config
 }
@@ -126,8 +134,32 @@ pub async fn start() -> Started {
         p.PA6,
         dcmi_config,
     );
+    // The line blocks: a circular DMA on DMA1 stream 1 with the DCMI's request, into two
+    // blocks in AXI SRAM (DMA-reachable), and the block the pipeline reads.
+    #[link_section = ".axisram"]
+    static mut RING: FrameBuffer<{ 8 * BLOCK_WORDS }> = FrameBuffer([0; 8 * BLOCK_WORDS]);
+    #[link_section = ".axisram"]
+    static mut BLOCK: [u32; BLOCK_WORDS] = [0; BLOCK_WORDS];
+    let request = dcmi::FrameDma::<peripherals::DCMI>::request(&*p.DMA1_CH1);
+    // SAFETY: `start` runs once (the peripherals can be taken only once), so these are the
+    // only references to the statics; NOLOAD sections are zeroed in place first. The ring
+    // reads the DCMI's data register, a valid peripheral address for the DMA.
+    let (ring, block) = unsafe {
+        core::ptr::write_bytes(addr_of_mut!(RING), 0, 1);
+        core::ptr::write_bytes(addr_of_mut!(BLOCK), 0, 1);
+        let ring_bytes: &'static mut [u8; 8 * BLOCK_WORDS] = &mut (*addr_of_mut!(RING)).0;
+        let words: &'static mut [u32] = bytemuck::cast_slice_mut(&mut ring_bytes[..]);
+        let ring = ReadableRingBuffer::new(
+            dma::Channel::new(p.DMA1_CH1, Irqs),
+            request,
+            embassy_stm32::pac::DCMI.dr().as_ptr() as *mut u32,
+            words,
+            dma::TransferOptions::default(),
+        );
+        (ring, &mut *addr_of_mut!(BLOCK))
+    };
     let exposure_pin = Output::new(p.PD12, Level::Low, Speed::High);
-    let camera = Mt9v034Dcmi::new(i2c, dcmi, exposure_pin).await;
+    let camera = Mt9v034Dcmi::new(i2c, dcmi, ring, block, exposure_pin).await;
 
     let trigger = Button::new(ExtiInput::new(p.PC13, p.EXTI13, Pull::Down, Irqs));
     let store = FlashStore::new(Flash::new_blocking(p.FLASH));

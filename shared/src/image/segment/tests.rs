@@ -24,10 +24,11 @@ struct Out {
 fn run(mask: &[u8], w: usize, h: usize, conn: Connectivity) -> Out {
     let img = Frame::new(mask, w, h, w).unwrap();
     let mut labels = vec![0xFFFFu16; w * h];
-    let mut table = vec![0u16; worst_case_labels(w, h, conn) + 1];
+    let mut runs = vec![Run::ZERO; w.div_ceil(2) * h];
     let mut features = vec![ObjectFeatures::empty(0); w * h];
+    let seg = segment(&img, 0, &mut runs, &mut features, conn).unwrap();
     let mut lf = Frame::new(&mut labels, w, h, w).unwrap();
-    let seg = segment(&img, 0, &mut lf, &mut table, &mut features, conn).unwrap();
+    paint_labels(&runs[..seg.runs], &mut lf);
     features.truncate(seg.objects);
     Out {
         labels,
@@ -88,11 +89,11 @@ fn l_shape_is_one_object_with_known_features() {
 
 #[test]
 fn u_shape_merges_late_and_labels_are_compact() {
-    // Two arms get provisional labels 1 and 2 (3 for the lone pixel at the top right);
-    // the bottom bar merges 1 and 2 in the last row. Compact labels: U = 1, dot = 2.
+    // Two arms (runs 0 and 1 of row 0, run 2 the lone pixel at the top right); the
+    // bottom bar merges them in the last row. Compact labels: U = 1, dot = 2.
     let (m, w, h) = parse(&["#..#..#", "#..#...", "#..#...", "####..."]);
     let o = run(&m, w, h, Connectivity::Eight);
-    assert_eq!(o.seg.provisional_labels, 3);
+    assert_eq!(o.seg.runs, 8);
     assert_eq!(o.seg.objects, 2);
     assert_eq!(o.labels, flood(&m, w, h, Connectivity::Eight));
     assert_eq!(o.labels[0], 1);
@@ -114,7 +115,7 @@ fn comb_needs_chained_equivalences() {
         "........#",
     ]);
     let o = run(&m, w, h, Connectivity::Eight);
-    assert_eq!(o.seg.provisional_labels, 5);
+    assert_eq!(o.seg.runs, 5 * 3 + 2);
     assert_eq!(o.seg.objects, 1);
     // Staircase merging from the right ("W" pattern), where the left arm arrives last.
     let (m, w, h) = parse(&["....#.#", "...##.#", "..#..##", ".#.....", "#......"]);
@@ -149,11 +150,7 @@ fn single_pixel_objects() {
         let y = 2 * (i / 3) as u16;
         assert_eq!((f.min_x, f.min_y), (x, y));
     }
-    // This is exactly the worst case for 8-connectivity: ceil(5/2)*ceil(3/2) = 6 labels.
-    assert_eq!(
-        o.seg.provisional_labels,
-        worst_case_labels(5, 3, Connectivity::Eight)
-    );
+    assert_eq!(o.seg.runs, 6);
 }
 
 #[test]
@@ -197,11 +194,9 @@ fn intensity_features_on_a_known_shape() {
         }
     }
     let fi = Frame::new(&img, w, h, w).unwrap();
-    let mut labels = vec![0u16; w * h];
-    let mut lf = Frame::new(&mut labels, w, h, w).unwrap();
-    let mut table = [0u16; 8];
+    let mut runs = [Run::ZERO; 2];
     let mut feats = [ObjectFeatures::empty(0); 2];
-    let seg = segment(&fi, 5, &mut lf, &mut table, &mut feats, Connectivity::Eight).unwrap();
+    let seg = segment(&fi, 5, &mut runs, &mut feats, Connectivity::Eight).unwrap();
     assert_eq!(seg.objects, 1);
     let f = feats[0];
     assert_eq!((f.pixel_count, f.peak_intensity), (6, 42));
@@ -223,56 +218,67 @@ fn intensity_features_on_a_known_shape() {
 fn full_tables_are_errors() {
     let (m, w, h) = parse(&["#.#.#", ".....", "#.#.#"]);
     let img = Frame::new(&m, w, h, w).unwrap();
-    let mut labels = vec![0u16; w * h];
-    let mut lf = Frame::new(&mut labels, w, h, w).unwrap();
     let mut feats = [ObjectFeatures::empty(0); 6];
-    // 6 provisional labels needed; a table of 6 entries holds 5.
-    let mut table = [0u16; 6];
+    // 6 runs needed; a table of 5 holds 5.
+    let mut runs = [Run::ZERO; 6];
     assert_eq!(
-        segment(
-            &img,
-            0,
-            &mut lf,
-            &mut table,
-            &mut feats,
-            Connectivity::Eight
-        )
-        .unwrap_err(),
+        segment(&img, 0, &mut runs[..5], &mut feats, Connectivity::Eight).unwrap_err(),
         SegmentError::TooManyLabels { capacity: 5 }
     );
-    // Enough labels but room for only 4 objects' features.
-    let mut table = [0u16; 7];
+    // Enough runs but room for only 4 objects' features.
     assert_eq!(
-        segment(
-            &img,
-            0,
-            &mut lf,
-            &mut table,
-            &mut feats[..4],
-            Connectivity::Eight
-        )
-        .unwrap_err(),
+        segment(&img, 0, &mut runs, &mut feats[..4], Connectivity::Eight).unwrap_err(),
         SegmentError::TooManyObjects { capacity: 4 }
     );
     // Exactly enough of both succeeds.
-    let seg = segment(
-        &img,
-        0,
-        &mut lf,
-        &mut table,
-        &mut feats,
-        Connectivity::Eight,
-    )
-    .unwrap();
+    let seg = segment(&img, 0, &mut runs, &mut feats, Connectivity::Eight).unwrap();
     assert_eq!(seg.objects, 6);
-    // An empty table cannot label anything, but an empty image needs no label.
+    // An empty table cannot hold a run, but an empty image needs none.
     assert_eq!(
-        segment(&img, 0, &mut lf, &mut [], &mut feats, Connectivity::Eight).unwrap_err(),
+        segment(&img, 0, &mut [], &mut feats, Connectivity::Eight).unwrap_err(),
         SegmentError::TooManyLabels { capacity: 0 }
     );
     let dark = [0u8; 15];
     let img = Frame::new(&dark, w, h, w).unwrap();
-    let seg = segment(&img, 0, &mut lf, &mut [], &mut [], Connectivity::Eight).unwrap();
-    assert_eq!(seg.objects, 0);
-    assert!(labels.iter().all(|&l| l == 0));
+    let seg = segment(&img, 0, &mut [], &mut [], Connectivity::Eight).unwrap();
+    assert_eq!((seg.objects, seg.runs), (0, 0));
+}
+
+#[test]
+fn word_scan_finds_the_runs_of_a_pixel_scan() {
+    // 8-bit rows of every length 0..40 with runs starting and ending at every offset within a
+    // word: the word-skipping scan gives the runs of the plain per-pixel definition.
+    let mut s: u32 = 99;
+    for n in 0..40usize {
+        for density in [5u32, 30, 70] {
+            let row: Vec<u8> = (0..n)
+                .map(|_| {
+                    s = s.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                    if (s >> 24) % 100 < density {
+                        9 + (s >> 8) as u8 % 200
+                    } else {
+                        (s >> 12) as u8 % 9
+                    }
+                })
+                .collect();
+            let mut runs = vec![Run::ZERO; n + 1];
+            let mut count = 0;
+            row_runs(&row, 3, 5, 8, &mut runs, &mut count).unwrap();
+            let mut expect = Vec::new();
+            let mut open = None;
+            for (x, &v) in row.iter().chain([0u8].iter()).enumerate() {
+                match (v > 8, open) {
+                    (true, None) => open = Some(x),
+                    (false, Some(a)) => {
+                        expect.push((a as u16 + 5, x as u16 + 5));
+                        open = None;
+                    }
+                    _ => {}
+                }
+            }
+            let got: Vec<(u16, u16)> = runs[..count].iter().map(|r| (r.start, r.end)).collect();
+            assert_eq!(got, expect, "n {n} density {density}");
+            assert!(runs[..count].iter().all(|r| r.row == 3));
+        }
+    }
 }
