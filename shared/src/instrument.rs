@@ -9,6 +9,7 @@
 //! tests).
 //!
 //! * [`stem`]: [`Mode::Cylinder`], the stem's diameter.
+//! * [`road`]: [`Mode::Road`], a road profile's mean profile depth and microtexture.
 
 use crate::calibration::{Calibration, MAX_PLANES};
 use crate::image::{Frame, Pixel};
@@ -21,8 +22,10 @@ use crate::pipeline::{
 use crate::real::{Real, Vec2, Vec3};
 use crate::solvers::stem::CylinderParams;
 
+pub mod road;
 pub mod stem;
 
+pub use road::Road;
 pub use stem::Stem;
 
 /// What an instrument's solver reads: per laser plane, the 3-D points of its curve (camera
@@ -130,6 +133,8 @@ pub struct Measured<S> {
 pub struct InstrumentParams {
     /// [`Mode::Cylinder`] ([`Stem`]).
     pub cylinder: CylinderParams,
+    /// [`Mode::Road`] ([`Road`]).
+    pub road: road::RoadParams,
 }
 
 /// Measures a frame pair with the instrument of `mode`: [`extract_profile`], then its solver.

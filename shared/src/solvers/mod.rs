@@ -33,7 +33,9 @@ pub mod circle;
 pub mod cylinder_fit;
 pub mod ellipse;
 pub mod lm;
+pub mod mpd;
 pub mod result;
+pub mod road_profile;
 pub mod stem;
 pub mod three_tangent;
 
