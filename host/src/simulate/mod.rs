@@ -11,6 +11,7 @@
 
 pub mod corpus;
 pub mod laser;
+pub mod road_corpus;
 pub mod render;
 pub mod scene;
 pub mod sensor;
