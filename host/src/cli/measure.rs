@@ -95,7 +95,18 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     } else {
         ProgressBar::hidden()
     };
-    let road_params = RoadParams::default();
+    // A road head's height-scale correction travels in its calibration file's `[road]`.
+    let mut road_params = RoadParams::default();
+    if let Some(path) = &args.calib {
+        match calibration_file::read_road(path) {
+            Ok(Some(r)) => road_params.profile.height_scale = r.height_scale,
+            Ok(None) => {}
+            Err(e) => {
+                report_unreadable(&mut out, args.json, &e.to_string())?;
+                return Ok(ExitCode::from(UNREADABLE));
+            }
+        }
+    }
     let results: Vec<Result<(Reading, Option<RoadResult>), String>> = targets
         .par_iter()
         .progress_with(bar)
