@@ -109,11 +109,7 @@ impl RoadReport {
             s += &format!("; microtexture on the peak: RMS {r:.1} µm, curvature {c:.2} /mm");
         }
         if let Some(t) = self.truth_mpd_mm {
-            s += &format!(
-                " (truth MPD {:.3} mm, error {:+.3} mm)",
-                t,
-                self.mpd_mm - t
-            );
+            s += &format!(" (truth MPD {:.3} mm, error {:+.3} mm)", t, self.mpd_mm - t);
         }
         s
     }
@@ -280,10 +276,7 @@ pub fn true_profile(
             _ => None,
         })
     };
-    let (s0, len) = (
-        params.profile.window_start,
-        params.profile.window_length,
-    );
+    let (s0, len) = (params.profile.window_start, params.profile.window_length);
     let count = (len / TRUTH_SPACING).round() as usize;
     let mut out = Vec::with_capacity(count + 1);
     for k in 0..=count {

@@ -98,7 +98,11 @@ fn our_mpd_equals_captif_slp_on_identical_profiles() {
     for (f, o) in files.iter().zip(&ours) {
         match (o, theirs[f]) {
             (Ok(a), Some(b)) => {
-                assert!((a - b).abs() <= 0.005e-3, "{}: ours {a}, captif-slp {b}", f.display());
+                assert!(
+                    (a - b).abs() <= 0.005e-3,
+                    "{}: ours {a}, captif-slp {b}",
+                    f.display()
+                );
                 compared += 1;
             }
             // Both refuse (drop-outs or spikes over the limit), or it is a real difference.
@@ -118,7 +122,11 @@ fn a_simulated_road_reads_its_true_mpd() {
     let o = measure_road(&capture, None, &PipelineConfig::default(), &params).unwrap();
     let r = o.result.as_ref().unwrap();
     let truth = o.truth_mpd.unwrap();
-    assert!((r.depth.mpd - truth).abs() <= 0.03e-3, "{} vs {truth}", r.depth.mpd);
+    assert!(
+        (r.depth.mpd - truth).abs() <= 0.03e-3,
+        "{} vs {truth}",
+        r.depth.mpd
+    );
     assert!(r.profile.dropout_fraction() < 0.05);
 }
 
@@ -127,13 +135,20 @@ fn flat_target_and_furrow_meet_their_targets() {
     let params = RoadParams::default();
     let (capture, _) = simulate(&piezo_spec(0.0, 77_010)).unwrap();
     let o = measure_road(&capture, None, &PipelineConfig::default(), &params).unwrap();
-    let valid: Vec<Vec2> = o.profile.iter().copied().filter(|p| p.y.is_finite()).collect();
+    let valid: Vec<Vec2> = o
+        .profile
+        .iter()
+        .copied()
+        .filter(|p| p.y.is_finite())
+        .collect();
     let rms = detrended_rms(&valid).unwrap();
     assert!(rms <= 50e-6, "{rms}");
     let spec = furrow_spec(146e-6, 77_011);
     let (capture, _) = simulate(&spec).unwrap();
     let o = measure_road(&capture, None, &PipelineConfig::default(), &params).unwrap();
-    let measured = furrow_depth(&o.profile, FURROW_PITCH, FURROW_WIDTH).unwrap().depth_m;
+    let measured = furrow_depth(&o.profile, FURROW_PITCH, FURROW_WIDTH)
+        .unwrap()
+        .depth_m;
     let truth = true_profile(&spec.objects, &spec.calibration, &params)
         .and_then(|p| furrow_depth(&p, FURROW_PITCH, FURROW_WIDTH))
         .unwrap()

@@ -55,6 +55,14 @@ fn main() -> Result<(), String> {
             method_name(stem.method),
             stem.distance
         ),
+        // Measured as a stem (`Mode::Cylinder`), so this is a stem reading; any other kind is
+        // printed by its headline value.
+        Ok(other) => println!(
+            "{}: {} = {:.3} mm",
+            dir.display(),
+            other.kind(),
+            other.value() * 1e3
+        ),
         // The sentence the CLI and the caliper's companion print for the same failure.
         Err(e) => println!("{}: no reading: {}", dir.display(), Failure::of(&e)),
     }

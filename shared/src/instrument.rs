@@ -157,8 +157,8 @@ pub struct InstrumentParams {
 ///     measure(Mode::Cylinder, &frame, &frame, &calibration, &config, &params, &mut buffers.workspace());
 /// assert_eq!(reading, Err(PipelineError::NoLaserLight { max_difference: 0 }));
 /// let reading =
-///     measure(Mode::Road, &frame, &frame, &calibration, &config, &params, &mut buffers.workspace());
-/// assert_eq!(reading, Err(PipelineError::UnsupportedMode(Mode::Road)));
+///     measure(Mode::Sphere, &frame, &frame, &calibration, &config, &params, &mut buffers.workspace());
+/// assert_eq!(reading, Err(PipelineError::UnsupportedMode(Mode::Sphere)));
 /// # Ok::<(), tangent_core::image::FrameError>(())
 /// ```
 pub fn measure<P: Pixel>(
@@ -182,8 +182,8 @@ pub fn measure<P: Pixel>(
 /// (the device refuses to be set to any other).
 pub fn supports(mode: Mode) -> bool {
     match mode {
-        Mode::Cylinder => true,
-        Mode::Sphere | Mode::Wall | Mode::Road => false,
+        Mode::Cylinder | Mode::Road => true,
+        Mode::Sphere | Mode::Wall => false,
     }
 }
 
@@ -203,7 +203,9 @@ pub fn solve<P: Pixel>(
             solve_with::<Stem, P>(profile, full_scale, calibration, &params.cylinder, ws)
                 .map(|s| Measurement::from(&s))
         }
-        Mode::Sphere | Mode::Wall | Mode::Road => Err(PipelineError::UnsupportedMode(mode)),
+        Mode::Road => solve_with::<Road, P>(profile, full_scale, calibration, &params.road, ws)
+            .map(|s| Measurement::from(&s)),
+        Mode::Sphere | Mode::Wall => Err(PipelineError::UnsupportedMode(mode)),
     }
 }
 

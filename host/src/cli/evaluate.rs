@@ -57,8 +57,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         );
         std::fs::remove_dir_all(&scratch).ok();
         match &args.out {
-            Some(path) => std::fs::write(path, &doc)
-                .with_context(|| format!("writing {}", path.display()))?,
+            Some(path) => {
+                std::fs::write(path, &doc).with_context(|| format!("writing {}", path.display()))?
+            }
             None => print!("{doc}"),
         }
         return Ok(ExitCode::SUCCESS);

@@ -8,10 +8,10 @@ use anyhow::Context;
 use indicatif::{ParallelProgressIterator, ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use tangent_core::calibration::Calibration;
-use tangent_core::pipeline::PipelineConfig;
-use tangent_core::solvers::stem::CylinderParams;
 use tangent_core::instrument::road::{RoadParams, RoadSolution};
+use tangent_core::pipeline::PipelineConfig;
 use tangent_core::pipeline::PipelineError;
+use tangent_core::solvers::stem::CylinderParams;
 use tangent_host::measure::{measure_capture, MeasureError, Reading};
 use tangent_host::road::section::Section;
 use tangent_host::road::{measure_road_dir, plot::road_png, RoadReport};
@@ -115,8 +115,14 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             // A capture's errors name its files relative to it; put the directory in front.
             let outcome = match measure_capture(dir, calibration.as_ref(), &config, &params) {
                 Err(MeasureError::UnsupportedMode(capture::Mode::Road)) => {
-                    return measure_road_capture(dir, calibration.as_ref(), &config, &road_params, args.plot.as_deref())
-                        .map(|(r, s)| (r, Some(s)));
+                    return measure_road_capture(
+                        dir,
+                        calibration.as_ref(),
+                        &config,
+                        &road_params,
+                        args.plot.as_deref(),
+                    )
+                    .map(|(r, s)| (r, Some(s)));
                 }
                 other => other.map_err(|e| format!("{}: {e}", dir.display()))?,
             };
@@ -163,7 +169,11 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     }
     if let Some(section) = &section {
         if args.json {
-            writeln!(out, "{}", serde_json::json!({ "section": section, "mpd_m": section.mpd() }))?;
+            writeln!(
+                out,
+                "{}",
+                serde_json::json!({ "section": section, "mpd_m": section.mpd() })
+            )?;
         } else {
             writeln!(out, "{}", section.summary())?;
         }
@@ -206,8 +216,8 @@ fn measure_road_capture(
     plot_dir: Option<&std::path::Path>,
 ) -> Result<(Reading, RoadResult), String> {
     let name = dir.display().to_string();
-    let outcome = measure_road_dir(dir, calibration, config, params)
-        .map_err(|e| format!("{name}: {e}"))?;
+    let outcome =
+        measure_road_dir(dir, calibration, config, params).map_err(|e| format!("{name}: {e}"))?;
     let reading = Reading::road(
         &name,
         outcome
@@ -222,8 +232,13 @@ fn measure_road_capture(
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_else(|| "capture".into());
         let path = plot_dir.join(format!("{file}.png"));
-        road_png(&path, &outcome, params, &format!("{file}: {}", reading.summary()))
-            .map_err(|e| format!("{}: {e:#}", path.display()))?;
+        road_png(
+            &path,
+            &outcome,
+            params,
+            &format!("{file}: {}", reading.summary()),
+        )
+        .map_err(|e| format!("{}: {e:#}", path.display()))?;
     }
     Ok((reading, outcome.result))
 }

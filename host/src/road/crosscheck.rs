@@ -41,7 +41,9 @@ pub fn captif_mpd(
         Err(e) => return Ok(Err(format!("python3 not runnable: {e}"))),
     };
     if output.status.code() == Some(3) {
-        return Ok(Err(String::from_utf8_lossy(&output.stderr).trim().to_string()));
+        return Ok(Err(String::from_utf8_lossy(&output.stderr)
+            .trim()
+            .to_string()));
     }
     if !output.status.success() {
         return Err(anyhow!(

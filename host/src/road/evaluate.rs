@@ -19,14 +19,17 @@ use super::crosscheck::{captif_mpd, write_profile_csv};
 use super::height_scale::{fit_height_scale, furrow_depth};
 use super::{measure_road, true_profile, RoadOutcome};
 use crate::simulate::road_corpus::{
-    furrow_spec, piezo_spec, road_spec, tilted_spec, Condition, Surface, FURROW_PITCH,
-    FURROW_WIDTH,
+    furrow_spec, piezo_spec, road_spec, tilted_spec, Condition, Surface, FURROW_PITCH, FURROW_WIDTH,
 };
 use crate::simulate::{simulate, SimSpec};
 
 /// A spec simulated and measured (`calibration`: the one the unit believes, if not the
 /// simulation's).
-fn run(spec: &SimSpec, calibration: Option<&Calibration>, params: &RoadParams) -> Result<RoadOutcome> {
+fn run(
+    spec: &SimSpec,
+    calibration: Option<&Calibration>,
+    params: &RoadParams,
+) -> Result<RoadOutcome> {
     let (capture, _) = simulate(spec)?;
     Ok(measure_road(
         &capture,
@@ -39,7 +42,11 @@ fn run(spec: &SimSpec, calibration: Option<&Calibration>, params: &RoadParams) -
 /// The naive baseline: the raw profile's highest sample minus its mean over the window
 /// (no drop-out rule, no filter, no halves, no slope suppression).
 pub fn naive_depth(profile: &[Vec2]) -> Option<f64> {
-    let v: Vec<f64> = profile.iter().map(|p| p.y).filter(|h| h.is_finite()).collect();
+    let v: Vec<f64> = profile
+        .iter()
+        .map(|p| p.y)
+        .filter(|h| h.is_finite())
+        .collect();
     if v.is_empty() {
         return None;
     }
@@ -62,7 +69,10 @@ pub fn report(first_seed: u64, seeds: u64, repo: &Path, scratch: &Path) -> Resul
         for j in 0..seeds {
             cases.push((
                 Surface::StoneMastic,
-                Condition { wet: c.0, polished: c.1 },
+                Condition {
+                    wet: c.0,
+                    polished: c.1,
+                },
                 first_seed + 1000 + 100 * i as u64 + j,
             ));
         }
@@ -103,7 +113,10 @@ pub fn report(first_seed: u64, seeds: u64, repo: &Path, scratch: &Path) -> Resul
         );
         let truth = o.truth_mpd.unwrap_or(f64::NAN);
         let (mpd, dropouts) = match &o.result {
-            Ok(r) => (r.depth.mpd, format!("{:.1} %", 100.0 * r.profile.dropout_fraction())),
+            Ok(r) => (
+                r.depth.mpd,
+                format!("{:.1} %", 100.0 * r.profile.dropout_fraction()),
+            ),
             Err(e) => (f64::NAN, format!("refused: {e}")),
         };
         let naive = naive_depth(&o.profile).unwrap_or(f64::NAN);
@@ -156,7 +169,12 @@ pub fn report(first_seed: u64, seeds: u64, repo: &Path, scratch: &Path) -> Resul
         .collect::<Result<_>>()?;
     let measured: Vec<f64> = piezo
         .iter()
-        .map(|o| o.result.as_ref().map(|r| r.profile.mean_height).unwrap_or(f64::NAN))
+        .map(|o| {
+            o.result
+                .as_ref()
+                .map(|r| r.profile.mean_height)
+                .unwrap_or(f64::NAN)
+        })
         .collect();
     writeln!(
         doc,
@@ -184,7 +202,12 @@ pub fn report(first_seed: u64, seeds: u64, repo: &Path, scratch: &Path) -> Resul
     }
     // Vertical resolution: each flat step's raw profile about its regression line.
     for o in &piezo {
-        let v: Vec<Vec2> = o.profile.iter().copied().filter(|p| p.y.is_finite()).collect();
+        let v: Vec<Vec2> = o
+            .profile
+            .iter()
+            .copied()
+            .filter(|p| p.y.is_finite())
+            .collect();
         if let Some(r) = detrended_rms(&v) {
             flat_rms.push(r);
         }
@@ -245,20 +268,35 @@ pub fn report(first_seed: u64, seeds: u64, repo: &Path, scratch: &Path) -> Resul
     writeln!(doc, "\n### Bad input\n\n| case | result |\n|---|---|")?;
     let tilted = run(&tilted_spec(10.0, first_seed + 4000), None, &params)?;
     writeln!(doc, "| head tilted 10° | {} |", verdict(&tilted))?;
-    let mut lifted = road_spec(Surface::DenseAsphalt, Condition::default(), first_seed + 4001);
+    let mut lifted = road_spec(
+        Surface::DenseAsphalt,
+        Condition::default(),
+        first_seed + 4001,
+    );
     if let Some(crate::truth::Object::Road(r)) = lifted.objects.first_mut() {
         r.distance_m += 0.03;
     }
     let lifted = run(&lifted, None, &params)?;
-    writeln!(doc, "| head lifted 30 mm off the road | {} |", verdict(&lifted))?;
+    writeln!(
+        doc,
+        "| head lifted 30 mm off the road | {} |",
+        verdict(&lifted)
+    )?;
     let (mut capture, _) = simulate(&road_spec(
         Surface::StoneMastic,
-        Condition { wet: true, polished: false },
+        Condition {
+            wet: true,
+            polished: false,
+        },
         first_seed + 4002,
     ))?;
     wet_mirror_patch(&mut capture, 330..430);
     let wet = measure_road(&capture, None, &PipelineConfig::default(), &params)?;
-    writeln!(doc, "| wet mirror patch (15 mm without return) | {} |", verdict(&wet))?;
+    writeln!(
+        doc,
+        "| wet mirror patch (15 mm without return) | {} |",
+        verdict(&wet)
+    )?;
     let (mut capture, _) = simulate(&road_spec(
         Surface::DenseAsphalt,
         Condition::default(),
@@ -266,7 +304,11 @@ pub fn report(first_seed: u64, seeds: u64, repo: &Path, scratch: &Path) -> Resul
     ))?;
     scattered_dropouts(&mut capture, 4);
     let sparse = measure_road(&capture, None, &PipelineConfig::default(), &params)?;
-    writeln!(doc, "| every 4th column without return (25 % drop-outs) | {} |", verdict(&sparse))?;
+    writeln!(
+        doc,
+        "| every 4th column without return (25 % drop-outs) | {} |",
+        verdict(&sparse)
+    )?;
     Ok(doc)
 }
 
@@ -288,7 +330,13 @@ pub fn detrended_rms(v: &[Vec2]) -> Option<f64> {
     let sss: f64 = v.iter().map(|p| (p.x - ms).powi(2)).sum();
     let ssh: f64 = v.iter().map(|p| (p.x - ms) * (p.y - mh)).sum();
     let b = if sss > 0.0 { ssh / sss } else { 0.0 };
-    Some((v.iter().map(|p| (p.y - mh - b * (p.x - ms)).powi(2)).sum::<f64>() / n).sqrt())
+    Some(
+        (v.iter()
+            .map(|p| (p.y - mh - b * (p.x - ms)).powi(2))
+            .sum::<f64>()
+            / n)
+            .sqrt(),
+    )
 }
 
 /// A wet film acts as a mirror: the laser is reflected away from the camera over the patch,
@@ -306,7 +354,12 @@ fn blank_columns(capture: &mut crate::capture::Capture, blank: impl Fn(usize) ->
     use crate::pgm::PgmSamples;
     let off = capture.off_frame().clone();
     let w = off.width;
-    let lit: Vec<bool> = capture.meta.frames.iter().map(|f| !f.lasers_on.is_empty()).collect();
+    let lit: Vec<bool> = capture
+        .meta
+        .frames
+        .iter()
+        .map(|f| !f.lasers_on.is_empty())
+        .collect();
     for (f, _) in capture.frames.iter_mut().zip(lit).filter(|(_, l)| *l) {
         match (&mut f.samples, &off.samples) {
             (PgmSamples::U8(on), PgmSamples::U8(o)) => {

@@ -84,7 +84,11 @@ pub const BIN: f64 = 0.05e-3;
 
 /// See [`FurrowDepth`]; drop-outs (NaN) are skipped. `None` with too few samples.
 pub fn furrow_depth(profile: &[Vec2], pitch: f64, width: f64) -> Option<FurrowDepth> {
-    let valid: Vec<Vec2> = profile.iter().copied().filter(|p| p.y.is_finite()).collect();
+    let valid: Vec<Vec2> = profile
+        .iter()
+        .copied()
+        .filter(|p| p.y.is_finite())
+        .collect();
     if valid.len() < 20 || !(pitch > 4.0 * BIN) {
         return None;
     }

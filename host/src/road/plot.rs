@@ -16,7 +16,12 @@ fn err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
 }
 
 /// Writes the profile plot of one road capture.
-pub fn road_png(path: &Path, outcome: &RoadOutcome, params: &RoadParams, title: &str) -> Result<()> {
+pub fn road_png(
+    path: &Path,
+    outcome: &RoadOutcome,
+    params: &RoadParams,
+    title: &str,
+) -> Result<()> {
     init_fonts();
     let root = BitMapBackend::new(path, (1200, 520)).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
@@ -28,7 +33,11 @@ pub fn road_png(path: &Path, outcome: &RoadOutcome, params: &RoadParams, title: 
     let (lo, hi) = valid.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
         (a.min(p.y), b.max(p.y))
     });
-    let (lo, hi) = if lo.is_finite() { (mm(lo) - 0.5, mm(hi) + 0.5) } else { (-1.0, 1.0) };
+    let (lo, hi) = if lo.is_finite() {
+        (mm(lo) - 0.5, mm(hi) + 0.5)
+    } else {
+        (-1.0, 1.0)
+    };
     let s0 = mm(params.profile.window_start);
     let s1 = s0 + mm(params.profile.window_length);
     let mut chart = ChartBuilder::on(&root)
@@ -54,7 +63,10 @@ pub fn road_png(path: &Path, outcome: &RoadOutcome, params: &RoadParams, title: 
         .legend(|(x, y)| Circle::new((x, y), 2, RGBColor(120, 120, 120).filled()));
     chart
         .draw_series(raw.iter().filter(|p| !p.y.is_finite()).map(|p| {
-            PathElement::new(vec![(mm(p.x), lo), (mm(p.x), lo + 0.15)], RED.stroke_width(1))
+            PathElement::new(
+                vec![(mm(p.x), lo), (mm(p.x), lo + 0.15)],
+                RED.stroke_width(1),
+            )
         }))
         .map_err(err)?
         .label("drop-out")
@@ -76,9 +88,11 @@ pub fn road_png(path: &Path, outcome: &RoadOutcome, params: &RoadParams, title: 
             .legend(|(x, y)| PathElement::new(vec![(x - 8, y), (x + 8, y)], BLUE));
         for g in &segments {
             chart
-                .draw_series(g.peaks.iter().map(|p| {
-                    TriangleMarker::new((mm(p.x), mm(p.y)), 7, RED.filled())
-                }))
+                .draw_series(
+                    g.peaks
+                        .iter()
+                        .map(|p| TriangleMarker::new((mm(p.x), mm(p.y)), 7, RED.filled())),
+                )
                 .map_err(err)?;
             let end = mm(g.start) + mm(params.mpd.segment_length);
             let level = mm(g.peaks[0].y + g.peaks[1].y) / 2.0;

@@ -170,13 +170,18 @@ mod tests {
         assert_eq!(s.mpd(), None);
         assert_eq!(s.add(&Ok(solution(1.0e-3))), Added::Segments(1));
         assert_eq!(s.add(&Ok(solution(1.2e-3))), Added::Segments(1));
-        let dropouts = Err(PipelineError::Road(RoadError::TooManyDropouts { fraction: 0.3 }));
+        let dropouts = Err(PipelineError::Road(RoadError::TooManyDropouts {
+            fraction: 0.3,
+        }));
         assert_eq!(s.add(&dropouts), Added::Excluded("drop-outs"));
         let tilted = Err(PipelineError::Road(RoadError::Tilted { angle: 0.2 }));
         assert_eq!(s.add(&tilted), Added::Failed("head tilted"));
         assert!((s.mpd().unwrap() - 1.1e-3).abs() < 1e-12);
         assert_eq!((s.profiles, s.segments(), s.not_used()), (4, 2, 2));
         let line = s.summary();
-        assert!(line.contains("MPD = 1.100 mm") && line.contains("1 excluded (drop-outs)"), "{line}");
+        assert!(
+            line.contains("MPD = 1.100 mm") && line.contains("1 excluded (drop-outs)"),
+            "{line}"
+        );
     }
 }

@@ -586,6 +586,8 @@ pub fn entries() -> Vec<CorpusEntry> {
             },
         );
     }
+    // --- the road head (`docs/road.md`): own calibration and seeds -------------------------
+    b.entries.extend(super::road_corpus::entries());
     b.entries
 }
 

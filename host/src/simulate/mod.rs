@@ -11,8 +11,8 @@
 
 pub mod corpus;
 pub mod laser;
-pub mod road_corpus;
 pub mod render;
+pub mod road_corpus;
 pub mod scene;
 pub mod sensor;
 

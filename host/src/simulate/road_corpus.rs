@@ -96,7 +96,11 @@ pub fn surface_waves(surface: Surface, condition: Condition, seed: u64) -> Vec<W
         });
     }
     // Microtexture: 4 components between 0.12 and 0.45 mm.
-    let micro = if condition.polished { a_micro / 5.0 } else { a_micro };
+    let micro = if condition.polished {
+        a_micro / 5.0
+    } else {
+        a_micro
+    };
     for k in 0..4 {
         let lambda = 0.12e-3 * (0.45f64 / 0.12).powf(k as f64 / 3.0);
         waves.push(Wave {

@@ -5,7 +5,7 @@
 use crate::calibration::{Calibration, CalibrationError};
 use crate::camera::Camera;
 use crate::laser_plane::LaserPlane;
-use crate::measurement::Mode;
+use crate::measurement::{Measurement, Micro, Mode, RoadReading};
 use crate::pipeline::PipelineError;
 #[allow(unused_imports)]
 use crate::real::Float;
@@ -70,6 +70,11 @@ pub struct RoadSolution {
     pub micro: Option<Microtexture>,
     /// Stand-off: where plane 0 crosses the optical axis (metres).
     pub standoff: Real,
+    /// Predicted 1σ of the MPD (metres) from the profile's own noise: the column noise `σ_c`
+    /// from second differences, carried through the resampling (`√(spacing/Δ)`) and the
+    /// filter (its noise gain `√G`); each MSD's two peaks are independent filtered samples,
+    /// so `σ_MPD = σ_c √(spacing/Δ · G / 2) / √segments` (`docs/road.md`, "Uncertainty").
+    pub uncertainty: Real,
     /// Image quality flags.
     pub flags: Flags,
 }
@@ -124,6 +129,7 @@ impl Instrument for Road {
         };
         let heights = &scratch.sigmas[..trace.len()];
         let micro = mpd::microtexture(trace, heights, peak, &params.mpd).ok();
+        let uncertainty = mpd_uncertainty(trace, &summary, &params.mpd, depth.valid_segments);
         Ok(RoadSolution {
             profile: summary,
             depth,
@@ -131,7 +137,53 @@ impl Instrument for Road {
             rms_height,
             micro,
             standoff,
+            uncertainty,
             flags: points.profile.image_flags(points.full_scale),
+        })
+    }
+}
+
+/// See [`RoadSolution::uncertainty`]. Second differences of white noise have variance
+/// `6σ²`; texture at the column scale inflates them, so the estimate errs high.
+fn mpd_uncertainty(
+    trace: &[crate::real::Vec2],
+    summary: &ProfileSummary,
+    params: &MpdParams,
+    segments: usize,
+) -> Real {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for w in trace.windows(3) {
+        if w.iter().all(|p| p.y.is_finite()) {
+            let d = w[0].y - 2.0 * w[1].y + w[2].y;
+            sum += d * d;
+            n += 1;
+        }
+    }
+    if n == 0 || segments == 0 {
+        return Real::NAN;
+    }
+    let sigma_column = sqrt(sum / (6.0 * n as Real));
+    let gain = mpd::Biquad::butterworth_lowpass(params.spacing, params.lowpass_cutoff).noise_gain();
+    let per_sample = (summary.spacing / params.spacing).min(1.0);
+    sigma_column * sqrt(per_sample * gain / 2.0) / sqrt(segments as Real)
+}
+
+impl From<&RoadSolution> for Measurement {
+    fn from(s: &RoadSolution) -> Self {
+        Measurement::Road(RoadReading {
+            mpd: s.depth.mpd,
+            uncertainty: s.uncertainty,
+            etd: s.depth.etd,
+            rms_height: s.rms_height,
+            mean_height: s.profile.mean_height,
+            tilt: s.profile.tilt,
+            dropout_fraction: s.profile.dropout_fraction(),
+            segments: s.depth.valid_segments.min(255) as u8,
+            micro: s.micro.map(|m| Micro {
+                rms_height: m.rms_height,
+                curvature: m.curvature,
+            }),
+            flags: s.flags,
         })
     }
 }

@@ -20,6 +20,8 @@ pub enum Method {
     CylinderFit,
     /// Three-tangent method on the curves projected along the fitted axis (tilt measured).
     GeneralisedThreeTangent,
+    /// ISO 13473-1 mean profile depth of a road profile (`docs/road.md`).
+    MeanProfileDepth,
 }
 
 /// Quality flags of a solution (a bit set; `Flags::ARC_TOO_SHORT.0 | …`).

@@ -195,6 +195,7 @@ fn every_method_has_a_distinct_name() {
         Method::CircleFit,
         Method::CylinderFit,
         Method::GeneralisedThreeTangent,
+        Method::MeanProfileDepth,
     ]
     .iter()
     .map(|m| method_name(*m).to_string())
@@ -205,7 +206,8 @@ fn every_method_has_a_distinct_name() {
             "three_tangent",
             "circle_fit",
             "cylinder_fit",
-            "generalised_three_tangent"
+            "generalised_three_tangent",
+            "mean_profile_depth"
         ]
     );
 }

@@ -86,6 +86,15 @@ fn the_filter_is_scipys_butterworth_run_forwards_and_backwards() {
     for (a, b) in x.iter().zip(&y) {
         assert!((a - b).abs() < 2e-5, "{a} vs {b}");
     }
+    // Noise gain: white noise through the forward–backward filter keeps G of its variance
+    // (checked against the direct sum of the squared zero-phase response).
+    let g = f.noise_gain();
+    let mut impulse = [0.0; 201];
+    impulse[100] = 1.0;
+    filter_zero_phase(&f, &mut impulse).unwrap();
+    let direct: Real = impulse.iter().map(|v| v * v).sum();
+    assert!((g - direct).abs() < 1e-4 * direct, "{g} vs {direct}");
+    assert!(g > 0.1 && g < 0.5, "{g}");
     // Too short to extend.
     assert!(filter_zero_phase(&f, &mut [0.0; FILTER_PAD]).is_err());
 }
