@@ -50,6 +50,9 @@ pub struct Args {
     /// MPD, running count and exclusions (`docs/road.md`, "Ambulatory use").
     #[arg(long, value_name = "LABEL")]
     section: Option<String>,
+    /// With --section: store the section's MPD in this field log under its label.
+    #[arg(long, value_name = "FILE", requires = "section")]
+    log: Option<PathBuf>,
 }
 
 /// Runs `tangent measure`: every capture that can be read is measured; the others are
@@ -168,6 +171,14 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         }
     }
     if let Some(section) = &section {
+        if let Some(path) = &args.log {
+            let stored = tangent_host::fieldlog::FieldLog::open(path)
+                .and_then(|mut log| section.log_to(&mut log, calibration.as_ref().map_or(0, |c| c.id)))
+                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+            if stored && !args.json {
+                eprintln!("stored section {} in {}", section.label, path.display());
+            }
+        }
         if args.json {
             writeln!(
                 out,

@@ -125,6 +125,53 @@ impl Section {
     }
 }
 
+/// Kind of the field-log record of a section ([`crate::fieldlog::TreeRecord::kind`]).
+pub const SECTION_KIND: &str = "road_section";
+
+impl Section {
+    /// Stores the section in the field log: a plot header named by its location label (if
+    /// the log's current plot is another), then one record of kind [`SECTION_KIND`] whose
+    /// size column holds the section's MPD (mm), its uncertainty column the MSD's standard
+    /// error (mm), its tree number the running count of valid segments and its note-like
+    /// species column `MPD`. Nothing is stored before the first valid segment.
+    pub fn log_to(
+        &self,
+        log: &mut crate::fieldlog::FieldLog,
+        calib_id: u32,
+    ) -> Result<bool, crate::fieldlog::FieldLogError> {
+        use crate::fieldlog::{now_rfc3339, PlotHeader, Record, TreeRecord};
+        let Some(mpd) = self.mpd() else {
+            return Ok(false);
+        };
+        if log.current_plot().map(|p| p.plot_id.as_str()) != Some(self.label.as_str()) {
+            log.append(Record::Plot(PlotHeader {
+                plot_id: self.label.clone(),
+                started: now_rfc3339(),
+                note: "road section (ISO 13473-1 MPD)".into(),
+            }))?;
+        }
+        let n = self.segments();
+        let standard_error = self.msd_std().map_or(0.0, |s| s / (n as f64).sqrt());
+        log.append(Record::Tree(TreeRecord {
+            plot_id: self.label.clone(),
+            tree_id: n as u32,
+            species: "MPD".into(),
+            diameter_mm: mpd * 1e3,
+            uncertainty_mm: standard_error * 1e3,
+            tilt_deg: 0.0,
+            flags: 0,
+            time: now_rfc3339(),
+            device_id: "host".into(),
+            calib_id,
+            seq: self.profiles as u32,
+            device_time_ms: 0,
+            kind: SECTION_KIND.into(),
+            measurement: None,
+        }))?;
+        Ok(true)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
