@@ -173,7 +173,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     if let Some(section) = &section {
         if let Some(path) = &args.log {
             let stored = tangent_host::fieldlog::FieldLog::open(path)
-                .and_then(|mut log| section.log_to(&mut log, calibration.as_ref().map_or(0, |c| c.id)))
+                .and_then(|mut log| {
+                    section.log_to(&mut log, calibration.as_ref().map_or(0, |c| c.id))
+                })
                 .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
             if stored && !args.json {
                 eprintln!("stored section {} in {}", section.label, path.display());

@@ -207,6 +207,7 @@ mod tests {
             rms_height: 0.0,
             micro: None,
             standoff: 0.3,
+            uncertainty: 5e-6,
             flags: Default::default(),
         }
     }
