@@ -26,6 +26,9 @@
 //! normal = [0.0, 0.99778, 0.06652]
 //! offset_m = 0.099778
 //! source_m = [0.0, 0.1, 0.0]
+//!
+//! [road]                       # road head only: piezo height-scale calibration; optional
+//! height_scale = 0.9901
 //! ```
 
 // `Real` is f64 on the host, but the casts keep this file correct if it ever is not.
@@ -182,6 +185,52 @@ pub struct CalibrationToml {
     /// a camera-only file, [`parse_camera`], has none and does not write the key).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub planes: Vec<PlaneToml>,
+    /// The road head's height-scale calibration (`docs/road.md`); absent on other heads.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub road: Option<RoadToml>,
+}
+
+/// `[road]`: the result of the piezo-stage height-scale calibration of a road head
+/// (`docs/road.md`, "Height-scale calibration").
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RoadToml {
+    /// Factor every road height is multiplied by (`1 / gain` of the fit).
+    pub height_scale: f64,
+    /// RMS of the fit's residuals (metres).
+    #[serde(default)]
+    pub residual_rms_m: f64,
+    /// Steps the stage made.
+    #[serde(default)]
+    pub steps: usize,
+}
+
+/// Accepted range of `road.height_scale`: a head whose heights are off by more than 20 % is
+/// mis-built or mis-calibrated, not corrected.
+pub const HEIGHT_SCALE_RANGE: (f64, f64) = (0.8, 1.25);
+
+/// The `[road]` table of a calibration file's text, if any, checked (`height_scale` within
+/// [`HEIGHT_SCALE_RANGE`]).
+pub fn parse_road(text: &str) -> Result<Option<RoadToml>, CalibrationFileError> {
+    let file: CalibrationToml = toml::from_str(text).map_err(|e| map_toml_error(&e, text))?;
+    if let Some(r) = &file.road {
+        let (lo, hi) = HEIGHT_SCALE_RANGE;
+        if !(lo..=hi).contains(&r.height_scale) {
+            return Err(CalibrationFileError::Syntax {
+                message: format!(
+                    "road.height_scale = {} is outside {lo}–{hi} (a head this far off is mis-built, not corrected)",
+                    r.height_scale
+                ),
+                line: None,
+            });
+        }
+    }
+    Ok(file.road)
+}
+
+/// Reads the `[road]` table of a calibration file ([`parse_road`]); errors name the file.
+pub fn read_road(path: &Path) -> Result<Option<RoadToml>, CalibrationFileError> {
+    parse_road(&read_text(path)?).map_err(in_file(path))
 }
 
 /// A 3-vector that must have exactly three components: serde's fixed-size array impl reads
@@ -231,6 +280,7 @@ impl CalibrationToml {
                     source_m: a3(p.source),
                 })
                 .collect(),
+            road: None,
         }
     }
 

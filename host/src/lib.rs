@@ -20,6 +20,7 @@ pub mod link;
 pub mod measure;
 pub mod pgm;
 pub mod plot;
+pub mod road;
 pub mod simulate;
 pub mod study;
 pub mod truth;

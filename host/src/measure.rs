@@ -114,6 +114,9 @@ pub struct Reading {
     /// Why the capture's optional truth curve was not read (the reading is unaffected).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub truth_curve_unreadable: Option<String>,
+    /// A road capture's reading (`docs/road.md`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub road: Option<crate::road::RoadReport>,
 }
 
 impl Reading {
@@ -145,6 +148,7 @@ impl Reading {
                     error: None,
                     truth_diameter_m: truth,
                     truth_curve_unreadable: None,
+                    road: None,
                 }
             }
             Ok(Solved::Stem(m)) => {
@@ -172,6 +176,7 @@ impl Reading {
                     error: None,
                     truth_diameter_m: truth,
                     truth_curve_unreadable: None,
+                    road: None,
                 }
             }
             Err(e) => Reading {
@@ -194,7 +199,37 @@ impl Reading {
                 error: Some(Failure::of(e).to_string()),
                 truth_diameter_m: truth,
                 truth_curve_unreadable: None,
+                road: None,
             },
+        }
+    }
+
+    /// The reading of a road capture: its report, or the sentence of its failure.
+    pub fn road(capture: &str, result: Result<crate::road::RoadReport, String>) -> Self {
+        let (road, error) = match result {
+            Ok(r) => (Some(r), None),
+            Err(e) => (None, Some(e)),
+        };
+        Reading {
+            capture: capture.to_string(),
+            instrument: Some("road"),
+            centre_m: None,
+            sections_diameter_m: None,
+            random_uncertainty_m: None,
+            diameter_m: None,
+            uncertainty_m: None,
+            method: None,
+            flags: Vec::new(),
+            tilt: None,
+            axes_m: None,
+            three_tangent_diameter_m: None,
+            fit_diameter_m: None,
+            distance_m: None,
+            points: None,
+            error,
+            truth_diameter_m: None,
+            truth_curve_unreadable: None,
+            road,
         }
     }
 
@@ -208,6 +243,9 @@ impl Reading {
     }
 
     fn result_text(&self) -> String {
+        if let Some(r) = &self.road {
+            return r.summary();
+        }
         match (self.diameter_m, &self.error) {
             (Some(d), _) if self.instrument == Some("sphere") => {
                 // `sphere d = 101.6 mm ± 0.4 mm (joint_fit), centre at 0.82 m`

@@ -10,6 +10,7 @@
 //!
 //! * [`stem`]: [`Mode::Cylinder`], the stem's diameter.
 //! * [`sphere`]: [`Mode::Sphere`], a ball's diameter and centre.
+//! * [`road`]: [`Mode::Road`], a road profile's mean profile depth and microtexture.
 
 use crate::calibration::{Calibration, MAX_PLANES};
 use crate::image::{Frame, Pixel};
@@ -23,9 +24,11 @@ use crate::real::{Real, Vec2, Vec3};
 use crate::solvers::sphere::SphereParams;
 use crate::solvers::stem::CylinderParams;
 
+pub mod road;
 pub mod sphere;
 pub mod stem;
 
+pub use road::Road;
 pub use sphere::Sphere;
 pub use stem::Stem;
 
@@ -136,6 +139,8 @@ pub struct InstrumentParams {
     pub cylinder: CylinderParams,
     /// [`Mode::Sphere`] ([`Sphere`]).
     pub sphere: SphereParams,
+    /// [`Mode::Road`] ([`Road`]).
+    pub road: road::RoadParams,
 }
 
 /// Measures a frame pair with the instrument of `mode`: [`extract_profile`], then its solver.
@@ -158,8 +163,8 @@ pub struct InstrumentParams {
 ///     measure(Mode::Cylinder, &frame, &frame, &calibration, &config, &params, &mut buffers.workspace());
 /// assert_eq!(reading, Err(PipelineError::NoLaserLight { max_difference: 0 }));
 /// let reading =
-///     measure(Mode::Road, &frame, &frame, &calibration, &config, &params, &mut buffers.workspace());
-/// assert_eq!(reading, Err(PipelineError::UnsupportedMode(Mode::Road)));
+///     measure(Mode::Sphere, &frame, &frame, &calibration, &config, &params, &mut buffers.workspace());
+/// assert_eq!(reading, Err(PipelineError::UnsupportedMode(Mode::Sphere)));
 /// # Ok::<(), tangent_core::image::FrameError>(())
 /// ```
 pub fn measure<P: Pixel>(
@@ -183,8 +188,8 @@ pub fn measure<P: Pixel>(
 /// (the device refuses to be set to any other).
 pub fn supports(mode: Mode) -> bool {
     match mode {
-        Mode::Cylinder | Mode::Sphere => true,
-        Mode::Wall | Mode::Road => false,
+        Mode::Cylinder | Mode::Sphere | Mode::Road => true,
+        Mode::Wall => false,
     }
 }
 
@@ -208,7 +213,9 @@ pub fn solve<P: Pixel>(
             solve_with::<Sphere, P>(profile, full_scale, calibration, &params.sphere, ws)
                 .map(|s| Measurement::from(&s))
         }
-        Mode::Wall | Mode::Road => Err(PipelineError::UnsupportedMode(mode)),
+        Mode::Road => solve_with::<Road, P>(profile, full_scale, calibration, &params.road, ws)
+            .map(|s| Measurement::from(&s)),
+        Mode::Wall => Err(PipelineError::UnsupportedMode(mode)),
     }
 }
 

@@ -53,6 +53,8 @@ pub enum Measurement {
     Stem(StemReading),
     /// A sphere's diameter and centre ([`Mode::Sphere`]).
     Sphere(SphereReading),
+    /// A road profile's texture ([`Mode::Road`]).
+    Road(RoadReading),
 }
 
 impl Measurement {
@@ -61,6 +63,7 @@ impl Measurement {
         match self {
             Measurement::Stem(_) => Mode::Cylinder,
             Measurement::Sphere(_) => Mode::Sphere,
+            Measurement::Road(_) => Mode::Road,
         }
     }
 
@@ -69,6 +72,7 @@ impl Measurement {
         match self {
             Measurement::Stem(s) => s.flags,
             Measurement::Sphere(s) => s.flags,
+            Measurement::Road(r) => r.flags,
         }
     }
 
@@ -77,6 +81,7 @@ impl Measurement {
         match self {
             Measurement::Stem(s) => s.method,
             Measurement::Sphere(s) => s.method,
+            Measurement::Road(_) => Method::MeanProfileDepth,
         }
     }
 
@@ -85,6 +90,7 @@ impl Measurement {
         match self {
             Measurement::Stem(_) => "stem",
             Measurement::Sphere(_) => "sphere",
+            Measurement::Road(_) => "road",
         }
     }
 
@@ -94,6 +100,7 @@ impl Measurement {
         match self {
             Measurement::Stem(s) => s.diameter,
             Measurement::Sphere(s) => s.diameter,
+            Measurement::Road(r) => r.mpd,
         }
     }
 
@@ -102,6 +109,7 @@ impl Measurement {
         match self {
             Measurement::Stem(s) => s.uncertainty,
             Measurement::Sphere(s) => s.uncertainty,
+            Measurement::Road(r) => r.uncertainty,
         }
     }
 }
@@ -160,6 +168,50 @@ pub struct Point {
     /// Forward.
     #[serde(with = "wire_real")]
     pub z: Real,
+}
+
+/// A road profile's texture (`docs/road.md`): ISO 13473-1 depths, the profile's statistics
+/// and the microtexture on its highest peak (metres, radians).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct RoadReading {
+    /// Mean profile depth: the mean MSD of the profile's valid segments.
+    #[serde(with = "wire_real")]
+    pub mpd: Real,
+    /// Predicted 1σ of the MPD from the profile's own noise.
+    #[serde(with = "wire_real")]
+    pub uncertainty: Real,
+    /// Estimated texture depth `0.2 mm + 0.8·MPD`.
+    #[serde(with = "wire_real")]
+    pub etd: Real,
+    /// RMS height of the filtered profile.
+    #[serde(with = "wire_real")]
+    pub rms_height: Real,
+    /// Mean height relative to the head's stand-off (+ nearer).
+    #[serde(with = "wire_real")]
+    pub mean_height: Real,
+    /// Tilt of the road against the head.
+    #[serde(with = "wire_real")]
+    pub tilt: Real,
+    /// Drop-out share of the profile (0–1).
+    #[serde(with = "wire_real")]
+    pub dropout_fraction: Real,
+    /// Valid 100 mm segments.
+    pub segments: u8,
+    /// Microtexture RMS height and peak curvature (1/m) on the highest peak.
+    pub micro: Option<Micro>,
+    /// Quality flags (image).
+    pub flags: Flags,
+}
+
+/// Microtexture indicators on one macrotexture peak.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Micro {
+    /// RMS height of the wavelengths below 0.5 mm (metres).
+    #[serde(with = "wire_real")]
+    pub rms_height: Real,
+    /// Curvature of the peak's top (1/m).
+    #[serde(with = "wire_real")]
+    pub curvature: Real,
 }
 
 /// A stem's lean relative to plane 0 (`docs/cylinder.md`, "Tilt angles"), radians.
@@ -231,7 +283,7 @@ mod tests {
         assert_eq!(bytes.len(), 1 + 12 + 1 + 1 + 12 + 1 + 1);
         let back: Measurement = postcard::from_bytes(bytes).expect("decodes");
         let Measurement::Stem(b) = back else {
-            panic!("a stem comes back a stem")
+            panic!("{back:?}")
         };
         assert_eq!(b.diameter, 0.3001f32 as Real);
         assert_eq!(b.method, Method::CircleFit);

@@ -32,6 +32,7 @@ use crate::image::FrameError;
 use crate::laser_plane::TriangulationError;
 use crate::measurement::Mode;
 use crate::real::Real;
+use crate::solvers::road_profile::RoadError;
 use crate::solvers::SolveError;
 
 pub mod buffers;
@@ -150,6 +151,9 @@ pub enum PipelineError {
     Solve(SolveError),
     /// The instrument has no solver yet.
     UnsupportedMode(Mode),
+    /// The road instrument refused the profile ([`Mode::Road`]: drop-outs, a wet patch, the
+    /// head tilted or out of range; `docs/road.md`, "Bad input").
+    Road(RoadError),
 }
 
 impl fmt::Display for PipelineError {
@@ -190,6 +194,7 @@ impl fmt::Display for PipelineError {
             PipelineError::UnsupportedMode(mode) => {
                 write!(f, "the {} instrument has no solver yet", mode.name())
             }
+            PipelineError::Road(e) => write!(f, "road profile: {e}"),
         }
     }
 }
@@ -223,6 +228,11 @@ impl From<CurveError> for PipelineError {
 impl From<SolveError> for PipelineError {
     fn from(e: SolveError) -> Self {
         PipelineError::Solve(e)
+    }
+}
+impl From<RoadError> for PipelineError {
+    fn from(e: RoadError) -> Self {
+        PipelineError::Road(e)
     }
 }
 impl From<TriangulationError> for PipelineError {

@@ -177,6 +177,7 @@ fn camera(
             },
         },
         planes: existing.map(|e| e.2).unwrap_or_default(),
+        road: None,
     };
     std::fs::write(out, toml::to_string(&file)?)
         .with_context(|| format!("writing {}", out.display()))?;

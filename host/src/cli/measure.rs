@@ -8,9 +8,13 @@ use anyhow::Context;
 use indicatif::{ParallelProgressIterator, ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use tangent_core::calibration::Calibration;
+use tangent_core::instrument::road::{RoadParams, RoadSolution};
 use tangent_core::pipeline::PipelineConfig;
+use tangent_core::pipeline::PipelineError;
 use tangent_core::solvers::stem::CylinderParams;
-use tangent_host::measure::{measure_capture, Reading};
+use tangent_host::measure::{measure_capture, MeasureError, Reading};
+use tangent_host::road::section::Section;
+use tangent_host::road::{measure_road_dir, plot::road_png, RoadReport};
 use tangent_host::{calibration_file, capture, plot};
 
 /// The long help of `tangent measure` (`main.rs` gives it to clap on the subcommand, where
@@ -38,9 +42,17 @@ pub struct Args {
     #[arg(long)]
     json: bool,
     /// Write a PNG per capture into DIR: the difference frame with the extracted curve and the
-    /// section with the fitted circle.
+    /// section with the fitted circle (road captures: the profile with its drop-outs, the
+    /// filtered profile and each segment's peaks).
     #[arg(long, value_name = "DIR")]
     plot: Option<PathBuf>,
+    /// Accumulate the road captures into one section with this location label and print its
+    /// MPD, running count and exclusions (`docs/road.md`, "Ambulatory use").
+    #[arg(long, value_name = "LABEL")]
+    section: Option<String>,
+    /// With --section: store the section's MPD in this field log under its label.
+    #[arg(long, value_name = "FILE", requires = "section")]
+    log: Option<PathBuf>,
 }
 
 /// Runs `tangent measure`: every capture that can be read is measured; the others are
@@ -86,14 +98,37 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     } else {
         ProgressBar::hidden()
     };
-    let results: Vec<Result<Reading, String>> = targets
+    // A road head's height-scale correction travels in its calibration file's `[road]`.
+    let mut road_params = RoadParams::default();
+    if let Some(path) = &args.calib {
+        match calibration_file::read_road(path) {
+            Ok(Some(r)) => road_params.profile.height_scale = r.height_scale,
+            Ok(None) => {}
+            Err(e) => {
+                report_unreadable(&mut out, args.json, &e.to_string())?;
+                return Ok(ExitCode::from(UNREADABLE));
+            }
+        }
+    }
+    let results: Vec<Result<(Reading, Option<RoadResult>), String>> = targets
         .par_iter()
         .progress_with(bar)
         .map(|target| {
             let dir = target.as_ref().map_err(Clone::clone)?;
             // A capture's errors name its files relative to it; put the directory in front.
-            let outcome = measure_capture(dir, calibration.as_ref(), &config, &params)
-                .map_err(|e| format!("{}: {e}", dir.display()))?;
+            let outcome = match measure_capture(dir, calibration.as_ref(), &config, &params) {
+                Err(MeasureError::UnsupportedMode(capture::Mode::Road)) => {
+                    return measure_road_capture(
+                        dir,
+                        calibration.as_ref(),
+                        &config,
+                        &road_params,
+                        args.plot.as_deref(),
+                    )
+                    .map(|(r, s)| (r, Some(s)));
+                }
+                other => other.map_err(|e| format!("{}: {e}", dir.display()))?,
+            };
             if let Some(plot_dir) = &args.plot {
                 let name = dir
                     .file_name()
@@ -107,14 +142,21 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
                 )
                 .map_err(|e| format!("{}: {e:#}", path.display()))?;
             }
-            Ok(outcome.reading)
+            Ok((outcome.reading, None))
         })
         .collect();
+    let mut section = args.section.as_deref().map(Section::new);
 
     let (mut no_reading, mut unreadable) = (0, 0);
     for r in &results {
         match r {
-            Ok(reading) => {
+            Ok((reading, road)) => {
+                if let (Some(section), Some(result)) = (section.as_mut(), road) {
+                    section.add(result);
+                    if !args.json {
+                        writeln!(out, "  running: {}", section.summary())?;
+                    }
+                }
                 no_reading += reading.error.is_some() as usize;
                 if args.json {
                     writeln!(out, "{}", serde_json::to_string(reading)?)?;
@@ -126,6 +168,27 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
                 unreadable += 1;
                 report_unreadable(&mut out, args.json, e)?;
             }
+        }
+    }
+    if let Some(section) = &section {
+        if let Some(path) = &args.log {
+            let stored = tangent_host::fieldlog::FieldLog::open(path)
+                .and_then(|mut log| {
+                    section.log_to(&mut log, calibration.as_ref().map_or(0, |c| c.id))
+                })
+                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+            if stored && !args.json {
+                eprintln!("stored section {} in {}", section.label, path.display());
+            }
+        }
+        if args.json {
+            writeln!(
+                out,
+                "{}",
+                serde_json::json!({ "section": section, "mpd_m": section.mpd() })
+            )?;
+        } else {
+            writeln!(out, "{}", section.summary())?;
         }
     }
     Ok(if unreadable > 0 {
@@ -152,4 +215,43 @@ fn report_unreadable(out: &mut impl Write, json: bool, message: &str) -> std::io
         eprintln!("error: {message}");
         Ok(())
     }
+}
+
+/// A road capture's solution, for the section.
+type RoadResult = Result<RoadSolution, PipelineError>;
+
+/// Measures a road capture: its reading (and plot), and its solution for the section.
+fn measure_road_capture(
+    dir: &std::path::Path,
+    calibration: Option<&Calibration>,
+    config: &PipelineConfig,
+    params: &RoadParams,
+    plot_dir: Option<&std::path::Path>,
+) -> Result<(Reading, RoadResult), String> {
+    let name = dir.display().to_string();
+    let outcome =
+        measure_road_dir(dir, calibration, config, params).map_err(|e| format!("{name}: {e}"))?;
+    let reading = Reading::road(
+        &name,
+        outcome
+            .result
+            .as_ref()
+            .map(|s| RoadReport::new(s, outcome.truth_mpd))
+            .map_err(|e| tangent_core::protocol::codes::Failure::of(e).to_string()),
+    );
+    if let Some(plot_dir) = plot_dir {
+        let file = dir
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "capture".into());
+        let path = plot_dir.join(format!("{file}.png"));
+        road_png(
+            &path,
+            &outcome,
+            params,
+            &format!("{file}: {}", reading.summary()),
+        )
+        .map_err(|e| format!("{}: {e:#}", path.display()))?;
+    }
+    Ok((reading, outcome.result))
 }

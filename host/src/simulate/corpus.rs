@@ -589,6 +589,8 @@ pub fn entries() -> Vec<CorpusEntry> {
     // --- spheres on two planes (`sphere_corpus`; seeds of their own, so the order above is
     // untouched) ---------------------------------------------------------------------------
     b.entries.extend(super::sphere_corpus::entries());
+    // --- the road head (`docs/road.md`): own calibration and seeds -------------------------
+    b.entries.extend(super::road_corpus::entries());
     b.entries
 }
 

@@ -18,6 +18,7 @@ use crate::image::threshold::ThresholdError;
 use crate::measurement::Mode;
 use crate::pipeline::PipelineError;
 use crate::solvers::result::{Flags, Method};
+use crate::solvers::road_profile::RoadError;
 use crate::solvers::SolveError;
 
 use super::{DeviceError, ErrorCode};
@@ -76,6 +77,7 @@ pub fn method_name(method: Method) -> &'static str {
         Method::JointFit => "joint_fit",
         Method::SphereSections => "sections",
         Method::SphereThreeTangent => "sphere_three_tangent",
+        Method::MeanProfileDepth => "mean_profile_depth",
     }
 }
 
@@ -136,6 +138,12 @@ pub enum Failure {
     /// Code 16: the instrument of this mode has no solver yet (the number is the [`Mode`]:
     /// 0 cylinder, 1 sphere, 2 wall, 3 road).
     UnsupportedMode(Mode),
+    /// Code 17: the road instrument refused the profile (the number is
+    /// [`RoadError::wire`]: drop-outs, a wet patch, the head tilted or out of range).
+    Road {
+        /// [`RoadError::wire`].
+        detail: u32,
+    },
     /// A code this version does not know (a newer firmware).
     Unknown {
         /// The code.
@@ -194,6 +202,9 @@ impl Failure {
             PipelineError::OutsideFrame => Failure::OutsideFrame,
             PipelineError::Solve(e) => Failure::Solve(*e),
             PipelineError::UnsupportedMode(mode) => Failure::UnsupportedMode(*mode),
+            PipelineError::Road(e) => Failure::Road {
+                detail: e.wire() & ARGUMENT_MAX,
+            },
         }
     }
 
@@ -216,6 +227,7 @@ impl Failure {
             Failure::Solve(_) => 14,
             Failure::TooManyLabels { .. } => 15,
             Failure::UnsupportedMode(_) => 16,
+            Failure::Road { .. } => 17,
             Failure::Unknown { code, .. } => *code,
         }
     }
@@ -228,6 +240,7 @@ impl Failure {
             | Failure::TooManyObjects { capacity: n }
             | Failure::CurveTooShort { points: n }
             | Failure::TooManyLabels { capacity: n }
+            | Failure::Road { detail: n }
             | Failure::Unknown { argument: n, .. } => n.min(ARGUMENT_MAX),
             Failure::Solve(e) => solve_error_number(e),
             Failure::UnsupportedMode(mode) => mode_number(mode),
@@ -273,6 +286,10 @@ impl Failure {
             15 => Failure::TooManyLabels { capacity: n },
             16 => match mode_of_number(n) {
                 Some(mode) => Failure::UnsupportedMode(mode),
+                None => Failure::Unknown { code, argument: n },
+            },
+            17 => match RoadError::from_wire(n) {
+                Some(_) => Failure::Road { detail: n },
                 None => Failure::Unknown { code, argument: n },
             },
             _ => Failure::Unknown { code, argument: n },
@@ -403,6 +420,10 @@ impl fmt::Display for Failure {
                 "the {} instrument has no solver yet (update the software)",
                 mode.name()
             ),
+            Failure::Road { detail } => match RoadError::from_wire(*detail) {
+                Some(e) => write!(f, "road profile: {e}"),
+                None => write!(f, "road profile refused (detail {detail})"),
+            },
             Failure::Unknown { code, argument } => write!(
                 f,
                 "the measurement failed (code {code}, detail {argument}: unknown to this version, update the host software)"

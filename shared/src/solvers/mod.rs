@@ -37,11 +37,13 @@ pub mod circle;
 pub mod cylinder_fit;
 pub mod ellipse;
 pub mod lm;
+pub mod mpd;
 pub mod result;
 pub mod sphere;
 pub mod sphere_fit;
 pub mod sphere_sections;
 pub mod sphere_three_tangent;
+pub mod road_profile;
 pub mod stem;
 pub mod three_tangent;
 

@@ -26,6 +26,8 @@ pub enum Method {
     SphereSections,
     /// Sphere from the three-tangent circles of its sections (`docs/sphere.md`).
     SphereThreeTangent,
+    /// ISO 13473-1 mean profile depth of a road profile (`docs/road.md`).
+    MeanProfileDepth,
 }
 
 /// Quality flags of a solution (a bit set; `Flags::ARC_TOO_SHORT.0 | …`).

@@ -198,6 +198,7 @@ fn every_method_has_a_distinct_name() {
         Method::JointFit,
         Method::SphereSections,
         Method::SphereThreeTangent,
+        Method::MeanProfileDepth,
     ]
     .iter()
     .map(|m| method_name(*m).to_string())
@@ -211,7 +212,8 @@ fn every_method_has_a_distinct_name() {
             "generalised_three_tangent",
             "joint_fit",
             "sections",
-            "sphere_three_tangent"
+            "sphere_three_tangent",
+            "mean_profile_depth"
         ]
     );
 }

@@ -1,0 +1,235 @@
+//! Ambulatory use (`docs/road.md`, "Ambulatory use"): profile after profile along a road
+//! section, the MSD of every 100 mm segment kept, the section's MPD as their running mean,
+//! and profiles the standard excludes (too many drop-outs or spikes, a gap) counted apart —
+//! never averaged in.
+
+use std::collections::BTreeMap;
+
+use serde::Serialize;
+use tangent_core::instrument::road::RoadSolution;
+use tangent_core::pipeline::PipelineError;
+use tangent_core::solvers::mpd::estimated_texture_depth;
+use tangent_core::solvers::road_profile::RoadError;
+
+/// One road section being measured.
+#[derive(Debug, Clone, PartialEq, Default, Serialize)]
+pub struct Section {
+    /// Location label (e.g. "A7 km 12.4 left wheel path").
+    pub label: String,
+    /// MSD of every valid segment so far (metres).
+    pub msd_m: Vec<f64>,
+    /// Profiles taken.
+    pub profiles: usize,
+    /// Profiles excluded by the standard's rules (drop-outs, gaps, spikes), by reason.
+    pub excluded: BTreeMap<&'static str, usize>,
+    /// Profiles that gave no profile at all (no light, tilted, out of range …), by reason.
+    pub failed: BTreeMap<&'static str, usize>,
+}
+
+/// Where a profile went.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Added {
+    /// Its valid segments joined the section (how many).
+    Segments(usize),
+    /// Excluded by the standard (the reason's name).
+    Excluded(&'static str),
+    /// No profile (the reason's name).
+    Failed(&'static str),
+}
+
+impl Section {
+    /// An empty section.
+    pub fn new(label: &str) -> Self {
+        Section {
+            label: label.to_string(),
+            ..Section::default()
+        }
+    }
+
+    /// Adds one profile's result.
+    pub fn add(&mut self, result: &Result<RoadSolution, PipelineError>) -> Added {
+        self.profiles += 1;
+        let added = match result {
+            Ok(s) => {
+                let valid: Vec<f64> = s.segments[..s.depth.segments.min(s.segments.len())]
+                    .iter()
+                    .filter(|g| g.valid)
+                    .map(|g| g.msd)
+                    .collect();
+                self.msd_m.extend(&valid);
+                Added::Segments(valid.len())
+            }
+            Err(PipelineError::Road(e)) => match e {
+                RoadError::TooManyDropouts { .. } => Added::Excluded("drop-outs"),
+                RoadError::DropoutGap { .. } => Added::Excluded("gap (wet patch or hole)"),
+                RoadError::TooManySpikes { .. } => Added::Excluded("spikes"),
+                RoadError::Tilted { .. } => Added::Failed("head tilted"),
+                RoadError::OutOfRange { .. } => Added::Failed("out of range"),
+                _ => Added::Failed("no profile"),
+            },
+            Err(_) => Added::Failed("no laser line"),
+        };
+        match added {
+            Added::Excluded(r) => *self.excluded.entry(r).or_default() += 1,
+            Added::Failed(r) => *self.failed.entry(r).or_default() += 1,
+            Added::Segments(_) => {}
+        }
+        added
+    }
+
+    /// Valid segments so far (the running count).
+    pub fn segments(&self) -> usize {
+        self.msd_m.len()
+    }
+
+    /// The section's MPD (metres): the mean MSD of its valid segments; `None` before the
+    /// first.
+    pub fn mpd(&self) -> Option<f64> {
+        (!self.msd_m.is_empty()).then(|| self.msd_m.iter().sum::<f64>() / self.msd_m.len() as f64)
+    }
+
+    /// Standard deviation of the segments' MSD (metres), from two segments.
+    pub fn msd_std(&self) -> Option<f64> {
+        let n = self.msd_m.len();
+        let m = self.mpd()?;
+        (n >= 2).then(|| {
+            (self.msd_m.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (n - 1) as f64).sqrt()
+        })
+    }
+
+    /// Profiles excluded or failed.
+    pub fn not_used(&self) -> usize {
+        self.excluded.values().sum::<usize>() + self.failed.values().sum::<usize>()
+    }
+
+    /// One line: label, MPD, ETD, counts.
+    pub fn summary(&self) -> String {
+        let mut s = match self.mpd() {
+            Some(m) => format!(
+                "section {}: MPD = {:.3} mm (ETD {:.3} mm) from {} segments",
+                self.label,
+                m * 1e3,
+                estimated_texture_depth(m) * 1e3,
+                self.segments()
+            ),
+            None => format!("section {}: no valid segment yet", self.label),
+        };
+        if let Some(sd) = self.msd_std() {
+            s += &format!(", MSD s.d. {:.3} mm", sd * 1e3);
+        }
+        s += &format!(", {} profiles", self.profiles);
+        for (reason, n) in self.excluded.iter().chain(&self.failed) {
+            s += &format!(", {n} excluded ({reason})");
+        }
+        s
+    }
+}
+
+/// Kind of the field-log record of a section ([`crate::fieldlog::TreeRecord::kind`]).
+pub const SECTION_KIND: &str = "road_section";
+
+impl Section {
+    /// Stores the section in the field log: a plot header named by its location label (if
+    /// the log's current plot is another), then one record of kind [`SECTION_KIND`] whose
+    /// size column holds the section's MPD (mm), its uncertainty column the MSD's standard
+    /// error (mm), its tree number the running count of valid segments and its note-like
+    /// species column `MPD`. Nothing is stored before the first valid segment.
+    pub fn log_to(
+        &self,
+        log: &mut crate::fieldlog::FieldLog,
+        calib_id: u32,
+    ) -> Result<bool, crate::fieldlog::FieldLogError> {
+        use crate::fieldlog::{now_rfc3339, PlotHeader, Record, TreeRecord};
+        let Some(mpd) = self.mpd() else {
+            return Ok(false);
+        };
+        if log.current_plot().map(|p| p.plot_id.as_str()) != Some(self.label.as_str()) {
+            log.append(Record::Plot(PlotHeader {
+                plot_id: self.label.clone(),
+                started: now_rfc3339(),
+                note: "road section (ISO 13473-1 MPD)".into(),
+            }))?;
+        }
+        let n = self.segments();
+        let standard_error = self.msd_std().map_or(0.0, |s| s / (n as f64).sqrt());
+        log.append(Record::Tree(TreeRecord {
+            plot_id: self.label.clone(),
+            tree_id: n as u32,
+            species: "MPD".into(),
+            diameter_mm: mpd * 1e3,
+            uncertainty_mm: standard_error * 1e3,
+            tilt_deg: 0.0,
+            flags: 0,
+            time: now_rfc3339(),
+            device_id: "host".into(),
+            calib_id,
+            seq: self.profiles as u32,
+            device_time_ms: 0,
+            kind: SECTION_KIND.into(),
+            measurement: None,
+        }))?;
+        Ok(true)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tangent_core::instrument::road::{RoadSolution, MAX_SEGMENTS};
+    use tangent_core::solvers::mpd::{MeanProfileDepth, SegmentDepth};
+    use tangent_core::solvers::road_profile::ProfileSummary;
+
+    fn solution(msd: f64) -> RoadSolution {
+        let mut segments = [SegmentDepth::default(); MAX_SEGMENTS];
+        segments[0] = SegmentDepth {
+            msd,
+            valid: true,
+            ..SegmentDepth::default()
+        };
+        RoadSolution {
+            profile: ProfileSummary {
+                samples: 667,
+                dropouts: 0,
+                spacing: 0.15e-3,
+                mean_height: 0.0,
+                tilt: 0.0,
+                longest_gap: (0.0, 0.0),
+            },
+            depth: MeanProfileDepth {
+                segments: 1,
+                valid_segments: 1,
+                mpd: msd,
+                etd: estimated_texture_depth(msd),
+                resampled: 200,
+                spikes: 0,
+            },
+            segments,
+            rms_height: 0.0,
+            micro: None,
+            standoff: 0.3,
+            uncertainty: 5e-6,
+            flags: Default::default(),
+        }
+    }
+
+    #[test]
+    fn excluded_profiles_are_counted_never_averaged() {
+        let mut s = Section::new("test strip");
+        assert_eq!(s.mpd(), None);
+        assert_eq!(s.add(&Ok(solution(1.0e-3))), Added::Segments(1));
+        assert_eq!(s.add(&Ok(solution(1.2e-3))), Added::Segments(1));
+        let dropouts = Err(PipelineError::Road(RoadError::TooManyDropouts {
+            fraction: 0.3,
+        }));
+        assert_eq!(s.add(&dropouts), Added::Excluded("drop-outs"));
+        let tilted = Err(PipelineError::Road(RoadError::Tilted { angle: 0.2 }));
+        assert_eq!(s.add(&tilted), Added::Failed("head tilted"));
+        assert!((s.mpd().unwrap() - 1.1e-3).abs() < 1e-12);
+        assert_eq!((s.profiles, s.segments(), s.not_used()), (4, 2, 2));
+        let line = s.summary();
+        assert!(
+            line.contains("MPD = 1.100 mm") && line.contains("1 excluded (drop-outs)"),
+            "{line}"
+        );
+    }
+}

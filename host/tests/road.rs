@@ -1,0 +1,172 @@
+//! The road instrument on the host: the MPD chain against captif-slp on identical profiles,
+//! and simulated road captures measured end to end against their truth (`docs/road.md`).
+
+use std::path::Path;
+
+use rand::{RngExt, SeedableRng};
+use rand_pcg::Pcg64;
+use tangent_core::instrument::road::RoadParams;
+use tangent_core::pipeline::{PipelineConfig, PipelineError};
+use tangent_core::real::Vec2;
+use tangent_core::solvers::road_profile::RoadError;
+use tangent_host::road::crosscheck::{captif_mpd, write_profile_csv};
+use tangent_host::road::evaluate::{detrended_rms, wet_mirror_patch};
+use tangent_host::road::height_scale::furrow_depth;
+use tangent_host::road::{measure_road, mpd_of_profile, true_profile};
+use tangent_host::simulate::road_corpus::{
+    furrow_spec, piezo_spec, road_spec, Condition, Surface, FURROW_PITCH, FURROW_WIDTH,
+};
+use tangent_host::simulate::simulate;
+
+fn repo() -> &'static Path {
+    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
+}
+
+/// A random raw profile like the road head's: 0.15 mm columns (jittered), macrotexture of a
+/// few components, drop-outs in runs, a few spikes.
+fn random_profile(seed: u64) -> Vec<Vec2> {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let comps: Vec<(f64, f64, f64)> = (0..6)
+        .map(|_| {
+            (
+                rng.random_range(0.05e-3..0.8e-3),
+                rng.random_range(1.0e-3..40e-3),
+                rng.random_range(0.0..6.283),
+            )
+        })
+        .collect();
+    let mut out = Vec::new();
+    let mut s = -0.05 + 0.05e-3;
+    let mut drop_run = 0;
+    while s <= 0.05 {
+        let mut h: f64 = comps
+            .iter()
+            .map(|(a, l, p)| a * (std::f64::consts::TAU * s / l + p).sin())
+            .sum();
+        h += rng.random_range(-20e-6..20e-6) + 0.01 * s;
+        if drop_run == 0 && rng.random::<f64>() < 0.01 {
+            drop_run = rng.random_range(1..6);
+        }
+        if rng.random::<f64>() < 0.003 {
+            h += 4e-3;
+        }
+        if drop_run > 0 {
+            drop_run -= 1;
+            h = f64::NAN;
+        }
+        out.push(Vec2::new(s, h));
+        s += 0.15e-3 * rng.random_range(0.97..1.03);
+    }
+    out
+}
+
+#[test]
+fn our_mpd_equals_captif_slp_on_identical_profiles() {
+    let params = RoadParams::default();
+    let dir = std::env::temp_dir().join(format!("tangent-road-crosscheck-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut ours = Vec::new();
+    let mut files = Vec::new();
+    for seed in 0..12 {
+        let p = random_profile(seed);
+        let f = dir.join(format!("p{seed}.csv"));
+        write_profile_csv(&f, &p, params.profile.window_start).unwrap();
+        // Ours on the profile as written (6 decimals in mm, as captif-slp reads it).
+        let text = std::fs::read_to_string(&f).unwrap();
+        let back: Vec<Vec2> = text
+            .lines()
+            .skip(1)
+            .map(|l| {
+                let (a, b) = l.split_once(',').unwrap();
+                Vec2::new(
+                    a.parse::<f64>().unwrap() * 1e-3 + params.profile.window_start,
+                    b.parse::<f64>().map(|v| v * 1e-3).unwrap_or(f64::NAN),
+                )
+            })
+            .collect();
+        ours.push(mpd_of_profile(&back, &params).map(|r| r.0.mpd));
+        files.push(f);
+    }
+    let theirs = match captif_mpd(repo(), &files).unwrap() {
+        Ok(m) => m,
+        Err(reason) => {
+            println!("skipped: {reason}");
+            return;
+        }
+    };
+    let mut compared = 0;
+    for (f, o) in files.iter().zip(&ours) {
+        match (o, theirs[f]) {
+            (Ok(a), Some(b)) => {
+                assert!(
+                    (a - b).abs() <= 0.005e-3,
+                    "{}: ours {a}, captif-slp {b}",
+                    f.display()
+                );
+                compared += 1;
+            }
+            // Both refuse (drop-outs or spikes over the limit), or it is a real difference.
+            (Err(_), None) => {}
+            other => panic!("{}: {other:?}", f.display()),
+        }
+    }
+    assert!(compared >= 8, "{compared}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn a_simulated_road_reads_its_true_mpd() {
+    let params = RoadParams::default();
+    let spec = road_spec(Surface::StoneMastic, Condition::default(), 77_001);
+    let (capture, _) = simulate(&spec).unwrap();
+    let o = measure_road(&capture, None, &PipelineConfig::default(), &params).unwrap();
+    let r = o.result.as_ref().unwrap();
+    let truth = o.truth_mpd.unwrap();
+    assert!(
+        (r.depth.mpd - truth).abs() <= 0.03e-3,
+        "{} vs {truth}",
+        r.depth.mpd
+    );
+    assert!(r.profile.dropout_fraction() < 0.05);
+}
+
+#[test]
+fn flat_target_and_furrow_meet_their_targets() {
+    let params = RoadParams::default();
+    let (capture, _) = simulate(&piezo_spec(0.0, 77_010)).unwrap();
+    let o = measure_road(&capture, None, &PipelineConfig::default(), &params).unwrap();
+    let valid: Vec<Vec2> = o
+        .profile
+        .iter()
+        .copied()
+        .filter(|p| p.y.is_finite())
+        .collect();
+    let rms = detrended_rms(&valid).unwrap();
+    assert!(rms <= 50e-6, "{rms}");
+    let spec = furrow_spec(146e-6, 77_011);
+    let (capture, _) = simulate(&spec).unwrap();
+    let o = measure_road(&capture, None, &PipelineConfig::default(), &params).unwrap();
+    let measured = furrow_depth(&o.profile, FURROW_PITCH, FURROW_WIDTH)
+        .unwrap()
+        .depth_m;
+    let truth = true_profile(&spec.objects, &spec.calibration, &params)
+        .and_then(|p| furrow_depth(&p, FURROW_PITCH, FURROW_WIDTH))
+        .unwrap()
+        .depth_m;
+    assert!((measured - truth).abs() <= 10e-6, "{measured} vs {truth}");
+}
+
+#[test]
+fn a_wet_mirror_patch_is_named() {
+    let params = RoadParams::default();
+    let spec = road_spec(Surface::DenseAsphalt, Condition::default(), 77_020);
+    let (mut capture, _) = simulate(&spec).unwrap();
+    wet_mirror_patch(&mut capture, 330..430);
+    let o = measure_road(&capture, None, &PipelineConfig::default(), &params).unwrap();
+    match o.result {
+        Err(PipelineError::Road(RoadError::DropoutGap { length, .. })) => {
+            assert!(length > 0.014, "{length}")
+        }
+        other => panic!("{other:?}"),
+    }
+}
