@@ -13,7 +13,8 @@ use crate::real::Float;
 use crate::real::{norm, sqrt, Real, Vec2, Vec3, PI};
 
 use super::circle::{self, RobustParams};
-use super::cylinder_fit::{fit_cylinder, initial_cylinder, project_along_axis, to_plane};
+use super::cylinder_fit::{fit_cylinder_weighted, initial_cylinder, project_along_axis, to_plane};
+use crate::calibration::MAX_PLANES;
 use super::ellipse::{self, EllipseFit};
 use super::lm::LmParams;
 use super::result::{Flags, Method, Tilt};
@@ -206,9 +207,9 @@ fn solve_plane(
     let near_sigma = |q: Vec2| norm(&noise_vector(plane, q, params));
     let fit = robust_circle(pts, near_sigma, noise_of, params, scratch.values).map(|rc| {
         let f = rc.fit;
-        let model =
-            circle::circle_radius_sigma(&f.circle, (0..pts.len()).map(|i| (pts[i], noise_of(i))));
-        let random = rc.data_sigma.max(model).hypot(rc.bending);
+        // The whole-arc fit's σ: the points' own σ, inflated by χ² and the residuals'
+        // correlation along the stripe (docs/error-model.md, "Correlation along the stripe").
+        let random = rc.data_sigma.hypot(rc.bending);
         let s = sqrt(random * random + cal(f.circle.radius, f.circle.centre).powi(2));
         let arc = arc_angle(pts, f.circle.centre);
         let rejected = 1.0 - f.inliers as Real / pts.len() as Real;
@@ -476,7 +477,17 @@ fn solve_tilted(
     one: &PlaneResult,
 ) -> Result<CylinderSolution, SolveError> {
     let init = initial_cylinder(input.curves, input.planes, scratch.points)?;
-    let fit = fit_cylinder(input.curves, init, &params.lm)?;
+    // Whole-arc weighted fit (docs/cylinder.md, "Whole-arc fit"): each point's own σ along
+    // its plane's noise direction.
+    let mut fields = [noise::DisplacementField::of(&input.planes[0]); MAX_PLANES];
+    for (f, plane) in fields.iter_mut().zip(input.planes) {
+        *f = noise::DisplacementField::of(plane);
+    }
+    let point_noise = |k: usize, i: usize| match (input.curves[k].get(i), input.sigmas[k].get(i)) {
+        (Some(x), Some(s)) => fields.get(k).map_or(Vec3::zeros(), |f| f.direction(*x) * *s),
+        _ => Vec3::zeros(),
+    };
+    let fit = fit_cylinder_weighted(input.curves, point_noise, init, &params.robust)?.fit;
     let cyl = fit.cylinder;
     let plane0 = &input.planes[0];
     // Generalised three-tangent on every curve; mean radius, σ of the mean of the
