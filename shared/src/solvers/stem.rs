@@ -25,7 +25,10 @@ use super::SolveError;
 use crate::laser_plane::LaserPlane;
 use crate::noise::{self, NoiseModel};
 
+mod budget;
 mod sigma;
+use budget::decimate;
+pub use budget::POINT_BUDGET;
 use sigma::{
     arc_angle, elliptic_diameter, noise_vector, one_point_sigma, projected_data_sigma,
     robust_circle, three_tangent_variance,
@@ -78,6 +81,10 @@ pub struct CylinderParams {
     /// [`Flags::ELLIPTIC`] (smaller ones are within what a round stem's bark and the stripe
     /// extraction's coherent bending produce; `docs/cylinder.md`, "Elliptic stems").
     pub elliptic_min_eccentricity: Real,
+    /// Most points of one curve the one-plane whole-arc fit uses; longer curves are binned
+    /// (`docs/error-model.md`, "Point budget"; default [`POINT_BUDGET`]). `usize::MAX` fits
+    /// every point.
+    pub point_budget: usize,
 }
 
 /// Default [`CylinderParams::elliptic_min_f`]: far above the 1e-6 tail of `F(2, n − 5)`
@@ -113,6 +120,7 @@ impl Default for CylinderParams {
             focal_px: 1000.0,
             elliptic_min_f: ELLIPTIC_MIN_F,
             elliptic_min_eccentricity: ELLIPTIC_MIN_ECCENTRICITY,
+            point_budget: POINT_BUDGET,
         }
     }
 }
@@ -175,7 +183,8 @@ fn solve_plane(
     params: &CylinderParams,
     scratch: &mut Scratch<'_>,
 ) -> Result<PlaneResult, SolveError> {
-    let pts = to_plane(curve, plane, scratch.points)?;
+    let n = to_plane(curve, plane, scratch.points)?.len();
+    let pts = &scratch.points[..n];
     let mut flags = Flags::default();
     let cal = |r: Real, centre: Vec2| {
         noise::calibration_relative_sigma(
@@ -201,11 +210,22 @@ fn solve_plane(
     };
     // Robust fit, scale floor = predicted point noise at the arc's nearest point; each data
     // point's noise vector is its stored σ along the field's direction.
+    // A long arc is binned to the point budget first (docs/error-model.md, "Point budget");
+    // the bins' σ go to the front of `values`, the fit's median scratch after them.
+    let (pts, sigmas, values): (&[Vec2], &[Real], &mut [Real]) =
+        match budget_split(n, params.point_budget, scratch.values.len()) {
+            Some(m) => {
+                let (binned, rest) = scratch.values.split_at_mut(m);
+                let m = decimate(&mut scratch.points[..n], sigmas, binned, params.point_budget);
+                (&scratch.points[..m], &binned[..m], rest)
+            }
+            None => (&scratch.points[..n], sigmas, &mut scratch.values[..]),
+        };
     let mut ellipse = None;
     let field = noise::DisplacementField::of(plane);
     let noise_of = |i: usize| field.direction_in_plane(pts[i]) * sigmas[i];
     let near_sigma = |q: Vec2| norm(&noise_vector(plane, q, params));
-    let fit = robust_circle(pts, near_sigma, noise_of, params, scratch.values).map(|rc| {
+    let fit = robust_circle(pts, near_sigma, noise_of, params, values).map(|rc| {
         let f = rc.fit;
         // The whole-arc fit's σ: the points' own σ, inflated by χ² and the residuals'
         // correlation along the stripe (docs/error-model.md, "Correlation along the stripe").
@@ -243,8 +263,19 @@ fn solve_plane(
         fit,
         ellipse,
         flags,
-        n: pts.len(),
+        n,
     })
+}
+
+/// Number of bins when a curve of `n` points is binned to `budget` and `values` (its length)
+/// holds both the bins' σ and the fit's scratch; `None` to fit every point (short enough, or
+/// no room).
+fn budget_split(n: usize, budget: usize, values: usize) -> Option<usize> {
+    if n <= budget || budget == 0 {
+        return None;
+    }
+    let m = n.div_ceil(n.div_ceil(budget));
+    (values >= 2 * m).then_some(m)
 }
 
 /// The ellipse fitted to the circle fit's inliers when the section is detectably not round
