@@ -26,7 +26,9 @@ use crate::laser_plane::LaserPlane;
 use crate::noise::{self, NoiseModel};
 
 mod budget;
+mod level;
 mod sigma;
+use level::LevelMap;
 use budget::decimate;
 pub use budget::POINT_BUDGET;
 use sigma::{
@@ -184,21 +186,28 @@ fn solve_plane(
     scratch: &mut Scratch<'_>,
 ) -> Result<PlaneResult, SolveError> {
     let n = to_plane(curve, plane, scratch.points)?.len();
+    // The level section of a vertical stem (docs/cylinder.md, "One plane: the level section").
+    let level = LevelMap::of(plane);
+    for p in scratch.points[..n].iter_mut() {
+        *p = level.to_level(*p);
+    }
     let pts = &scratch.points[..n];
     let mut flags = Flags::default();
     let cal = |r: Real, centre: Vec2| {
         noise::calibration_relative_sigma(
             plane,
-            plane.from_plane_coords(centre),
+            plane.from_plane_coords(level.to_plane(centre)),
             &params.noise,
             params.focal_px,
         ) * r
     };
+    // Model noise of a point the data does not contain, in the level section.
+    let noise_at = |q: Vec2| level.to_level(noise_vector(plane, level.to_plane(q), params));
     // Three-tangent with σ from the edges (model) and from D (max of model and data).
     let tt = match three_tangent(pts, &params.three_tangent) {
         Ok(t) => {
             let near = t.bisector * t.nearest_distance;
-            let s_point = noise_vector(plane, near, params).dot(&t.bisector).abs();
+            let s_point = noise_at(near).dot(&t.bisector).abs();
             let random = sqrt(three_tangent_variance(&t, s_point, params));
             let s = sqrt(random * random + cal(t.radius, t.centre).powi(2));
             Some((t, s))
@@ -223,8 +232,9 @@ fn solve_plane(
         };
     let mut ellipse = None;
     let field = noise::DisplacementField::of(plane);
-    let noise_of = |i: usize| field.direction_in_plane(pts[i]) * sigmas[i];
-    let near_sigma = |q: Vec2| norm(&noise_vector(plane, q, params));
+    let noise_of =
+        |i: usize| level.to_level(field.direction_in_plane(level.to_plane(pts[i])) * sigmas[i]);
+    let near_sigma = |q: Vec2| norm(&noise_at(q));
     let fit = robust_circle(pts, near_sigma, noise_of, params, values).map(|rc| {
         let f = rc.fit;
         // The whole-arc fit's σ: the points' own σ, inflated by χ² and the residuals'
@@ -418,10 +428,12 @@ fn finish_plane(
     plane: &LaserPlane,
     params: &CylinderParams,
 ) -> Result<CylinderSolution, SolveError> {
+    // The one-plane results are in the level section (`solve_plane`).
+    let level = LevelMap::of(plane);
     if let (Some(e), Some((f, _, _))) = (one.ellipse, one.fit) {
         let cal_rel = noise::calibration_relative_sigma(
             plane,
-            plane.from_plane_coords(e.centre),
+            plane.from_plane_coords(level.to_plane(e.centre)),
             &params.noise,
             params.focal_px,
         );
@@ -442,7 +454,7 @@ fn finish_plane(
             fit_diameter: Some(2.0 * f.circle.radius),
             fit_uncertainty: one.fit.map(|(_, s, _)| 2.0 * s),
             distance: norm(&c) - f.circle.radius,
-            centre: plane.from_plane_coords(e.centre),
+            centre: plane.from_plane_coords(level.to_plane(e.centre)),
             axes: Some((2.0 * e.semi_axes.0, 2.0 * e.semi_axes.1)),
         });
     }
@@ -496,7 +508,7 @@ fn finish_plane(
         fit_diameter: one.fit.map(|(f, _, _)| 2.0 * f.circle.radius),
         fit_uncertainty: one.fit.map(|(_, s, _)| 2.0 * s),
         distance,
-        centre: plane.from_plane_coords(centre),
+        centre: plane.from_plane_coords(level.to_plane(centre)),
         axes: None,
     })
 }
