@@ -229,7 +229,12 @@ pub fn fit_cylinder(
     if params.max_iterations == 0 || !(params.tolerance >= 0.0) {
         return Err(SolveError::InvalidParameter);
     }
-    let Normalised { mean, scale, start: st, n } = normalise(curves, initial)?;
+    let Normalised {
+        mean,
+        scale,
+        start: st,
+        n,
+    } = normalise(curves, initial)?;
     let unit = |_: usize, _: usize, _: Vec3| 1.0;
     let problem = CylinderProblem {
         curves,

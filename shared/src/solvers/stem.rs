@@ -14,7 +14,6 @@ use crate::real::{norm, sqrt, Real, Vec2, Vec3, PI};
 
 use super::circle::{self, RobustParams};
 use super::cylinder_fit::{fit_cylinder_weighted, initial_cylinder, project_along_axis, to_plane};
-use crate::calibration::MAX_PLANES;
 use super::ellipse::{self, EllipseFit};
 use super::lm::LmParams;
 use super::result::{Flags, Method, Tilt};
@@ -22,15 +21,16 @@ use super::three_tangent::{
     generalised_three_tangent, three_tangent, ThreeTangent, ThreeTangentParams,
 };
 use super::SolveError;
+use crate::calibration::MAX_PLANES;
 use crate::laser_plane::LaserPlane;
 use crate::noise::{self, NoiseModel};
 
 mod budget;
 mod level;
 mod sigma;
-use level::LevelMap;
 use budget::decimate;
 pub use budget::POINT_BUDGET;
+use level::LevelMap;
 use sigma::{
     arc_angle, elliptic_diameter, noise_vector, one_point_sigma, projected_data_sigma,
     robust_circle, three_tangent_variance,
@@ -225,7 +225,12 @@ fn solve_plane(
         match budget_split(n, params.point_budget, scratch.values.len()) {
             Some(m) => {
                 let (binned, rest) = scratch.values.split_at_mut(m);
-                let m = decimate(&mut scratch.points[..n], sigmas, binned, params.point_budget);
+                let m = decimate(
+                    &mut scratch.points[..n],
+                    sigmas,
+                    binned,
+                    params.point_budget,
+                );
                 (&scratch.points[..m], &binned[..m], rest)
             }
             None => (&scratch.points[..n], sigmas, &mut scratch.values[..]),
@@ -527,7 +532,9 @@ fn solve_tilted(
         *f = noise::DisplacementField::of(plane);
     }
     let point_noise = |k: usize, i: usize| match (input.curves[k].get(i), input.sigmas[k].get(i)) {
-        (Some(x), Some(s)) => fields.get(k).map_or(Vec3::zeros(), |f| f.direction(*x) * *s),
+        (Some(x), Some(s)) => fields
+            .get(k)
+            .map_or(Vec3::zeros(), |f| f.direction(*x) * *s),
         _ => Vec3::zeros(),
     };
     let fit = fit_cylinder_weighted(input.curves, point_noise, init, &params.robust)?.fit;

@@ -10,7 +10,7 @@ use crate::real::Float;
 use crate::real::{norm, sqrt, Real, Vec3};
 
 use super::{
-    cyl_accumulate, normalise, Cylinder, CylinderFit, CylinderProblem, CylState, Normalised,
+    cyl_accumulate, normalise, CylState, Cylinder, CylinderFit, CylinderProblem, Normalised,
 };
 use crate::solvers::circle::weighted::LATERAL_FLOOR;
 use crate::solvers::circle::RobustParams;
@@ -73,10 +73,7 @@ pub fn fit_cylinder_weighted(
         return Err(SolveError::InvalidParameter);
     }
     let Normalised {
-        mean,
-        scale,
-        start,
-        ..
+        mean, scale, start, ..
     } = normalise(curves, initial)?;
     let point_noise = |k: usize, i: usize| {
         let g = noise(k, i) / scale;
