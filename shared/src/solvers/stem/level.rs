@@ -40,13 +40,13 @@ impl LevelMap {
     }
 
     /// In-plane coordinates (or an in-plane vector) to the level section.
-    pub(super) fn to_level(&self, q: Vec2) -> Vec2 {
+    pub(super) fn to_level(self, q: Vec2) -> Vec2 {
         let m = &self.m;
         Vec2::new(m[0][0] * q.x + m[0][1] * q.y, m[1][0] * q.x + m[1][1] * q.y)
     }
 
     /// Level-section coordinates back to the plane's.
-    pub(super) fn to_plane(&self, p: Vec2) -> Vec2 {
+    pub(super) fn to_plane(self, p: Vec2) -> Vec2 {
         let m = &self.inv;
         Vec2::new(m[0][0] * p.x + m[0][1] * p.y, m[1][0] * p.x + m[1][1] * p.y)
     }
