@@ -17,7 +17,7 @@ use tangent_core::calibration::Calibration;
 
 use crate::calibration_file::{self, CalibrationFileError};
 use crate::pgm::{Pgm, PgmError};
-use crate::truth::{Object, TruthPoint};
+use crate::truth::{Object, PhysicsModel, TruthPoint};
 
 /// The largest frame side a capture may declare (pixels). With [`MAX_FRAME_PIXELS`] this
 /// bounds the memory reading (and inspecting) a capture takes; the sensor (MT9V034,
@@ -60,6 +60,10 @@ pub struct Truth {
     /// The objects of the scene, in the camera frame of the laser-on frame (metres).
     #[serde(default)]
     pub objects: Vec<Object>,
+    /// The physics model a synthetic capture was rendered with (`docs/simulator.md`, §10).
+    /// Absent: the reference model if the capture has a `[simulation]` table, else unknown.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub physics_model: Option<PhysicsModel>,
 }
 
 /// `capture.toml`, as written on disk.

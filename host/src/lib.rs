@@ -6,6 +6,7 @@
 //! `src/cli/`).
 #![deny(missing_docs)]
 
+pub mod baseline;
 pub mod calibrate;
 pub mod calibration_bounds;
 pub mod calibration_file;

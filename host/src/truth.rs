@@ -207,3 +207,64 @@ pub struct TruthPoint {
     /// Index of the lit object in `truth.objects`.
     pub object: usize,
 }
+
+/// Name of the physics a synthetic capture was rendered with (`docs/simulator.md`,
+/// "Physics models"): a label over the photometric parameters of the `[simulation]` table
+/// (reflectance, sheet profile, PSF, speckle, bark texture scale, sensor noise), recorded in
+/// `[truth]` so an evaluation can group its captures by it. The geometry never depends on it.
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Default, Serialize, Deserialize,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum PhysicsModel {
+    /// Lambertian surfaces, Gaussian sheet, Gaussian PSF, fine speckle, the MT9V034's noise.
+    #[default]
+    Reference,
+    /// Rough diffuse bark (Oren–Nayar), coarser or finer bark texture.
+    OrenNayarBark,
+    /// Wet or smooth bark: a Lambertian body plus a specular lobe.
+    SpecularSheen,
+    /// A flat-topped (super-Gaussian) sheet cross profile.
+    FlatTopSheet,
+    /// A defocused lens: a uniform blur disc on top of the Gaussian PSF.
+    Defocus,
+    /// A narrow-linewidth laser through a stopped-down lens: high-contrast, coarse speckle.
+    CoarseSpeckle,
+    /// A noisier sensor: more read noise, pixel response non-uniformity, row noise.
+    NoisySensor,
+    /// Every aspect above drawn independently (reference or alternative).
+    Mixed,
+}
+
+impl PhysicsModel {
+    /// Every model, in table order.
+    pub const ALL: [PhysicsModel; 8] = [
+        PhysicsModel::Reference,
+        PhysicsModel::OrenNayarBark,
+        PhysicsModel::SpecularSheen,
+        PhysicsModel::FlatTopSheet,
+        PhysicsModel::Defocus,
+        PhysicsModel::CoarseSpeckle,
+        PhysicsModel::NoisySensor,
+        PhysicsModel::Mixed,
+    ];
+
+    /// The snake-case name used in `capture.toml` and the tables.
+    pub fn name(self) -> &'static str {
+        match self {
+            PhysicsModel::Reference => "reference",
+            PhysicsModel::OrenNayarBark => "oren_nayar_bark",
+            PhysicsModel::SpecularSheen => "specular_sheen",
+            PhysicsModel::FlatTopSheet => "flat_top_sheet",
+            PhysicsModel::Defocus => "defocus",
+            PhysicsModel::CoarseSpeckle => "coarse_speckle",
+            PhysicsModel::NoisySensor => "noisy_sensor",
+            PhysicsModel::Mixed => "mixed",
+        }
+    }
+
+    /// The model of that name, if any.
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|m| m.name() == name)
+    }
+}

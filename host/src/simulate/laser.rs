@@ -25,6 +25,47 @@ pub struct LaserParams {
     /// Spectral width (metres); with the surface roughness it reduces the speckle contrast
     /// ([`super::sensor::spectral_speckle_contrast`]).
     pub spectral_width_m: f64,
+    /// Shape of the sheet's cross profile (Gaussian unless given).
+    #[serde(default, skip_serializing_if = "SheetProfile::is_gaussian")]
+    pub profile: SheetProfile,
+}
+
+/// Cross profile of the light sheet, at the `1/e²` half-width `w(r)` (`docs/simulator.md`,
+/// "Physics models").
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum SheetProfile {
+    /// `exp(−2 s²/w²)`: a single-transverse-mode beam focused by a cylindrical lens.
+    #[default]
+    Gaussian,
+    /// Super-Gaussian `exp(−2 |s/w|^order)`, `order` > 2: the flat-topped thickness profile
+    /// of a multimode diode's slow axis or of a top-hat line generator.
+    FlatTop {
+        /// Exponent (2 = Gaussian; 4–10 flat-topped).
+        order: f64,
+    },
+}
+
+impl SheetProfile {
+    /// True for the Gaussian profile (the default, not written to `capture.toml`).
+    pub fn is_gaussian(&self) -> bool {
+        *self == SheetProfile::Gaussian
+    }
+
+    /// Line density of the profile at signed distance `s` from the plane for half-width `w`,
+    /// normalised to unit integral over `s`: Gaussian `√(2/π)/w · exp(−2s²/w²)`; super-Gaussian
+    /// `exp(−2|s/w|^p) / (2w·Γ(1 + 1/p)·2^(−1/p))` (the same formula, `p = 2`).
+    pub fn density(&self, s: f64, w: f64) -> f64 {
+        match *self {
+            SheetProfile::Gaussian => {
+                (2.0 / std::f64::consts::PI).sqrt() / w * (-2.0 * s * s / (w * w)).exp()
+            }
+            SheetProfile::FlatTop { order: p } => {
+                let norm = 2.0 * w * libm::tgamma(1.0 + 1.0 / p) * 2f64.powf(-1.0 / p);
+                (-2.0 * (s / w).abs().powf(p)).exp() / norm
+            }
+        }
+    }
 }
 
 impl Default for LaserParams {
@@ -40,6 +81,7 @@ impl Default for LaserParams {
             waist_half_width_m: 0.6e-3,
             divergence_rad: 1e-3,
             spectral_width_m: 1e-9,
+            profile: SheetProfile::Gaussian,
         }
     }
 }
@@ -56,6 +98,8 @@ impl LaserParams {
     /// ```text
     /// E = P/(θ_fan·r) · √(2/π)/w(r) · exp(−2 s²/w(r)²) · cos ι
     /// ```
+    ///
+    /// (Gaussian sheet; [`SheetProfile::density`] replaces the middle factor for others)
     ///
     /// with `r = |p − S|`, `s` the signed distance from the plane, `ι` the incidence angle
     /// (`docs/simulator.md`, "Laser irradiance"). Zero outside the fan, behind the surface,
@@ -79,8 +123,7 @@ impl LaserParams {
             return 0.0;
         }
         let line_density = self.power_w / (self.fan_angle_rad * r);
-        let profile = (2.0 / std::f64::consts::PI).sqrt() / w * (-2.0 * s * s / (w * w)).exp();
-        line_density * profile * cos_inc
+        line_density * self.profile.density(s, w) * cos_inc
     }
 
     /// True when `p` (projected onto the plane) is inside the fan: the angle from the fan's

@@ -11,11 +11,13 @@
 
 pub mod corpus;
 pub mod laser;
+pub mod physics;
+pub mod reflectance;
 pub mod render;
 pub mod scene;
 pub mod sensor;
 
-use rand::SeedableRng;
+use rand::{RngExt, SeedableRng};
 use rand_pcg::Pcg64;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -24,8 +26,9 @@ use tangent_core::calibration::{Calibration, MAX_PLANES};
 use crate::calibration_file::CalibrationToml;
 use crate::capture::{Capture, CaptureMeta, FrameEntry, Mode, Truth, FORMAT_VERSION};
 use crate::pgm::Pgm;
-use crate::truth::Object;
+use crate::truth::{Object, PhysicsModel};
 use laser::LaserParams;
+use reflectance::Reflectance;
 use render::{HandMotion, Lighting, RenderSetup};
 use scene::{splitmix, Scene, SceneError};
 use sensor::{OpticsParams, SensorParams};
@@ -82,6 +85,29 @@ pub struct SimParams {
     pub hand_motion: Option<HandMotion>,
     /// `n` of the `n × n` supersampling of stripe and edge pixels.
     pub supersampling: usize,
+    /// Name of the physics model these parameters were drawn from ([`physics::apply`]);
+    /// also recorded in the capture's `[truth]`.
+    #[serde(default, skip_serializing_if = "is_reference")]
+    pub physics: PhysicsModel,
+    /// BRDF of every surface (the objects' albedos scale it).
+    #[serde(default, skip_serializing_if = "Reflectance::is_lambertian")]
+    pub reflectance: Reflectance,
+    /// Feature size of the procedural textures relative to the nominal one
+    /// ([`scene::Scene::with_texture_scale`]).
+    #[serde(default = "one", skip_serializing_if = "is_one")]
+    pub texture_scale: f64,
+}
+
+fn is_reference(m: &PhysicsModel) -> bool {
+    *m == PhysicsModel::Reference
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+fn is_one(x: &f64) -> bool {
+    *x == 1.0
 }
 
 impl Default for SimParams {
@@ -105,6 +131,9 @@ impl Default for SimParams {
             surface_roughness_m: 1e-3,
             hand_motion: None,
             supersampling: 8,
+            physics: PhysicsModel::Reference,
+            reflectance: Reflectance::Lambertian,
+            texture_scale: 1.0,
         }
     }
 }
@@ -151,6 +180,16 @@ pub struct SimReport {
     /// integration ([`sensor::speckle_cells`]) and spectral decorrelation combined.
     pub speckle_cells: f64,
 }
+
+/// Speckle correlation σ on the sensor (pixels) from which neighbouring pixels' speckle is
+/// rendered correlated ([`sensor::correlated_speckle`]); below it the pixel integrates many
+/// grains and neighbours are nearly independent (the reference f/2.4 lens: 0.15 px).
+pub const CORRELATED_SPECKLE_GRAIN_PX: f64 = 0.25;
+
+/// Random stream of the PRNU pattern.
+const PRNU_STREAM: u64 = 300;
+/// First random stream of the row noise (plus the frame's stream).
+const ROW_NOISE_STREAM: u64 = 400;
 
 fn rng_for(seed: u64, stream: u64, row: u64) -> Pcg64 {
     Pcg64::seed_from_u64(splitmix(
@@ -204,12 +243,13 @@ pub fn simulate(spec: &SimSpec) -> Result<(Capture, SimReport), SimError> {
             "bit_depth 1..=16, gain > 0 and supersampling ≥ 1 required".into(),
         ));
     }
-    let scene = Scene::new(&spec.objects, p.seed)?;
+    let scene = Scene::new(&spec.objects, p.seed)?.with_texture_scale(p.texture_scale);
     let setup = RenderSetup {
         calibration: cal,
         scene: &scene,
         lighting: &p.lighting,
         laser: &p.laser,
+        reflectance: &p.reflectance,
         vignetting: p.optics.vignetting,
         supersampling: p.supersampling,
     };
@@ -223,10 +263,19 @@ pub fn simulate(spec: &SimSpec) -> Result<(Capture, SimReport), SimError> {
         None => on.ambient.clone(),
     };
     let sigma = p.optics.psf_sigma_px;
-    sensor::gaussian_blur(&mut on.ambient, w, h, sigma);
-    sensor::gaussian_blur(&mut off_ambient, w, h, sigma);
-    for &i in &p.lit_planes {
-        sensor::gaussian_blur(&mut on.lasers[i], w, h, sigma);
+    let defocus = p.optics.defocus_radius_px;
+    for layer in std::iter::once(&mut on.ambient)
+        .chain(std::iter::once(&mut off_ambient))
+        .chain(
+            on.lasers
+                .iter_mut()
+                .enumerate()
+                .filter(|(i, _)| lit[*i])
+                .map(|(_, l)| l),
+        )
+    {
+        sensor::gaussian_blur(layer, w, h, sigma);
+        sensor::disc_blur(layer, w, h, defocus);
     }
 
     let k = p.sensor.electrons_per_s(&p.optics, p.laser.wavelength_m);
@@ -267,10 +316,29 @@ pub fn simulate(spec: &SimSpec) -> Result<(Capture, SimReport), SimError> {
         f64::INFINITY
     };
     // Speckle: one factor per pixel and laser (independent lasers, independent patterns).
+    // Grains well below the pixel (the reference lens) are independent from pixel to pixel;
+    // larger ones (a stopped-down lens) are rendered as a correlated field.
+    let grain_px = sensor::speckle_correlation_m(p.laser.wavelength_m, p.optics.f_number)
+        / p.sensor.pixel_pitch_m;
     let speckle: Vec<Vec<f64>> = (0..nplanes)
         .map(|i| {
             if !(p.speckle && lit[i]) {
                 return Vec::new();
+            }
+            if grain_px >= CORRELATED_SPECKLE_GRAIN_PX {
+                let white: Vec<f64> = (0..h)
+                    .into_par_iter()
+                    .flat_map_iter(|row| {
+                        let mut rng = rng_for(p.seed, 100 + i as u64, row as u64);
+                        (0..w)
+                            .map(move |_| rng.sample::<f64, _>(rand_distr::StandardNormal))
+                            .collect::<Vec<_>>()
+                    })
+                    .collect();
+                // Pixel-integrated grains: the intensity correlation widened by the pixel's
+                // box (variance 1/12 px²).
+                let width = (grain_px * grain_px + 1.0 / 12.0).sqrt();
+                return sensor::correlated_speckle(&white, w, h, width, cells);
             }
             (0..h)
                 .into_par_iter()
@@ -289,11 +357,36 @@ pub fn simulate(spec: &SimSpec) -> Result<(Capture, SimReport), SimError> {
     } else {
         vec![p.lit_planes.clone()]
     };
+    // Photo-response non-uniformity: one fixed gain per pixel, the same in every frame.
+    let prnu: Vec<f64> = if p.sensor.prnu > 0.0 {
+        (0..h)
+            .into_par_iter()
+            .flat_map_iter(|row| {
+                let mut rng = rng_for(p.seed, PRNU_STREAM, row as u64);
+                (0..w)
+                    .map(move |_| {
+                        (1.0 + p.sensor.prnu * rng.sample::<f64, _>(rand_distr::StandardNormal))
+                            .max(0.0)
+                    })
+                    .collect::<Vec<_>>()
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
     let expose = |stream: u64, planes: &[usize], ambient: &[f64]| -> Vec<u16> {
         (0..h)
             .into_par_iter()
             .flat_map_iter(|row| {
                 let mut rng = rng_for(p.seed, stream, row as u64);
+                // The row's temporal offset comes from its own stream, so the pixels' draws
+                // are those of a sensor without row noise.
+                let row_offset_e = if p.sensor.row_noise_e > 0.0 {
+                    let mut row_rng = rng_for(p.seed, ROW_NOISE_STREAM + stream, row as u64);
+                    p.sensor.row_noise_e * row_rng.sample::<f64, _>(rand_distr::StandardNormal)
+                } else {
+                    0.0
+                };
                 let mut out = Vec::with_capacity(w);
                 for col in 0..w {
                     let j = row * w + col;
@@ -306,10 +399,15 @@ pub fn simulate(spec: &SimSpec) -> Result<(Capture, SimReport), SimError> {
                             .unwrap_or(1.0);
                         rate += on.lasers[i][j] * s;
                     }
-                    out.push(
-                        p.sensor
-                            .expose_pixel(rate * k * exposure_s, p.gain, &mut rng),
-                    );
+                    if let Some(g) = prnu.get(j) {
+                        rate *= g;
+                    }
+                    out.push(p.sensor.expose_pixel_with_offset(
+                        rate * k * exposure_s,
+                        row_offset_e,
+                        p.gain,
+                        &mut rng,
+                    ));
                 }
                 out
             })
@@ -378,6 +476,9 @@ pub fn simulate(spec: &SimSpec) -> Result<(Capture, SimReport), SimError> {
         truth: Some(Truth {
             truth_curve: Some("truth-curve.csv".into()),
             objects: spec.objects.clone(),
+            // The reference model is left implicit (as in `[simulation]`), so the reference
+            // captures' `capture.toml` is what it was before the models existed.
+            physics_model: (p.physics != PhysicsModel::Reference).then_some(p.physics),
         }),
         simulation: Some(simulation),
     };

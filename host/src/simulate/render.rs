@@ -14,6 +14,7 @@ use tangent_core::camera::Camera;
 use tangent_core::real::{Vec2, Vec3};
 
 use super::laser::LaserParams;
+use super::reflectance::Reflectance;
 use super::scene::{fbm, Scene};
 use crate::truth::TruthPoint;
 
@@ -96,6 +97,8 @@ pub struct RenderSetup<'a> {
     pub lighting: &'a Lighting,
     /// The lasers.
     pub laser: &'a LaserParams,
+    /// The surfaces' BRDF.
+    pub reflectance: &'a Reflectance,
     /// Apply `cos⁴θ` vignetting.
     pub vignetting: bool,
     /// `n` of the `n × n` supersampling of edge and stripe pixels.
@@ -196,7 +199,14 @@ impl RenderSetup<'_> {
         let rho = self.scene.albedo(h.object, h.point);
         let n = h.normal;
         let up = Vec3::new(0.0, -1.0, 0.0);
-        let mut e = l.diffuse_w_m2 * 0.5 * (1.0 + n.dot(&up));
+        let lambertian = self.reflectance.is_lambertian();
+        // Towards the viewer (the camera of this frame).
+        let v = -dir.normalize();
+        let e_sky = l.diffuse_w_m2 * 0.5 * (1.0 + n.dot(&up));
+        // Lambertian: ρ·(E_sky + E_sun) as one product (the reference rendering, bit for bit);
+        // other BRDFs weigh the sky and the sun separately.
+        let mut e = e_sky;
+        let mut ambient = self.reflectance.diffuse_factor(rho) * e_sky;
         if l.sun_w_m2 > 0.0 {
             let sun = Vec3::new(l.sun_direction[0], l.sun_direction[1], l.sun_direction[2]);
             let sn = sun.norm();
@@ -205,17 +215,28 @@ impl RenderSetup<'_> {
                 let cos_sun = n.dot(&sun);
                 if cos_sun > 0.0 && !self.scene.occluded(h.point, h.point + sun * 1e3) {
                     e += l.sun_w_m2 * cos_sun;
+                    ambient += self.reflectance.pi_brdf(rho, n, sun, v) * l.sun_w_m2 * cos_sun;
                 }
             }
         }
-        out.ambient = rho * e * vig;
+        out.ambient = if lambertian {
+            rho * e * vig
+        } else {
+            ambient * vig
+        };
         for (i, plane) in self.calibration.planes.iter().enumerate() {
             if !lit[i] {
                 continue;
             }
             let irr = self.laser.irradiance(plane, h.point, n);
             if irr > 0.0 && !self.scene.occluded(h.point, plane.source) {
-                out.laser[i] = rho * irr * vig;
+                let brdf = if lambertian {
+                    rho
+                } else {
+                    let to_source = (plane.source - h.point).normalize();
+                    self.reflectance.pi_brdf(rho, n, to_source, v)
+                };
+                out.laser[i] = brdf * irr * vig;
             }
         }
         out

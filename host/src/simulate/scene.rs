@@ -100,6 +100,8 @@ struct Prepared {
 #[derive(Debug, Clone)]
 pub struct Scene {
     objects: Vec<Prepared>,
+    /// Feature size of every texture relative to its nominal one (1 = as documented).
+    texture_scale: f64,
 }
 
 /// Smallest ray parameter accepted as a hit (metres for unit directions): avoids a shadow
@@ -263,7 +265,10 @@ impl Scene {
                 seed: splitmix(seed ^ (index as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)),
             });
         }
-        Ok(Scene { objects: out })
+        Ok(Scene {
+            objects: out,
+            texture_scale: 1.0,
+        })
     }
 
     /// Nearest hit of the ray `origin + t·dir` with `t ∈ (T_MIN, t_max)`.
@@ -315,6 +320,7 @@ impl Scene {
             return o.albedo;
         }
         let (s1, s2) = o.shape.surface_coords(point);
+        let (s1, s2) = (s1 / self.texture_scale, s2 / self.texture_scale);
         let pattern = match o.texture {
             Texture::None => 0.0,
             // Furrows: features 8 cm long along the axis, 1.5 cm across, plus fine detail.
@@ -331,6 +337,16 @@ impl Scene {
 }
 
 impl Scene {
+    /// The same scene with every texture's features `scale` times larger (bark furrows,
+    /// stone grains; a physics-model parameter, `docs/simulator.md`, "Physics models").
+    /// Non-positive or non-finite scales leave the textures as they are.
+    pub fn with_texture_scale(mut self, scale: f64) -> Self {
+        if scale.is_finite() && scale > 0.0 {
+            self.texture_scale = scale;
+        }
+        self
+    }
+
     /// Reflectance region of `point` on object `object`: the square index of a board (a
     /// different value for every square, 0 on its border), 0 on every other object. The
     /// renderer supersamples pixels whose corners see different regions, so the squares'

@@ -24,6 +24,15 @@ pub struct OpticsParams {
     pub psf_sigma_px: f64,
     /// Natural `cos⁴θ` vignetting on or off.
     pub vignetting: bool,
+    /// Radius (pixels) of the geometric blur disc of a defocused lens, applied on top of the
+    /// Gaussian PSF: `c = f²·|s − s_f| / (N·s·(s_f − f))` for an object at `s` and focus at
+    /// `s_f` (`docs/simulator.md`, "Physics models"). 0 = in focus.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub defocus_radius_px: f64,
+}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }
 
 impl Default for OpticsParams {
@@ -34,6 +43,7 @@ impl Default for OpticsParams {
             filter_transmission: 0.9,
             psf_sigma_px: 0.5,
             vignetting: true,
+            defocus_radius_px: 0.0,
         }
     }
 }
@@ -56,6 +66,14 @@ pub struct SensorParams {
     pub bit_depth: u8,
     /// Black level (digital numbers at unity gain, added before quantisation).
     pub black_level_dn: f64,
+    /// Photo-response non-uniformity: RMS of the fixed per-pixel gain deviation (EMVA 1288
+    /// `PRNU`, fraction; 0.01 = 1 %). The same in every frame of a capture.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub prnu: f64,
+    /// Temporal row noise (electrons RMS): one offset per row and frame, from the row's
+    /// shared readout chain. Unlike the fixed pattern it does not cancel in the subtraction.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub row_noise_e: f64,
 }
 
 impl Default for SensorParams {
@@ -71,6 +89,8 @@ impl Default for SensorParams {
             read_noise_e: 28.0,
             bit_depth: 8,
             black_level_dn: 2.0,
+            prnu: 0.0,
+            row_noise_e: 0.0,
         }
     }
 }
@@ -100,6 +120,18 @@ impl SensorParams {
     /// the full well, Gaussian read noise, gain, black level, rounding and clipping to
     /// `[0, max_dn]`.
     pub fn expose_pixel<R: Rng + ?Sized>(&self, mean_e: f64, gain: f64, rng: &mut R) -> u16 {
+        self.expose_pixel_with_offset(mean_e, 0.0, gain, rng)
+    }
+
+    /// [`SensorParams::expose_pixel`] with `offset_e` electrons added to the read noise (a
+    /// row's temporal offset, [`SensorParams::row_noise_e`]).
+    pub fn expose_pixel_with_offset<R: Rng + ?Sized>(
+        &self,
+        mean_e: f64,
+        offset_e: f64,
+        gain: f64,
+        rng: &mut R,
+    ) -> u16 {
         let electrons = if mean_e > 0.0 {
             Poisson::new(mean_e).map(|p| p.sample(rng)).unwrap_or(0.0)
         } else {
@@ -108,7 +140,7 @@ impl SensorParams {
         let electrons = electrons.min(self.full_well_e);
         let read: f64 = rng.sample(StandardNormal);
         let dn_per_e = gain * self.max_dn() as f64 / self.full_well_e;
-        let dn = self.black_level_dn + dn_per_e * (electrons + self.read_noise_e * read);
+        let dn = self.black_level_dn + dn_per_e * (electrons + self.read_noise_e * read + offset_e);
         dn.round().clamp(0.0, self.max_dn() as f64) as u16
     }
 
@@ -179,6 +211,79 @@ pub fn speckle_factor<R: Rng + ?Sized>(cells: f64, rng: &mut R) -> f64 {
     Gamma::new(cells, 1.0 / cells)
         .map(|g| g.sample(rng))
         .unwrap_or(1.0)
+}
+
+/// One speckle factor per pixel of a `w × h` image whose speckle grains are comparable to
+/// the pixel: a unit Gaussian field correlated by a Gaussian kernel of σ = `grain_px`
+/// (taps normalised so the field keeps unit variance), mapped to the Gamma(`M`, 1/`M`)
+/// marginal of [`speckle_factor`] by the Wilson–Hilferty transform
+/// `m = max(0, 1 − 1/(9M) + g/(3√M))³` (`docs/simulator.md`, "Speckle"). `white` holds
+/// `w × h` independent unit normals.
+pub fn correlated_speckle(
+    white: &[f64],
+    w: usize,
+    h: usize,
+    grain_px: f64,
+    cells: f64,
+) -> Vec<f64> {
+    let mut g = white.to_vec();
+    gaussian_blur(&mut g, w, h, grain_px);
+    // Σh² of the separable kernel (per axis, the same as in `gaussian_blur`), to restore unit
+    // variance after the filter.
+    let r = (3.0 * grain_px).ceil() as isize;
+    let taps: Vec<f64> = (-r..=r)
+        .map(|i| (-(i * i) as f64 / (2.0 * grain_px * grain_px)).exp())
+        .collect();
+    let sum: f64 = taps.iter().sum();
+    let sum_sq: f64 = taps.iter().map(|t| (t / sum) * (t / sum)).sum();
+    let scale = 1.0 / sum_sq; // 2-D: (Σh²)² in variance, so 1/Σh² in amplitude
+    if !cells.is_finite() {
+        return vec![1.0; g.len()];
+    }
+    let a = 1.0 - 1.0 / (9.0 * cells);
+    let b = 1.0 / (3.0 * cells.sqrt());
+    g.iter()
+        .map(|x| (a + b * x * scale).max(0.0).powi(3))
+        .collect()
+}
+
+/// Blur by a uniform disc of radius `radius` pixels (geometric defocus), each pixel's weight
+/// the exact-enough area of the disc over it (16 × 16 sub-samples), edges clamped.
+pub fn disc_blur(img: &mut [f64], w: usize, h: usize, radius: f64) {
+    if !(radius > 0.0) || w == 0 || h == 0 {
+        return;
+    }
+    let r = radius.ceil() as isize;
+    let n = 16;
+    let mut kernel = Vec::new();
+    for dy in -r..=r {
+        for dx in -r..=r {
+            let mut inside = 0usize;
+            for b in 0..n {
+                for a in 0..n {
+                    let x = dx as f64 + (a as f64 + 0.5) / n as f64 - 0.5;
+                    let y = dy as f64 + (b as f64 + 0.5) / n as f64 - 0.5;
+                    inside += (x * x + y * y <= radius * radius) as usize;
+                }
+            }
+            if inside > 0 {
+                kernel.push((dx, dy, inside as f64));
+            }
+        }
+    }
+    let total: f64 = kernel.iter().map(|k| k.2).sum();
+    let src = img.to_vec();
+    for y in 0..h {
+        for x in 0..w {
+            let mut acc = 0.0;
+            for &(dx, dy, k) in &kernel {
+                let xx = (x as isize + dx).clamp(0, w as isize - 1) as usize;
+                let yy = (y as isize + dy).clamp(0, h as isize - 1) as usize;
+                acc += k * src[yy * w + xx];
+            }
+            img[y * w + x] = acc / total;
+        }
+    }
 }
 
 /// Separable Gaussian blur (σ in pixels, kernel ±⌈3σ⌉, edges clamped) of a `w × h` image.
