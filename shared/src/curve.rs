@@ -39,6 +39,10 @@ pub struct CurvePoint {
     pub curve: u8,
     /// A sample the estimator read was at or above the saturation level.
     pub saturated: bool,
+    /// Gaussian σ of the stripe's cross profile (pixels, [`peaks::Peak::sigma`]); 0 when the
+    /// estimator does not model it. With `amplitude` and the image noise it gives the point's
+    /// own σ ([`crate::noise::NoiseModel::stripe_centre_px`]).
+    pub width: Real,
 }
 
 impl CurvePoint {
@@ -49,6 +53,7 @@ impl CurvePoint {
         amplitude: 0.0,
         curve: 0,
         saturated: false,
+        width: 0.0,
     };
 }
 
@@ -359,6 +364,7 @@ fn locate<P: Pixel>(
         amplitude: p.amplitude,
         curve: k as u8,
         saturated: p.saturated,
+        width: p.sigma.unwrap_or(0.0),
     })
 }
 
@@ -693,6 +699,7 @@ mod tests {
             amplitude: 1.0,
             curve,
             saturated: false,
+            width: 1.0,
         }
     }
 

@@ -13,6 +13,7 @@
 //! * [`road`]: [`Mode::Road`], a road profile's mean profile depth and microtexture.
 
 use crate::calibration::{Calibration, MAX_PLANES};
+use crate::curve::CurvePoint;
 use crate::image::{Frame, Pixel};
 use crate::laser_plane::LaserPlane;
 use crate::measurement::{Measurement, Mode};
@@ -37,6 +38,9 @@ pub use stem::Stem;
 #[derive(Debug, Clone, Copy)]
 pub struct PlanePoints<'a> {
     all: &'a [Vec3],
+    /// The curve points beside `all` (amplitude and width give each point's own σ); empty
+    /// when unknown (the model's σ then stands).
+    curve: &'a [CurvePoint],
     curves: [&'a [Vec3]; MAX_PLANES],
     planes: &'a [LaserPlane],
     /// The image part of the chain (flags, saturation, frame-edge contact).
@@ -60,11 +64,19 @@ impl<'a> PlanePoints<'a> {
         }
         PlanePoints {
             all: points,
+            curve: &[],
             curves,
             planes: &calibration.planes[..n],
             profile,
             full_scale,
         }
+    }
+
+    /// The same points with their curve points (`Workspace::curve`, same indices as
+    /// `points`): each point's σ then comes from its own stripe ([`point_sigmas`]).
+    pub fn with_curve(mut self, curve: &'a [CurvePoint]) -> Self {
+        self.curve = curve;
+        self
     }
 
     /// Each plane's points, in plane order.
@@ -78,7 +90,7 @@ impl<'a> PlanePoints<'a> {
     }
 
     /// Writes each point's 1σ into `sigmas` (the workspace's, lent in [`Scratch::sigmas`])
-    /// from the noise model ([`point_sigmas`]) and returns them per plane, in the order of
+    /// from each point's stripe or the noise model ([`point_sigmas`]) and returns them per plane, in the order of
     /// [`PlanePoints::curves`].
     pub fn sigmas<'s>(
         &self,
@@ -86,7 +98,15 @@ impl<'a> PlanePoints<'a> {
         focal_px: Real,
         sigmas: &'s mut [Real],
     ) -> Result<[&'s [Real]; MAX_PLANES], PipelineError> {
-        point_sigmas(self.profile, self.planes, noise, focal_px, self.all, sigmas)?;
+        point_sigmas(
+            self.profile,
+            self.planes,
+            noise,
+            focal_px,
+            self.all,
+            self.curve,
+            sigmas,
+        )?;
         let sigmas: &'s [Real] = sigmas;
         let mut per_plane: [&[Real]; MAX_PLANES] = [&[]; MAX_PLANES];
         for (k, s) in per_plane.iter_mut().enumerate().take(self.planes.len()) {
@@ -243,7 +263,7 @@ pub fn solve_with<I: Instrument, P: Pixel>(
     params: &I::Params,
     ws: &mut Workspace<'_, P>,
 ) -> Result<I::Solution, PipelineError> {
-    let points = PlanePoints::new(profile, full_scale, calibration, ws.points);
+    let points = PlanePoints::new(profile, full_scale, calibration, ws.points).with_curve(ws.curve);
     let scratch = Scratch {
         sigmas: ws.sigmas,
         points: ws.scratch_points,

@@ -107,6 +107,25 @@ impl NoiseModel {
         sqrt(self.subpixel_px * self.subpixel_px + s * s)
     }
 
+    /// σ of one stripe centre (pixels along `v`) from what the image says of it
+    /// (`docs/error-model.md`, "A point's own σ"): the Cramér–Rao bound of a Gaussian cross
+    /// profile of peak `amplitude` and σ `width_px` (pixels, [`crate::peaks::Peak::sigma`])
+    /// under white noise `noise_dn` per sample (the difference image's, same units as
+    /// `amplitude`; 1/12 of quantisation added),
+    /// `σ_est = (σ_n/A)·√(2s/√π)`, in quadrature with speckle ([`NoiseModel::speckle_px`]).
+    /// The weighted Gaussian log-fit reaches the bound (`docs/subpixel.md` §6). Where the
+    /// amplitude is unknown or not positive, or `width_px` is not positive, the model's
+    /// [`NoiseModel::image_px`] stands.
+    pub fn stripe_centre_px(&self, amplitude: Real, width_px: Real, noise_dn: Real) -> Real {
+        if !(amplitude > 0.0 && width_px > 0.0 && noise_dn >= 0.0 && amplitude.is_finite()) {
+            return self.image_px();
+        }
+        let noise = sqrt(noise_dn * noise_dn + 1.0 / 12.0);
+        let estimator = noise / amplitude * sqrt(2.0 * width_px / sqrt(PI));
+        let speckle = self.speckle_px();
+        sqrt(estimator * estimator + speckle * speckle)
+    }
+
     /// σ of one grazing-ray angle (radians): `edge_px / f` (a column is `1/f` rad near the
     /// optical axis).
     pub fn edge_angle_sigma(&self, focal_px: Real) -> Real {

@@ -23,6 +23,9 @@ pub struct Profile {
     pub subtract: SubtractStats,
     /// Threshold applied to the difference image.
     pub threshold: u32,
+    /// Noise σ of the difference image (grey levels, `threshold::difference_noise`): with a
+    /// point's amplitude and width it gives the point's own σ ([`point_sigmas`]).
+    pub noise: Real,
     /// Objects found by the segmentation.
     pub objects: usize,
     /// Objects that passed the selection criteria.
@@ -80,26 +83,33 @@ impl Profile {
 }
 
 /// Writes each triangulated point's 1σ (metres) into `sigmas`, beside `points` (the
-/// workspace's, same indices): the stripe-centre noise `noise.image_px()` mapped through
-/// `∂X/∂v` of its plane ([`noise::displacement_sigma`], `docs/error-model.md`, "One point"); 0
-/// where the geometry gives none. `focal_px` is the focal length of the noise model.
+/// workspace's, same indices): the point's own stripe-centre σ from its amplitude and width
+/// against the difference image's noise ([`NoiseModel::stripe_centre_px`], `curve` the
+/// workspace's curve points, same indices), or the model's `noise.image_px()` where `curve`
+/// does not cover the point, mapped through `∂X/∂v` of its plane
+/// ([`noise::displacement_sigma`], `docs/error-model.md`, "One point" and "A point's own σ");
+/// 0 where the geometry gives none. `focal_px` is the focal length of the noise model.
 pub fn point_sigmas(
     profile: &Profile,
     planes: &[LaserPlane],
     noise: &NoiseModel,
     focal_px: Real,
     points: &[Vec3],
+    curve: &[CurvePoint],
     sigmas: &mut [Real],
 ) -> Result<(), PipelineError> {
-    let sigma_px = noise.image_px();
     for (plane, &(s, e)) in profile.plane_points.iter().enumerate().take(profile.planes) {
         need("sigmas", e, sigmas.len())?;
         let model = planes.get(plane).ok_or(PipelineError::Calibration)?;
         let points = profile.points(points, plane);
+        let curve = curve.get(s..e).unwrap_or(&[]);
         let Some(sigmas) = sigmas.get_mut(s..e) else {
             continue;
         };
-        for (sigma, x) in sigmas.iter_mut().zip(points) {
+        for (i, (sigma, x)) in sigmas.iter_mut().zip(points).enumerate() {
+            let sigma_px = curve.get(i).map_or(noise.image_px(), |c| {
+                noise.stripe_centre_px(c.amplitude, c.width, profile.noise)
+            });
             *sigma = noise::displacement_sigma(model, focal_px, *x, sigma_px).unwrap_or(0.0);
         }
     }
@@ -212,6 +222,8 @@ pub(super) struct Segmented {
     pub(super) bit_depth: u8,
     pub(super) stats: SubtractStats,
     pub(super) threshold: u32,
+    /// Noise σ of the difference image (grey levels).
+    pub(super) noise: Real,
     pub(super) objects: usize,
     pub(super) runs: usize,
 }
@@ -264,6 +276,7 @@ pub(super) fn after_segmentation<P: Pixel>(
     Ok(Profile {
         subtract: seg.stats,
         threshold: seg.threshold,
+        noise: seg.noise,
         objects: seg.objects,
         candidates: report.candidates,
         unused_candidates: usage.unused + report.candidates.saturating_sub(report.selected),

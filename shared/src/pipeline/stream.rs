@@ -260,6 +260,7 @@ impl ProfileStream {
                 bit_depth,
                 stats,
                 threshold: t,
+                noise,
                 objects: segmentation.objects,
                 runs: n,
             },

@@ -9,6 +9,9 @@
 //!   `|p − c| − r`, with the parameter covariance.
 //! * [`fit_robust`]: the same, iteratively reweighted with Tukey's biweight and a MAD scale,
 //!   for stripes with bark, branches or a second object.
+//! * [`fit_weighted`] ([`weighted`]): the whole-arc fit the stem solver uses — each point
+//!   weighted by its own σ, robust on the normalised residuals, with the radius σ from the
+//!   points' σ, the χ² and the residuals' correlation along the stripe.
 //! * The radius σ of a geometric fit beyond its equal-noise covariance: from each point's
 //!   noise vector ([`circle_radius_sigma`]) or from the residuals themselves
 //!   ([`circle_radius_sigma_residuals`]) (`docs/error-model.md`).
@@ -33,6 +36,9 @@ use crate::real::{self, sqrt, Mat3, Real, Vec2, Vec3};
 
 use super::lm::{self, Evaluated, LeastSquares, LmParams, NormalEquations};
 use super::SolveError;
+
+pub mod weighted;
+pub use weighted::{fit_weighted, weighted_radius_sigma, WeightedFit};
 
 /// A circle: centre and radius (same units as the points).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -264,7 +270,7 @@ fn smallest_root<F: Fn(Real) -> (Real, Real)>(f: F) -> Result<Real, SolveError> 
 
 /// Normal equations of the (weighted) orthogonal-distance problem at `(a, b, r)`
 /// (normalised coordinates): `JᵀWJ`, `JᵀWd`, `Σw·d²`, `Σw`, points with `w > 0`.
-fn accumulate<W: Fn(Vec2) -> Real>(
+fn accumulate<W: Fn(usize, Vec2) -> Real>(
     points: &[Vec2],
     norm: &Normalisation,
     theta: Vec3,
@@ -275,9 +281,9 @@ fn accumulate<W: Fn(Vec2) -> Real>(
     let mut cost = 0.0;
     let mut wsum = 0.0;
     let mut used = 0;
-    for p in points {
+    for (i, p) in points.iter().enumerate() {
         let q = norm.apply(*p);
-        let w = weight(q);
+        let w = weight(i, q);
         if !(w > 0.0) {
             continue;
         }
@@ -309,7 +315,7 @@ struct CircleProblem<'a, W> {
     weight: &'a W,
 }
 
-impl<W: Fn(Vec2) -> Real> LeastSquares<3> for CircleProblem<'_, W> {
+impl<W: Fn(usize, Vec2) -> Real> LeastSquares<3> for CircleProblem<'_, W> {
     type Params = Vec3;
     type Extra = ();
 
@@ -332,7 +338,7 @@ impl<W: Fn(Vec2) -> Real> LeastSquares<3> for CircleProblem<'_, W> {
 
 /// Levenberg–Marquardt ([`lm::minimise`]) on normalised coordinates; returns
 /// `(θ, iterations)`.
-fn lm<W: Fn(Vec2) -> Real>(
+fn lm<W: Fn(usize, Vec2) -> Real>(
     points: &[Vec2],
     norm: &Normalisation,
     start: Vec3,
@@ -352,7 +358,7 @@ fn lm<W: Fn(Vec2) -> Real>(
     Ok((min.params, iterations))
 }
 
-fn finish<W: Fn(Vec2) -> Real>(
+fn finish<W: Fn(usize, Vec2) -> Real>(
     points: &[Vec2],
     norm: &Normalisation,
     theta: Vec3,
@@ -419,7 +425,7 @@ pub fn fit_geometric(
     params.validate()?;
     let norm = Normalisation::of(points, 3)?;
     let start = normalised_start(&initial, &norm)?;
-    let unit = |_: Vec2| 1.0;
+    let unit = |_: usize, _: Vec2| 1.0;
     let (theta, it) = lm(points, &norm, start, params, &unit)?;
     finish(points, &norm, theta, it, &unit)
 }
@@ -502,13 +508,13 @@ pub fn fit_robust(
             return Err(SolveError::Degenerate);
         }
         let cs = params.tuning * scale;
-        let weight = move |q: Vec2| tukey((real::norm(&(q - centre)) - r) / cs);
+        let weight = move |_: usize, q: Vec2| tukey((real::norm(&(q - centre)) - r) / cs);
         let (next, it) = lm(points, &norm, theta, &params.lm, &weight)?;
         last_it = it;
         let change = real::norm(&(next - theta));
         theta = next;
         if change <= params.lm.tolerance * (1.0 + real::norm(&theta)) {
-            let weight = move |q: Vec2| tukey((real::norm(&(q - centre)) - r) / cs);
+            let weight = move |_: usize, q: Vec2| tukey((real::norm(&(q - centre)) - r) / cs);
             return finish(points, &norm, theta, last_it, &weight);
         }
     }
@@ -523,7 +529,7 @@ pub fn fit_robust(
     let (_, median, _) = buf.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
     let scale = (1.4826 * *median).max(min_scale);
     let cs = params.tuning * scale;
-    let weight = move |q: Vec2| tukey((real::norm(&(q - centre)) - r) / cs);
+    let weight = move |_: usize, q: Vec2| tukey((real::norm(&(q - centre)) - r) / cs);
     let (next, it) = lm(points, &norm, theta, &params.lm, &weight)?;
     if real::norm(&(next - theta)) > scale {
         return Err(SolveError::NotConverged);

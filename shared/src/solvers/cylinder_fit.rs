@@ -58,6 +58,9 @@ pub struct CylinderFit {
 type M5 = SMatrix<Real, 5, 5>;
 type V5 = SVector<Real, 5>;
 
+mod weighted;
+pub use weighted::{fit_cylinder_weighted, WeightedCylinderFit};
+
 /// Two unit vectors completing `u` to an orthonormal basis.
 fn basis(u: Vec3) -> (Vec3, Vec3) {
     let helper = if u.x.abs() < 0.6 {
@@ -77,20 +80,25 @@ struct CylState {
     r: Real,
 }
 
-fn cyl_accumulate(
+fn cyl_accumulate<W: Fn(usize, usize, Vec3) -> Real>(
     curves: &[&[Vec3]],
     mean: Vec3,
     scale: Real,
     st: &CylState,
+    weight: &W,
 ) -> (M5, V5, Real, usize) {
     let (e1, e2) = basis(st.u);
     let mut jtj = M5::zeros();
     let mut jtd = V5::zeros();
     let mut cost = 0.0;
     let mut n = 0;
-    for curve in curves {
-        for x in curve.iter() {
+    for (k, curve) in curves.iter().enumerate() {
+        for (i, x) in curve.iter().enumerate() {
             let y = (x - mean) / scale;
+            let weight = weight(k, i, y);
+            if !(weight > 0.0) {
+                continue;
+            }
             let w = y - st.p;
             let wu = w.dot(&st.u);
             let q = w - st.u * wu;
@@ -99,9 +107,9 @@ fn cyl_accumulate(
             let (g1, g2) = (g.dot(&e1), g.dot(&e2));
             let j = V5::new(-g1, -g2, -wu * g1, -wu * g2, -1.0);
             let d = rho - st.r;
-            jtj += j * j.transpose();
-            jtd += j * d;
-            cost += d * d;
+            jtj += j * j.transpose() * weight;
+            jtd += j * (weight * d);
+            cost += weight * d * d;
             n += 1;
         }
     }
@@ -123,18 +131,23 @@ fn cyl_step(st: &CylState, step: &V5) -> CylState {
 }
 
 /// The cylinder fit as a [`LeastSquares`] problem on the centred, scaled points.
-struct CylinderProblem<'a> {
+struct CylinderProblem<'a, W> {
     curves: &'a [&'a [Vec3]],
     mean: Vec3,
     scale: Real,
+    weight: &'a W,
 }
 
-impl LeastSquares<5> for CylinderProblem<'_> {
+impl<W: Fn(usize, usize, Vec3) -> Real> LeastSquares<5> for CylinderProblem<'_, W> {
     type Params = CylState;
     type Extra = ();
 
     fn evaluate(&self, st: &CylState) -> Result<(NormalEquations<5>, ()), SolveError> {
-        let (jtj, jtr, cost, _) = cyl_accumulate(self.curves, self.mean, self.scale, st);
+        let (jtj, jtr, cost, n) =
+            cyl_accumulate(self.curves, self.mean, self.scale, st, self.weight);
+        if n < 6 {
+            return Err(SolveError::TooFewPoints);
+        }
         Ok((NormalEquations { jtj, jtr, cost }, ()))
     }
 
@@ -148,20 +161,16 @@ impl LeastSquares<5> for CylinderProblem<'_> {
     }
 }
 
-/// Geometric cylinder fit: minimises `Σ (dist(xᵢ, axis) − r)²` over all points of all
-/// curves by Levenberg–Marquardt, parametrised by 2 axis angles, 2 axis-point offsets
-/// (perpendicular to the axis) and `r` (`docs/cylinder.md`, "Cylinder fit").
-///
-/// Points are centred and scaled first (f32). Start from [`initial_cylinder`]. Needs at
-/// least 6 points, over at least two curves in different planes for a well-posed axis.
-pub fn fit_cylinder(
-    curves: &[&[Vec3]],
-    initial: Cylinder,
-    params: &LmParams,
-) -> Result<CylinderFit, SolveError> {
-    if params.max_iterations == 0 || !(params.tolerance >= 0.0) {
-        return Err(SolveError::InvalidParameter);
-    }
+/// The points centred on their centroid and scaled to unit RMS distance, and the initial
+/// cylinder in those units.
+struct Normalised {
+    mean: Vec3,
+    scale: Real,
+    start: CylState,
+    n: usize,
+}
+
+fn normalise(curves: &[&[Vec3]], initial: Cylinder) -> Result<Normalised, SolveError> {
     let mut sum = Vec3::zeros();
     let mut n = 0usize;
     for c in curves {
@@ -198,10 +207,40 @@ pub fn fit_cylinder(
         u,
         r: initial.radius / scale,
     };
+    Ok(Normalised {
+        mean,
+        scale,
+        start: st,
+        n,
+    })
+}
+
+/// Geometric cylinder fit: minimises `Σ (dist(xᵢ, axis) − r)²` over all points of all
+/// curves by Levenberg–Marquardt, parametrised by 2 axis angles, 2 axis-point offsets
+/// (perpendicular to the axis) and `r` (`docs/cylinder.md`, "Cylinder fit").
+///
+/// Points are centred and scaled first (f32). Start from [`initial_cylinder`]. Needs at
+/// least 6 points, over at least two curves in different planes for a well-posed axis.
+pub fn fit_cylinder(
+    curves: &[&[Vec3]],
+    initial: Cylinder,
+    params: &LmParams,
+) -> Result<CylinderFit, SolveError> {
+    if params.max_iterations == 0 || !(params.tolerance >= 0.0) {
+        return Err(SolveError::InvalidParameter);
+    }
+    let Normalised {
+        mean,
+        scale,
+        start: st,
+        n,
+    } = normalise(curves, initial)?;
+    let unit = |_: usize, _: usize, _: Vec3| 1.0;
     let problem = CylinderProblem {
         curves,
         mean,
         scale,
+        weight: &unit,
     };
     let start = Evaluated::at(&problem, st)?;
     let (min, iterations) = lm::minimise(&problem, start, params)?;

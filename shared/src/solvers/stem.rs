@@ -13,7 +13,7 @@ use crate::real::Float;
 use crate::real::{norm, sqrt, Real, Vec2, Vec3, PI};
 
 use super::circle::{self, RobustParams};
-use super::cylinder_fit::{fit_cylinder, initial_cylinder, project_along_axis, to_plane};
+use super::cylinder_fit::{fit_cylinder_weighted, initial_cylinder, project_along_axis, to_plane};
 use super::ellipse::{self, EllipseFit};
 use super::lm::LmParams;
 use super::result::{Flags, Method, Tilt};
@@ -21,10 +21,16 @@ use super::three_tangent::{
     generalised_three_tangent, three_tangent, ThreeTangent, ThreeTangentParams,
 };
 use super::SolveError;
+use crate::calibration::MAX_PLANES;
 use crate::laser_plane::LaserPlane;
 use crate::noise::{self, NoiseModel};
 
+mod budget;
+mod level;
 mod sigma;
+use budget::decimate;
+pub use budget::POINT_BUDGET;
+use level::LevelMap;
 use sigma::{
     arc_angle, elliptic_diameter, noise_vector, one_point_sigma, projected_data_sigma,
     robust_circle, three_tangent_variance,
@@ -77,6 +83,10 @@ pub struct CylinderParams {
     /// [`Flags::ELLIPTIC`] (smaller ones are within what a round stem's bark and the stripe
     /// extraction's coherent bending produce; `docs/cylinder.md`, "Elliptic stems").
     pub elliptic_min_eccentricity: Real,
+    /// Most points of one curve the one-plane whole-arc fit uses; longer curves are binned
+    /// (`docs/error-model.md`, "Point budget"; default [`POINT_BUDGET`]). `usize::MAX` fits
+    /// every point.
+    pub point_budget: usize,
 }
 
 /// Default [`CylinderParams::elliptic_min_f`]: far above the 1e-6 tail of `F(2, n − 5)`
@@ -112,6 +122,7 @@ impl Default for CylinderParams {
             focal_px: 1000.0,
             elliptic_min_f: ELLIPTIC_MIN_F,
             elliptic_min_eccentricity: ELLIPTIC_MIN_ECCENTRICITY,
+            point_budget: POINT_BUDGET,
         }
     }
 }
@@ -174,21 +185,29 @@ fn solve_plane(
     params: &CylinderParams,
     scratch: &mut Scratch<'_>,
 ) -> Result<PlaneResult, SolveError> {
-    let pts = to_plane(curve, plane, scratch.points)?;
+    let n = to_plane(curve, plane, scratch.points)?.len();
+    // The level section of a vertical stem (docs/cylinder.md, "One plane: the level section").
+    let level = LevelMap::of(plane);
+    for p in scratch.points[..n].iter_mut() {
+        *p = level.to_level(*p);
+    }
+    let pts = &scratch.points[..n];
     let mut flags = Flags::default();
     let cal = |r: Real, centre: Vec2| {
         noise::calibration_relative_sigma(
             plane,
-            plane.from_plane_coords(centre),
+            plane.from_plane_coords(level.to_plane(centre)),
             &params.noise,
             params.focal_px,
         ) * r
     };
+    // Model noise of a point the data does not contain, in the level section.
+    let noise_at = |q: Vec2| level.to_level(noise_vector(plane, level.to_plane(q), params));
     // Three-tangent with σ from the edges (model) and from D (max of model and data).
     let tt = match three_tangent(pts, &params.three_tangent) {
         Ok(t) => {
             let near = t.bisector * t.nearest_distance;
-            let s_point = noise_vector(plane, near, params).dot(&t.bisector).abs();
+            let s_point = noise_at(near).dot(&t.bisector).abs();
             let random = sqrt(three_tangent_variance(&t, s_point, params));
             let s = sqrt(random * random + cal(t.radius, t.centre).powi(2));
             Some((t, s))
@@ -200,15 +219,32 @@ fn solve_plane(
     };
     // Robust fit, scale floor = predicted point noise at the arc's nearest point; each data
     // point's noise vector is its stored σ along the field's direction.
+    // A long arc is binned to the point budget first (docs/error-model.md, "Point budget");
+    // the bins' σ go to the front of `values`, the fit's median scratch after them.
+    let (pts, sigmas, values): (&[Vec2], &[Real], &mut [Real]) =
+        match budget_split(n, params.point_budget, scratch.values.len()) {
+            Some(m) => {
+                let (binned, rest) = scratch.values.split_at_mut(m);
+                let m = decimate(
+                    &mut scratch.points[..n],
+                    sigmas,
+                    binned,
+                    params.point_budget,
+                );
+                (&scratch.points[..m], &binned[..m], rest)
+            }
+            None => (&scratch.points[..n], sigmas, &mut scratch.values[..]),
+        };
     let mut ellipse = None;
     let field = noise::DisplacementField::of(plane);
-    let noise_of = |i: usize| field.direction_in_plane(pts[i]) * sigmas[i];
-    let near_sigma = |q: Vec2| norm(&noise_vector(plane, q, params));
-    let fit = robust_circle(pts, near_sigma, noise_of, params, scratch.values).map(|rc| {
+    let noise_of =
+        |i: usize| level.to_level(field.direction_in_plane(level.to_plane(pts[i])) * sigmas[i]);
+    let near_sigma = |q: Vec2| norm(&noise_at(q));
+    let fit = robust_circle(pts, near_sigma, noise_of, params, values).map(|rc| {
         let f = rc.fit;
-        let model =
-            circle::circle_radius_sigma(&f.circle, (0..pts.len()).map(|i| (pts[i], noise_of(i))));
-        let random = rc.data_sigma.max(model).hypot(rc.bending);
+        // The whole-arc fit's σ: the points' own σ, inflated by χ² and the residuals'
+        // correlation along the stripe (docs/error-model.md, "Correlation along the stripe").
+        let random = rc.data_sigma.hypot(rc.bending);
         let s = sqrt(random * random + cal(f.circle.radius, f.circle.centre).powi(2));
         let arc = arc_angle(pts, f.circle.centre);
         let rejected = 1.0 - f.inliers as Real / pts.len() as Real;
@@ -242,8 +278,19 @@ fn solve_plane(
         fit,
         ellipse,
         flags,
-        n: pts.len(),
+        n,
     })
+}
+
+/// Number of bins when a curve of `n` points is binned to `budget` and `values` (its length)
+/// holds both the bins' σ and the fit's scratch; `None` to fit every point (short enough, or
+/// no room).
+fn budget_split(n: usize, budget: usize, values: usize) -> Option<usize> {
+    if n <= budget || budget == 0 {
+        return None;
+    }
+    let m = n.div_ceil(n.div_ceil(budget));
+    (values >= 2 * m).then_some(m)
 }
 
 /// The ellipse fitted to the circle fit's inliers when the section is detectably not round
@@ -386,10 +433,12 @@ fn finish_plane(
     plane: &LaserPlane,
     params: &CylinderParams,
 ) -> Result<CylinderSolution, SolveError> {
+    // The one-plane results are in the level section (`solve_plane`).
+    let level = LevelMap::of(plane);
     if let (Some(e), Some((f, _, _))) = (one.ellipse, one.fit) {
         let cal_rel = noise::calibration_relative_sigma(
             plane,
-            plane.from_plane_coords(e.centre),
+            plane.from_plane_coords(level.to_plane(e.centre)),
             &params.noise,
             params.focal_px,
         );
@@ -410,7 +459,7 @@ fn finish_plane(
             fit_diameter: Some(2.0 * f.circle.radius),
             fit_uncertainty: one.fit.map(|(_, s, _)| 2.0 * s),
             distance: norm(&c) - f.circle.radius,
-            centre: plane.from_plane_coords(e.centre),
+            centre: plane.from_plane_coords(level.to_plane(e.centre)),
             axes: Some((2.0 * e.semi_axes.0, 2.0 * e.semi_axes.1)),
         });
     }
@@ -464,7 +513,7 @@ fn finish_plane(
         fit_diameter: one.fit.map(|(f, _, _)| 2.0 * f.circle.radius),
         fit_uncertainty: one.fit.map(|(_, s, _)| 2.0 * s),
         distance,
-        centre: plane.from_plane_coords(centre),
+        centre: plane.from_plane_coords(level.to_plane(centre)),
         axes: None,
     })
 }
@@ -476,7 +525,19 @@ fn solve_tilted(
     one: &PlaneResult,
 ) -> Result<CylinderSolution, SolveError> {
     let init = initial_cylinder(input.curves, input.planes, scratch.points)?;
-    let fit = fit_cylinder(input.curves, init, &params.lm)?;
+    // Whole-arc weighted fit (docs/cylinder.md, "Whole-arc fit"): each point's own σ along
+    // its plane's noise direction.
+    let mut fields = [noise::DisplacementField::of(&input.planes[0]); MAX_PLANES];
+    for (f, plane) in fields.iter_mut().zip(input.planes) {
+        *f = noise::DisplacementField::of(plane);
+    }
+    let point_noise = |k: usize, i: usize| match (input.curves[k].get(i), input.sigmas[k].get(i)) {
+        (Some(x), Some(s)) => fields
+            .get(k)
+            .map_or(Vec3::zeros(), |f| f.direction(*x) * *s),
+        _ => Vec3::zeros(),
+    };
+    let fit = fit_cylinder_weighted(input.curves, point_noise, init, &params.robust)?.fit;
     let cyl = fit.cylinder;
     let plane0 = &input.planes[0];
     // Generalised three-tangent on every curve; mean radius, σ of the mean of the

@@ -196,7 +196,7 @@ pub(super) fn projected_data_sigma(
         .then_some((rc.fit.circle, s, rc.fit.rms_residual))
 }
 
-/// A robust circle fit with its data-driven σ terms (`docs/error-model.md`, "Data-driven fit
+/// The whole-arc circle fit with its data-driven σ terms (`docs/error-model.md`, "Data-driven fit
 /// uncertainty"), as the one-plane and the projected two-plane results both use.
 pub(super) struct RobustCircle {
     /// The robust fit (Hyper start, Tukey weights).
@@ -205,8 +205,8 @@ pub(super) struct RobustCircle {
     pub(super) near_sigma: Real,
     /// Residual beyond which a point is the fit's outlier.
     pub(super) cutoff: Real,
-    /// `max(σ_GN, σ_sandwich)` of the radius (the sandwich from the residuals, 0 if
-    /// undefined).
+    /// Radius σ of the whole-arc fit ([`circle::WeightedFit::sigma_radius`]): the points'
+    /// own σ, inflated by the reduced χ² and the residuals' correlation length.
     pub(super) data_sigma: Real,
     /// Radius σ from a coherent bending of the curve ([`bending_sigma`]).
     pub(super) bending: Real,
@@ -232,18 +232,18 @@ pub(super) fn robust_circle(
     let s_point = near_sigma(near);
     let mut rp = params.robust;
     rp.min_scale = rp.min_scale.max(s_point);
-    let fit = circle::fit_robust(pts, init, &rp, values).ok()?;
-    // Data-driven sandwich: the dim ends of a far curve are several times noisier than the
-    // model's per-point σ (docs/error-model.md).
+    // Whole-arc fit (docs/cylinder.md, "Whole-arc fit"): every point with its own σ along
+    // its noise direction, none trimmed but real outliers.
+    let wf = circle::fit_weighted(pts, &noise, init, &rp, values).ok()?;
+    let fit = wf.fit;
     let cutoff = rp.tuning * fit.rms_residual.max(rp.min_scale);
-    let data = circle::circle_radius_sigma_residuals(&fit.circle, pts, cutoff);
-    let data = if data.is_finite() { data } else { 0.0 };
     let bending = bending_sigma(&fit, pts, noise);
+    let data_sigma = wf.sigma_radius;
     Some(RobustCircle {
         fit,
         near_sigma: s_point,
         cutoff,
-        data_sigma: fit.std_dev.z.max(data),
+        data_sigma,
         bending,
     })
 }

@@ -1,0 +1,258 @@
+//! The whole-arc circle fit (`docs/cylinder.md`, "Whole-arc fit"): every point weighted by
+//! its own σ, robust against real outliers (branches, background) without trimming the arc's
+//! noisy ends, with the radius σ from the points' σ, the data's χ² and the correlation of the
+//! residuals along the stripe (`docs/error-model.md`, "A point's own σ" and "Correlation
+//! along the stripe").
+
+// `!(x > 0.0)` is deliberate throughout: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+#[allow(unused_imports)]
+use crate::real::Float;
+use crate::real::{self, sqrt, Mat3, Real, Vec2, Vec3};
+
+use super::{accumulate, finish, lm, normalised_start, tukey, Circle, CircleFit, Normalisation};
+use super::{RobustParams, SolveError};
+
+/// Floor of a point's orthogonal-residual σ as a fraction of its σ along its noise direction
+/// (`docs/cylinder.md`, "Whole-arc fit"): near the silhouette the noise direction runs along
+/// the circle and `nᵢ·ĝᵢ → 0`; the floor keeps those points' weight at most `1/FLOOR²` = 25
+/// times what their own σ gives, so that what the noise model does not describe there (bark
+/// relief, the stripe's fade) cannot dominate the fit.
+pub const LATERAL_FLOOR: Real = 0.2;
+
+/// Longest lag (points) of the residual autocorrelation summed into the correlation length.
+pub const MAX_CORRELATION_LAG: usize = 64;
+
+/// Result of [`fit_weighted`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WeightedFit {
+    /// The circle, its residual RMS (of the points with weight, unweighted), iterations and
+    /// inliers ([`CircleFit::covariance`] is the weighted one scaled by the reduced χ²).
+    pub fit: CircleFit,
+    /// Radius σ if the points' σ are right and independent: `√[(JᵀWJ)⁻¹]_rr`.
+    pub model_sigma_radius: Real,
+    /// Reduced χ² of the normalised residuals `dᵢ/σᵢ` of the inliers.
+    pub chi2_dof: Real,
+    /// Correlation length of the normalised residuals along the curve (points):
+    /// `L = 1 + 2 Σ_k ρ_k`, summed while `ρ_k > 0` up to [`MAX_CORRELATION_LAG`].
+    pub correlation_length: Real,
+    /// Radius σ: `model_sigma_radius · √max(χ²_ν·L, 1)` (`docs/error-model.md`,
+    /// "Correlation along the stripe").
+    pub sigma_radius: Real,
+}
+
+/// σ of point `i`'s orthogonal residual (normalised units) about a circle centred at `centre`.
+fn residual_sigma(q: Vec2, centre: Vec2, sigma: Real, direction: Vec2) -> Real {
+    let d = q - centre;
+    let len = real::norm(&d);
+    let along = if len > 0.0 {
+        (d / len).dot(&direction)
+    } else {
+        1.0
+    };
+    sigma * sqrt(along * along + LATERAL_FLOOR * LATERAL_FLOOR)
+}
+
+/// Whole-arc weighted, robust geometric circle fit.
+///
+/// Point `i` has the 1σ noise vector `noise(i)` (same units as the points): σᵢ along the unit
+/// direction ĝᵢ; its orthogonal residual `dᵢ` then has σ `σᵢ·√((nᵢ·ĝᵢ)² + f²)` (`f` =
+/// [`LATERAL_FLOOR`]). Iteratively reweighted least squares: weights `tukey(uᵢ/(c·s))/σ_{dᵢ}²`
+/// with `uᵢ = dᵢ/σ_{dᵢ}`, `s = max(1.4826·median|uᵢ|, 1)` (the data are not taken to be
+/// quieter than their own σ), `c` = `params.tuning`, frozen at the previous round's circle,
+/// LM ([`super::super::lm`]) inside each round. `params.min_scale` is not used (the σ's set
+/// the scale). `scratch` (at least `points.len()`) holds the `|uᵢ|` for the median.
+///
+/// Points with a non-positive or non-finite σ are left out. Errors as [`super::fit_robust`].
+pub fn fit_weighted(
+    points: &[Vec2],
+    noise: impl Fn(usize) -> Vec2,
+    initial: Circle,
+    params: &RobustParams,
+    scratch: &mut [Real],
+) -> Result<WeightedFit, SolveError> {
+    params.lm.validate()?;
+    if !(params.tuning.is_finite() && params.tuning > 0.0) || params.max_rounds == 0 {
+        return Err(SolveError::InvalidParameter);
+    }
+    let norm = Normalisation::of(points, 3)?;
+    let buf = scratch
+        .get_mut(..points.len())
+        .ok_or(SolveError::ScratchTooSmall)?;
+    let inv_scale = 1.0 / norm.scale;
+    let sigma_of = |i: usize| {
+        let s = real::norm(&noise(i)) * inv_scale;
+        if s > 0.0 && s.is_finite() {
+            s
+        } else {
+            Real::INFINITY
+        }
+    };
+    let direction = |i: usize| {
+        let g = noise(i);
+        let s = real::norm(&g);
+        if s > 0.0 {
+            g / s
+        } else {
+            Vec2::zeros()
+        }
+    };
+    let mut theta = normalised_start(&initial, &norm)?;
+    let mut last_it = 0;
+    let mut cs = params.tuning;
+    for round in 0..=params.max_rounds {
+        let centre = Vec2::new(theta.x, theta.y);
+        let r = theta.z;
+        let mut k = 0;
+        for (i, p) in points.iter().enumerate() {
+            let q = norm.apply(*p);
+            let s = residual_sigma(q, centre, sigma_of(i), direction(i));
+            if s.is_finite() {
+                buf[k] = ((real::norm(&(q - centre)) - r) / s).abs();
+                k += 1;
+            }
+        }
+        if k < 3 {
+            return Err(SolveError::TooFewPoints);
+        }
+        let mid = k / 2;
+        let (_, median, _) = buf[..k].select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
+        let scale = (1.4826 * *median).max(1.0);
+        if !scale.is_finite() {
+            return Err(SolveError::Degenerate);
+        }
+        cs = params.tuning * scale;
+        let weight = |i: usize, q: Vec2| {
+            let s = residual_sigma(q, centre, sigma_of(i), direction(i));
+            if !s.is_finite() {
+                return 0.0;
+            }
+            tukey((real::norm(&(q - centre)) - r) / (s * cs)) / (s * s)
+        };
+        let (next, it) = lm(points, &norm, theta, &params.lm, &weight)?;
+        last_it = it;
+        let change = real::norm(&(next - theta));
+        theta = next;
+        if change <= params.lm.tolerance * (1.0 + real::norm(&theta)) {
+            break;
+        }
+        // The last allowed round must have settled to within the noise.
+        if round == params.max_rounds && change > 1e-3 * theta.z {
+            return Err(SolveError::NotConverged);
+        }
+    }
+    let centre = Vec2::new(theta.x, theta.y);
+    let r = theta.z;
+    let weight = |i: usize, q: Vec2| {
+        let s = residual_sigma(q, centre, sigma_of(i), direction(i));
+        if !s.is_finite() {
+            return 0.0;
+        }
+        tukey((real::norm(&(q - centre)) - r) / (s * cs)) / (s * s)
+    };
+    let (jtj, _, chi2, _, used) = accumulate(points, &norm, theta, &weight);
+    let mut fit = finish(points, &norm, theta, last_it, &weight)?;
+    // Unweighted RMS of the inliers (metres), as the unweighted fits report.
+    let (mut ss, mut n) = (0.0, 0usize);
+    for (i, p) in points.iter().enumerate() {
+        let q = norm.apply(*p);
+        if weight(i, q) > 0.0 {
+            let d = real::norm(&(q - centre)) - r;
+            ss += d * d;
+            n += 1;
+        }
+    }
+    fit.rms_residual = if n > 0 {
+        sqrt(ss / n as Real) * norm.scale
+    } else {
+        0.0
+    };
+    let dof = used.saturating_sub(3).max(1) as Real;
+    let chi2_dof = chi2 / dof;
+    let inv = jtj.try_inverse().ok_or(SolveError::Degenerate)?;
+    let model = sqrt(inv[(2, 2)].max(0.0)) * norm.scale;
+    fit.covariance = inv * (chi2_dof * norm.scale * norm.scale);
+    fit.std_dev = Vec3::new(
+        sqrt(fit.covariance[(0, 0)].max(0.0)),
+        sqrt(fit.covariance[(1, 1)].max(0.0)),
+        sqrt(fit.covariance[(2, 2)].max(0.0)),
+    );
+    let correlation = correlation_length(points, &norm, theta, &weight, buf);
+    let factor = (chi2_dof * correlation).max(1.0);
+    let sigma_radius = model * sqrt(factor);
+    if !(sigma_radius.is_finite() && fit.circle.radius.is_finite()) {
+        return Err(SolveError::Degenerate);
+    }
+    Ok(WeightedFit {
+        fit,
+        model_sigma_radius: model,
+        chi2_dof,
+        correlation_length: correlation,
+        sigma_radius,
+    })
+}
+
+/// Correlation length of the inliers' normalised residuals `uᵢ = dᵢ·√wᵢ` in curve order
+/// (`docs/error-model.md`, "Correlation along the stripe"): `1 + 2 Σ_{k≥1} ρ_k` while
+/// `ρ_k > 0`, `k ≤` [`MAX_CORRELATION_LAG`] and `k < n/4`; at least 1. `buf` holds the `uᵢ`.
+fn correlation_length<W: Fn(usize, Vec2) -> Real>(
+    points: &[Vec2],
+    norm: &Normalisation,
+    theta: Vec3,
+    weight: &W,
+    buf: &mut [Real],
+) -> Real {
+    let centre = Vec2::new(theta.x, theta.y);
+    let mut n = 0;
+    for (i, p) in points.iter().enumerate() {
+        let q = norm.apply(*p);
+        let w = weight(i, q);
+        if w > 0.0 {
+            buf[n] = (real::norm(&(q - centre)) - theta.z) * sqrt(w);
+            n += 1;
+        }
+    }
+    let u = &buf[..n];
+    let c0: Real = u.iter().map(|x| x * x).sum();
+    if !(c0 > 0.0) || n < 8 {
+        return 1.0;
+    }
+    let mut length = 1.0;
+    for k in 1..=MAX_CORRELATION_LAG.min(n / 4) {
+        let ck: Real = u.iter().zip(&u[k..]).map(|(a, b)| a * b).sum();
+        let rho = ck / c0;
+        if !(rho > 0.0) {
+            break;
+        }
+        length += 2.0 * rho;
+    }
+    length
+}
+
+/// Radius σ of a circle fit with per-point σ along directions, as [`fit_weighted`] weighs
+/// them, for points with correlated noise of correlation length `correlation` points
+/// (`docs/error-model.md`, "Correlation along the stripe"): `√([(JᵀWJ)⁻¹]_rr · L)`. For the
+/// error model's predictions, where no data exist.
+pub fn weighted_radius_sigma<I: Iterator<Item = (Vec2, Real, Vec2)>>(
+    c: &Circle,
+    points: I,
+    correlation: Real,
+) -> Real {
+    let mut a = Mat3::zeros();
+    for (q, sigma, direction) in points {
+        let d = q - c.centre;
+        let len = real::norm(&d);
+        if !(len > 0.0 && sigma > 0.0) {
+            continue;
+        }
+        let nn = d / len;
+        let s = residual_sigma(q, c.centre, sigma, direction);
+        let j = Vec3::new(-nn.x, -nn.y, -1.0);
+        a += j * j.transpose() / (s * s);
+    }
+    match a.try_inverse() {
+        Some(inv) => sqrt(inv[(2, 2)].max(0.0) * correlation.max(1.0)),
+        None => Real::INFINITY,
+    }
+}

@@ -1,0 +1,183 @@
+//! The whole-arc cylinder fit (`docs/cylinder.md`, "Whole-arc fit"): the two-plane fit with
+//! every point weighted by its own σ and robust against real outliers, as the one-plane
+//! [`crate::solvers::circle::fit_weighted`].
+
+// `!(x > 0.0)` is deliberate throughout: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+#[allow(unused_imports)]
+use crate::real::Float;
+use crate::real::{norm, sqrt, Real, Vec3};
+
+use super::{
+    cyl_accumulate, normalise, CylState, Cylinder, CylinderFit, CylinderProblem, Normalised,
+};
+use crate::solvers::circle::weighted::LATERAL_FLOOR;
+use crate::solvers::circle::RobustParams;
+use crate::solvers::lm::{self, Evaluated};
+use crate::solvers::SolveError;
+
+/// Result of [`fit_cylinder_weighted`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WeightedCylinderFit {
+    /// The fit; `sigma_radius` and `sigma_axis` from `(JᵀWJ)⁻¹·max(χ²_ν, 1)`, `rms_residual`
+    /// of the points with weight (unweighted), `points` those points.
+    pub fit: CylinderFit,
+    /// Reduced χ² of the normalised residuals of the points with weight.
+    pub chi2_dof: Real,
+}
+
+/// σ (normalised units) of the residual of the point `y` about the cylinder `st`, whose noise
+/// is `sigma` along the unit `direction`: `σ·√((ρ̂·ĝ)² + f²)` (`ρ̂` the radial direction from
+/// the axis, `f` = [`LATERAL_FLOOR`]).
+fn residual(st: &CylState, y: Vec3, sigma: Real, direction: Vec3) -> (Real, Real) {
+    let w = y - st.p;
+    let q = w - st.u * w.dot(&st.u);
+    let rho = norm(&q);
+    let along = if rho > 0.0 {
+        (q / rho).dot(&direction)
+    } else {
+        1.0
+    };
+    (
+        rho - st.r,
+        sigma * sqrt(along * along + LATERAL_FLOOR * LATERAL_FLOOR),
+    )
+}
+
+/// Tukey's biweight `(1 − u²)²` for `|u| < 1`.
+fn tukey(u: Real) -> Real {
+    if u.abs() < 1.0 {
+        let t = 1.0 - u * u;
+        t * t
+    } else {
+        0.0
+    }
+}
+
+/// Whole-arc weighted, robust cylinder fit: point `i` of curve `k` has the 1σ noise vector
+/// `noise(k, i)` (metres). Iteratively reweighted least squares with weights
+/// `tukey(uᵢ/(c·s))/σ_{dᵢ}²`, `uᵢ = dᵢ/σ_{dᵢ}` frozen at the previous round's cylinder, the
+/// scale `s = max(1.2533·mean|uᵢ|, 1)` over the previous round's points with weight (no
+/// scratch for a median over all curves; the first round's mean includes the outliers, which
+/// only makes it more lenient), `c` = `params.tuning`; LM inside each round. Start from
+/// [`super::initial_cylinder`]. Errors as [`super::fit_cylinder`].
+pub fn fit_cylinder_weighted(
+    curves: &[&[Vec3]],
+    noise: impl Fn(usize, usize) -> Vec3,
+    initial: Cylinder,
+    params: &RobustParams,
+) -> Result<WeightedCylinderFit, SolveError> {
+    params.lm.validate()?;
+    if !(params.tuning.is_finite() && params.tuning > 0.0) || params.max_rounds == 0 {
+        return Err(SolveError::InvalidParameter);
+    }
+    let Normalised {
+        mean, scale, start, ..
+    } = normalise(curves, initial)?;
+    let point_noise = |k: usize, i: usize| {
+        let g = noise(k, i) / scale;
+        let s = norm(&g);
+        if s > 0.0 && s.is_finite() {
+            (s, g / s)
+        } else {
+            (Real::INFINITY, Vec3::zeros())
+        }
+    };
+    let mut st = start;
+    let mut cutoff = Real::INFINITY;
+    let mut iterations = 0;
+    for round in 0..=params.max_rounds {
+        // Scale from the previous round's points with weight (all, in the first round).
+        let (mut sum, mut k_in) = (0.0, 0usize);
+        for (k, curve) in curves.iter().enumerate() {
+            for (i, x) in curve.iter().enumerate() {
+                let (s, g) = point_noise(k, i);
+                let (d, sd) = residual(&st, (x - mean) / scale, s, g);
+                let u = (d / sd).abs();
+                if sd.is_finite() && u < cutoff {
+                    sum += u;
+                    k_in += 1;
+                }
+            }
+        }
+        if k_in < 6 {
+            return Err(SolveError::TooFewPoints);
+        }
+        let s = (1.2533 * sum / k_in as Real).max(1.0);
+        cutoff = params.tuning * s;
+        let frozen = st;
+        let c = cutoff;
+        let weight = |k: usize, i: usize, y: Vec3| {
+            let (s, g) = point_noise(k, i);
+            let (d, sd) = residual(&frozen, y, s, g);
+            if !sd.is_finite() {
+                return 0.0;
+            }
+            tukey(d / (sd * c)) / (sd * sd)
+        };
+        let problem = CylinderProblem {
+            curves,
+            mean,
+            scale,
+            weight: &weight,
+        };
+        let begin = Evaluated::at(&problem, st)?;
+        let (min, it) = lm::minimise(&problem, begin, &params.lm)?;
+        iterations = it;
+        let next = min.params;
+        let change = norm(&(next.p - st.p)) + norm(&(next.u - st.u)) + (next.r - st.r).abs();
+        st = next;
+        if change <= params.lm.tolerance * (1.0 + norm(&st.p) + st.r) {
+            break;
+        }
+        if round == params.max_rounds && change > 1e-3 * st.r {
+            return Err(SolveError::NotConverged);
+        }
+    }
+    let frozen = st;
+    let weight = |k: usize, i: usize, y: Vec3| {
+        let (s, g) = point_noise(k, i);
+        let (d, sd) = residual(&frozen, y, s, g);
+        if !sd.is_finite() {
+            return 0.0;
+        }
+        tukey(d / (sd * cutoff)) / (sd * sd)
+    };
+    let (jtj, _, chi2, used) = cyl_accumulate(curves, mean, scale, &st, &weight);
+    let r = st.r.abs();
+    if !(r > 0.0 && r.is_finite()) || used < 6 {
+        return Err(SolveError::Degenerate);
+    }
+    let chi2_dof = chi2 / (used - 5) as Real;
+    let f = chi2_dof.max(1.0);
+    let inv = jtj.try_inverse().ok_or(SolveError::Degenerate)?;
+    let sigma_radius = sqrt((inv[(4, 4)] * f).max(0.0)) * scale;
+    let sigma_axis = sqrt((inv[(2, 2)] * f).max((inv[(3, 3)] * f).max(0.0)));
+    // Unweighted RMS of the points with weight.
+    let mut ss = 0.0;
+    for (k, curve) in curves.iter().enumerate() {
+        for (i, x) in curve.iter().enumerate() {
+            let y = (x - mean) / scale;
+            if weight(k, i, y) > 0.0 {
+                let (d, _) = residual(&st, y, 1.0, Vec3::zeros());
+                ss += d * d;
+            }
+        }
+    }
+    Ok(WeightedCylinderFit {
+        fit: CylinderFit {
+            cylinder: Cylinder {
+                point: mean + st.p * scale,
+                axis: st.u,
+                radius: r * scale,
+            },
+            rms_residual: sqrt(ss / used as Real) * scale,
+            iterations,
+            sigma_radius,
+            sigma_axis,
+            points: used,
+        },
+        chi2_dof,
+    })
+}
