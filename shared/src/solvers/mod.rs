@@ -33,6 +33,7 @@ pub mod circle;
 pub mod cylinder_fit;
 pub mod ellipse;
 pub mod lm;
+pub mod plane_pca;
 pub mod result;
 pub mod stem;
 pub mod three_tangent;
