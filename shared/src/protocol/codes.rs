@@ -317,6 +317,9 @@ fn solve_error_number(e: SolveError) -> u32 {
         SolveError::InvalidParameter => 7,
         SolveError::PlaneCount => 8,
         SolveError::NotRound => 9,
+        // The wall solver's (numbers from 20 keep clear of other instruments').
+        SolveError::SingleLine => 20,
+        SolveError::NotPlanar => 21,
     }
 }
 
@@ -333,6 +336,8 @@ fn solve_error_of_number(n: u32) -> Option<SolveError> {
         7 => SolveError::InvalidParameter,
         8 => SolveError::PlaneCount,
         9 => SolveError::NotRound,
+        20 => SolveError::SingleLine,
+        21 => SolveError::NotPlanar,
         _ => return None,
     })
 }

@@ -37,6 +37,7 @@ pub mod plane_pca;
 pub mod result;
 pub mod stem;
 pub mod three_tangent;
+pub mod walls;
 
 /// Why a solver could not produce a trustworthy answer.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -65,6 +66,11 @@ pub enum SolveError {
     /// The section is detectably not round and one view cannot resolve its axes: measure
     /// across two directions (`docs/cylinder.md`, "Elliptic stems").
     NotRound,
+    /// Every straight run of the lit points lies on one laser line: a plane needs points
+    /// off that line (`docs/building.md`, "One line is not a plane").
+    SingleLine,
+    /// No plane fits: the lit surface is curved, or the lines fall on different objects.
+    NotPlanar,
 }
 
 impl fmt::Display for SolveError {
@@ -80,6 +86,12 @@ impl fmt::Display for SolveError {
             SolveError::InvalidParameter => "solver parameter out of range",
             SolveError::PlaneCount => "wrong number of laser planes for this solution",
             SolveError::NotRound => "section not round: measure across two directions",
+            SolveError::SingleLine => {
+                "only one laser line lies on the surface: a plane needs two (aim so that both lines cross the wall)"
+            }
+            SolveError::NotPlanar => {
+                "the lit surface is not flat (curved, or the lines fall on different objects): no wall plane fits"
+            }
         };
         f.write_str(s)
     }

@@ -267,4 +267,4 @@ pub fn plane_intersection(
 
 #[cfg(test)]
 #[path = "plane_pca_tests.rs"]
-mod tests;
+pub(crate) mod tests;
