@@ -9,6 +9,8 @@
 //! tests).
 //!
 //! * [`stem`]: [`Mode::Cylinder`], the stem's diameter.
+//! * [`wall`]: [`Mode::Wall`], walls by principal components: orientation, corner angle,
+//!   distance between parallel walls, segment length (`docs/building.md`).
 
 use crate::calibration::{Calibration, MAX_PLANES};
 use crate::image::{Frame, Pixel};
@@ -22,8 +24,10 @@ use crate::real::{Real, Vec2, Vec3};
 use crate::solvers::stem::CylinderParams;
 
 pub mod stem;
+pub mod wall;
 
 pub use stem::Stem;
+pub use wall::{Wall, WallInstrumentParams};
 
 /// What an instrument's solver reads: per laser plane, the 3-D points of its curve (camera
 /// frame, metres, ordered by image column), the planes themselves, and the image summary.
@@ -130,6 +134,8 @@ pub struct Measured<S> {
 pub struct InstrumentParams {
     /// [`Mode::Cylinder`] ([`Stem`]).
     pub cylinder: CylinderParams,
+    /// [`Mode::Wall`] ([`Wall`]).
+    pub wall: WallInstrumentParams,
 }
 
 /// Measures a frame pair with the instrument of `mode`: [`extract_profile`], then its solver.
