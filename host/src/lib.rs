@@ -15,6 +15,7 @@ pub mod evaluate;
 pub mod fieldlog;
 pub mod link;
 pub mod measure;
+pub mod measure_wall;
 pub mod pgm;
 pub mod plot;
 pub mod simulate;

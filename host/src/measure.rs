@@ -13,13 +13,15 @@ use tangent_core::calibration::Calibration;
 use tangent_core::curve::CurvePoint;
 use tangent_core::image::{Frame, Pixel};
 use tangent_core::instrument::stem::StemMeasurement;
-use tangent_core::instrument::{self, Stem};
-use tangent_core::pipeline::{OwnedBuffers, PipelineConfig, PipelineError};
+use tangent_core::instrument::wall::WallMeasurement;
+use tangent_core::instrument::{self, Instrument, Measured, Stem, Wall, WallInstrumentParams};
+use tangent_core::pipeline::{OwnedBuffers, PipelineConfig, PipelineError, Profile};
 use tangent_core::protocol::codes::{self, Failure};
 use tangent_core::real::Vec3;
 use tangent_core::solvers::stem::CylinderParams;
 
 use crate::capture::{Capture, CaptureError, Mode};
+use crate::measure_wall::{self, WallReport};
 use crate::pgm::{Pgm, PgmSamples};
 use crate::truth::Object;
 
@@ -33,7 +35,7 @@ pub enum MeasureError {
     #[error(transparent)]
     Capture(#[from] CaptureError),
     /// The capture is not of a mode this command measures.
-    #[error("capture mode {0:?} is not measured yet (only cylinder captures are)")]
+    #[error("capture mode {0:?} is not measured yet (only cylinder and wall captures are)")]
     UnsupportedMode(Mode),
     /// No frame lit every plane of the calibration.
     #[error("no laser-on frame lights all {0} planes of the calibration")]
@@ -97,6 +99,9 @@ pub struct Reading {
     /// Why the capture's optional truth curve was not read (the reading is unaffected).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub truth_curve_unreadable: Option<String>,
+    /// The wall instrument's readings (captures of mode `wall`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub wall: Option<WallReport>,
 }
 
 impl Reading {
@@ -128,6 +133,7 @@ impl Reading {
                     error: None,
                     truth_diameter_m: truth,
                     truth_curve_unreadable: None,
+                    wall: None,
                 }
             }
             Err(e) => Reading {
@@ -146,6 +152,47 @@ impl Reading {
                 error: Some(Failure::of(e).to_string()),
                 truth_diameter_m: truth,
                 truth_curve_unreadable: None,
+                wall: None,
+            },
+        }
+    }
+
+    /// The reading of a wall capture: the walls' report, or the error.
+    fn from_wall(
+        capture: &str,
+        result: &Result<WallMeasurement, PipelineError>,
+        loaded: &Capture,
+    ) -> Self {
+        let blank = Reading {
+            capture: capture.to_string(),
+            diameter_m: None,
+            uncertainty_m: None,
+            method: None,
+            flags: Vec::new(),
+            tilt: None,
+            axes_m: None,
+            three_tangent_diameter_m: None,
+            fit_diameter_m: None,
+            distance_m: None,
+            points: None,
+            error: None,
+            truth_diameter_m: None,
+            truth_curve_unreadable: None,
+            wall: None,
+        };
+        match result {
+            Ok(m) => Reading {
+                flags: measure_wall::flag_names(m),
+                points: Some(m.solution.points),
+                wall: Some(WallReport::of(
+                    &m.solution,
+                    measure_wall::wall_truth(loaded, &m.solution),
+                )),
+                ..blank
+            },
+            Err(e) => Reading {
+                error: Some(Failure::of(e).to_string()),
+                ..blank
             },
         }
     }
@@ -160,6 +207,9 @@ impl Reading {
     }
 
     fn result_text(&self) -> String {
+        if let Some(w) = &self.wall {
+            return w.summary(&self.flags);
+        }
         match (self.diameter_m, &self.error) {
             (Some(d), _) => {
                 let mut s = format!(
@@ -191,12 +241,31 @@ impl Reading {
     }
 }
 
+/// The core's detailed solution of one capture, by instrument.
+#[derive(Debug, Clone)]
+pub enum Solved {
+    /// A stem ([`Mode::Cylinder`]).
+    Stem(StemMeasurement),
+    /// Walls ([`Mode::Wall`]).
+    Wall(WallMeasurement),
+}
+
+impl Solved {
+    /// The image summary the solution came from.
+    pub fn profile(&self) -> &Profile {
+        match self {
+            Solved::Stem(m) => &m.profile,
+            Solved::Wall(m) => &m.profile,
+        }
+    }
+}
+
 /// What a measurement of one capture produced, with the buffers for plots.
 pub struct Outcome {
     /// The result, for printing and JSON.
     pub reading: Reading,
     /// The core's result.
-    pub result: Result<StemMeasurement, PipelineError>,
+    pub result: Result<Solved, PipelineError>,
     /// The difference frame (as 16-bit, whatever the sensor depth) and its size.
     pub diff: Vec<u16>,
     /// The curve points (all planes).
@@ -267,14 +336,14 @@ pub fn composite_on_frame(capture: &Capture, planes: usize) -> Option<Pgm> {
     }
 }
 
-fn run<P: Pixel>(
+fn run<I: Instrument, P: Pixel>(
     off: &[P],
     on: &[P],
     pgm: &Pgm,
     calibration: &Calibration,
     config: &PipelineConfig,
-    params: &CylinderParams,
-) -> (Result<StemMeasurement, PipelineError>, OwnedBuffers<P>) {
+    params: &I::Params,
+) -> (Result<Measured<I::Solution>, PipelineError>, OwnedBuffers<P>) {
     let planes = calibration.planes.len();
     let mut hw = OwnedBuffers::<P>::for_frame(pgm.width, pgm.height, pgm.bit_depth(), planes);
     let result = (|| {
@@ -282,7 +351,7 @@ fn run<P: Pixel>(
             Frame::new(off, pgm.width, pgm.height, pgm.width)?.with_bit_depth(pgm.bit_depth())?;
         let on =
             Frame::new(on, pgm.width, pgm.height, pgm.width)?.with_bit_depth(pgm.bit_depth())?;
-        instrument::measure_with::<Stem, P>(
+        instrument::measure_with::<I, P>(
             &off,
             &on,
             calibration,
@@ -353,41 +422,27 @@ pub fn measure_loaded(
     config: &PipelineConfig,
     params: &CylinderParams,
 ) -> Result<Outcome, MeasureError> {
-    // The instruments the host reports on (the stem's detailed solution feeds the extra
-    // keys of `Reading`).
-    match capture.meta.mode {
-        Mode::Cylinder => {}
-        mode @ (Mode::Sphere | Mode::Wall | Mode::Road) => {
-            return Err(MeasureError::UnsupportedMode(mode))
-        }
-    }
     let calibration = calibration
         .cloned()
         .unwrap_or_else(|| capture.calibration.clone());
-    let (off, on) = frame_pair(capture, calibration.planes.len())?;
-    let (result, diff, curve, points) = match (&off.samples, &on.samples) {
-        (PgmSamples::U8(a), PgmSamples::U8(b)) => {
-            let (r, hw) = run(a, b, &on, &calibration, config, params);
-            (
-                r,
-                hw.diff().iter().map(|&v| v as u16).collect(),
-                hw.curve().to_vec(),
-                hw.points().to_vec(),
-            )
+    // The instruments the host reports on: each one's detailed solution feeds its keys of
+    // `Reading`.
+    let (result, mut reading, buffers) = match capture.meta.mode {
+        Mode::Cylinder => {
+            let (r, buffers) = solve_capture::<Stem>(capture, &calibration, config, params)?;
+            let reading = Reading::from_result(name, &r, truth_diameter(capture));
+            (r.map(Solved::Stem), reading, buffers)
         }
-        (PgmSamples::U16(a), PgmSamples::U16(b)) => {
-            let (r, hw) = run(a, b, &on, &calibration, config, params);
-            (
-                r,
-                hw.diff().to_vec(),
-                hw.curve().to_vec(),
-                hw.points().to_vec(),
-            )
+        Mode::Wall => {
+            let params = wall_params(&calibration, params);
+            let (r, buffers) = solve_capture::<Wall>(capture, &calibration, config, &params)?;
+            let reading = Reading::from_wall(name, &r, capture);
+            (r.map(Solved::Wall), reading, buffers)
         }
-        _ => return Err(MeasureError::MixedDepth),
+        mode @ (Mode::Sphere | Mode::Road) => return Err(MeasureError::UnsupportedMode(mode)),
     };
-    let mut reading = Reading::from_result(name, &result, truth_diameter(capture));
     reading.truth_curve_unreadable = capture.truth_curve_unreadable.clone();
+    let (diff, curve, points) = buffers;
     Ok(Outcome {
         reading,
         result,
@@ -395,5 +450,53 @@ pub fn measure_loaded(
         curve,
         points,
         calibration,
+    })
+}
+
+/// The wall instrument's settings for `calibration`'s camera, with the stem's noise model.
+pub fn wall_params(calibration: &Calibration, params: &CylinderParams) -> WallInstrumentParams {
+    let mut p = WallInstrumentParams {
+        noise: params.noise,
+        focal_px: calibration.camera.fy,
+        ..WallInstrumentParams::default()
+    };
+    p.walls.focal_px = calibration.camera.fx;
+    p.walls.principal_u = calibration.camera.cx;
+    p.walls.width_px = calibration.camera.width as f64;
+    p
+}
+
+/// The buffers a plot shows: the difference frame (16-bit), the curve points, the 3-D points.
+type PlotBuffers = (Vec<u16>, Vec<CurvePoint>, Vec<Vec3>);
+
+/// Runs instrument `I` on the capture's frame pair.
+#[allow(clippy::type_complexity)]
+fn solve_capture<I: Instrument>(
+    capture: &Capture,
+    calibration: &Calibration,
+    config: &PipelineConfig,
+    params: &I::Params,
+) -> Result<(Result<Measured<I::Solution>, PipelineError>, PlotBuffers), MeasureError> {
+    let (off, on) = frame_pair(capture, calibration.planes.len())?;
+    Ok(match (&off.samples, &on.samples) {
+        (PgmSamples::U8(a), PgmSamples::U8(b)) => {
+            let (r, hw) = run::<I, u8>(a, b, &on, calibration, config, params);
+            (
+                r,
+                (
+                    hw.diff().iter().map(|&v| v as u16).collect(),
+                    hw.curve().to_vec(),
+                    hw.points().to_vec(),
+                ),
+            )
+        }
+        (PgmSamples::U16(a), PgmSamples::U16(b)) => {
+            let (r, hw) = run::<I, u16>(a, b, &on, calibration, config, params);
+            (
+                r,
+                (hw.diff().to_vec(), hw.curve().to_vec(), hw.points().to_vec()),
+            )
+        }
+        _ => return Err(MeasureError::MixedDepth),
     })
 }

@@ -11,7 +11,7 @@ use plotters::prelude::*;
 use plotters::style::{register_font, FontStyle};
 use tangent_core::real::Vec2;
 
-use crate::measure::Outcome;
+use crate::measure::{Outcome, Solved};
 
 static FONT: Once = Once::new();
 
@@ -67,7 +67,7 @@ pub fn measurement_png(path: &Path, outcome: &Outcome, title: &str) -> Result<()
         }
     }
     let (planes, ranges) = match &outcome.result {
-        Ok(m) => (m.profile.planes, m.profile.plane_points),
+        Ok(m) => (m.profile().planes, m.profile().plane_points),
         Err(_) => (0, Default::default()),
     };
     for (k, &(s, e)) in ranges.iter().enumerate().take(planes) {
@@ -89,10 +89,13 @@ pub fn measurement_png(path: &Path, outcome: &Outcome, title: &str) -> Result<()
             pts.push((k, plane0.to_plane_coords(*p)));
         }
     }
-    let circle = outcome.result.as_ref().ok().map(|m| {
-        let c = plane0.to_plane_coords(m.solution.centre);
-        (c, m.solution.diameter / 2.0)
-    });
+    let circle = match &outcome.result {
+        Ok(Solved::Stem(m)) => {
+            let c = plane0.to_plane_coords(m.solution.centre);
+            Some((c, m.solution.diameter / 2.0))
+        }
+        _ => None,
+    };
     let (mut a0, mut a1, mut b0, mut b1) = (
         f64::INFINITY,
         f64::NEG_INFINITY,

@@ -14,6 +14,7 @@ pub mod laser;
 pub mod render;
 pub mod scene;
 pub mod sensor;
+pub mod wall_corpus;
 
 use rand::SeedableRng;
 use rand_pcg::Pcg64;

@@ -185,10 +185,10 @@ pub fn parallel_distance(a: &PlaneFit, b: &PlaneFit) -> Estimate {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Orientation {
     /// Turn of the wall about the camera's vertical axis `y`: 0 when it faces the camera,
-    /// positive when its right-hand part (seen from the camera) is farther.
+    /// positive when its right-hand part (seen from the camera) is nearer.
     pub yaw: Estimate,
     /// Tilt about the camera's horizontal axis `x`: 0 when it faces the camera, positive when
-    /// its lower part (image bottom) is farther.
+    /// its lower part (image bottom) is nearer.
     pub pitch: Estimate,
     /// Distance from the camera centre along the optical axis to the plane (metres).
     pub axis_distance: Estimate,

@@ -68,7 +68,8 @@ pub struct WallParams {
     /// Two walls adjoining without a jump at less than this angle are facets of a curved
     /// surface, not a corner (radians).
     pub curved_max: Real,
-    /// A wall whose rms distance from its plane exceeds this is not flat (metres).
+    /// A wall whose rms distance from its plane exceeds this, and its χ² per point
+    /// `coplanar_chi2`, is not flat (metres).
     pub max_rms: Real,
     /// Gravity in the camera frame (pointing down, any length) and its direction's 1σ
     /// (radians), when the instrument knows it: enables [`WallSolution::plumb`].
@@ -201,6 +202,8 @@ pub struct WallSolution {
     pub plumb: Option<Estimate>,
     /// Points used in the wall fits.
     pub points: usize,
+    /// The straight runs each curve was cut into, left to right per curve, with their wall.
+    pub runs: heapless::Vec<Run, MAX_SEGMENTS>,
     /// Quality flags.
     pub flags: Flags,
 }
@@ -234,7 +237,9 @@ pub fn solve(input: &WallInput<'_>, params: &WallParams) -> Result<WallSolution,
     let mut points = 0;
     for (w, wall) in walls.iter().enumerate() {
         let plane = refit(input, params, &runs, w, &wall.plane)?;
-        if plane.rms > params.max_rms {
+        // Far walls scatter by millimetres: only scatter the noise does not explain is
+        // a surface that is not flat.
+        if plane.rms > params.max_rms && plane.chi2 > params.coplanar_chi2 {
             return Err(SolveError::NotPlanar);
         }
         if plane.chi2 > params.coplanar_chi2 {
@@ -268,6 +273,7 @@ pub fn solve(input: &WallInput<'_>, params: &WallParams) -> Result<WallSolution,
         segment,
         plumb,
         points,
+        runs,
         flags,
     })
 }
@@ -624,19 +630,18 @@ fn segment(
             var += s * s;
             continue;
         }
-        let (u_edge, sigma_u) = match outer {
-            Some(o) => {
-                let u_out = column(pts[o], params);
-                (0.5 * (u_in + u_out), ((u_out - u_in).abs().max(1.0)) / sqrt(12.0))
-            }
-            None => {
-                let at_side = if side == 0 { u_in < params.edge_margin_px } else { u_in > params.width_px - 1.0 - params.edge_margin_px };
-                if at_side {
-                    kinds[side] = EndKind::FrameSide;
-                }
-                (u_in + 0.5 * sign, 1.0 / sqrt(12.0))
-            }
+        // The plane's stripe is seen up to its last column and not in the next: the edge is
+        // within that column's outer half-pixel whatever follows (a deeper surface, a gap of
+        // unlit columns), uniform: σ = 1/√12 px (docs/building.md, "Segment length").
+        let at_side = if side == 0 {
+            u_in < params.edge_margin_px
+        } else {
+            u_in > params.width_px - 1.0 - params.edge_margin_px
         };
+        if outer.is_none() && at_side {
+            kinds[side] = EndKind::FrameSide;
+        }
+        let (u_edge, sigma_u) = (u_in + 0.5 * sign, 1.0 / sqrt(12.0));
         let at = |u: Real| -> Option<Real> {
             let a = u - params.principal_u;
             let den = params.focal_px * dir.x - a * dir.z;

@@ -115,6 +115,18 @@ fn a_frontal_wall_faces_the_camera() {
 }
 
 #[test]
+fn a_far_turned_wall_is_found() {
+    // 3 m away, turned 25°: the points scatter by several millimetres, as predicted.
+    let y = (25.0 as Real).to_radians();
+    let scene = [piece(Vec3::new(y.sin(), 0.0, y.cos()), Vec3::new(0.0, 0.0, 3.0), ALL)];
+    let s = Curves::of(&scene, 0.085, 11).solve(&WallParams::default()).unwrap();
+    assert_eq!(s.walls.len(), 1);
+    let o = s.orientation;
+    assert!((o.yaw.value - y).abs() < 4.0 * o.yaw.sigma, "{o:?}");
+    assert!((o.axis_distance.value - 3.0).abs() < 4.0 * o.axis_distance.sigma, "{o:?}");
+}
+
+#[test]
 fn a_room_corner_reads_its_angle() {
     for (opening, seed) in [(90.0 as Real, 2u64), (80.0, 3), (100.0, 4)] {
         // Walls symmetric about the axis meeting 2 m away; `opening` between them.
