@@ -18,7 +18,9 @@
 use embassy_futures::select::{select, select3, Either, Either3};
 use heapless::Deque;
 use tangent_core::calibration::Calibration;
-use tangent_core::measurement::Measurement;
+use tangent_core::instrument;
+use tangent_core::measurement::Mode;
+use tangent_core::protocol::codes::Failure;
 use tangent_core::protocol::codes::HISTORY_LEN;
 use tangent_core::protocol::{
     self, DeviceError, DeviceInfo, ErrorCode, Feed, FrameEncoder, FrameSel, FrameSetInfo,
@@ -76,6 +78,9 @@ pub struct App<'b, B: Board, M: Measurer> {
     exposure: Exposure,
     history: Deque<Reading, HISTORY_LEN>,
     stream: Option<(u16, Welford)>,
+    /// The instrument every reading is measured with ([`Request::SetMode`]); kept in RAM, so
+    /// a reset returns to [`Mode::Cylinder`].
+    mode: Mode,
     /// Duration of the last pipeline run (µs of the board clock), for benchmarks.
     pub last_pipeline_us: u64,
 }
@@ -114,6 +119,7 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
             exposure: Exposure::new(),
             history: Deque::new(),
             stream: None,
+            mode: Mode::Cylinder,
             last_pipeline_us: 0,
         }
     }
@@ -126,6 +132,11 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
     /// The active calibration.
     pub fn calibration(&self) -> Option<&Calibration> {
         self.calibration.as_ref()
+    }
+
+    /// The instrument the device measures with.
+    pub fn mode(&self) -> Mode {
+        self.mode
     }
 
     /// Link counters.
@@ -296,7 +307,30 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
                 let report = self.self_test().await;
                 self.send(tag, &Response::SelfTest(report)).await;
             }
+            Request::SetMode(mode) => {
+                let response = match self.set_mode(mode) {
+                    Ok(()) => Response::Ack,
+                    Err(failure) => Response::Error(failure.device_error()),
+                };
+                self.send(tag, &response).await;
+            }
         }
+    }
+
+    /// Selects the instrument of later readings; a mode this build cannot measure is refused
+    /// ([`Failure::UnsupportedMode`]) and the mode stays. A running stream carries on in the
+    /// new mode with fresh statistics (a mean of stems and spheres means nothing).
+    pub fn set_mode(&mut self, mode: Mode) -> Result<(), Failure> {
+        if !instrument::supports(mode) {
+            return Err(Failure::UnsupportedMode(mode));
+        }
+        if mode != self.mode {
+            if let Some((_, stats)) = self.stream.as_mut() {
+                *stats = Welford::new();
+            }
+        }
+        self.mode = mode;
+        Ok(())
     }
 
     fn install_calibration(&mut self, wire: &WireCalibration) -> Result<(), DeviceError> {
@@ -375,6 +409,7 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
             uptime_ms: self.dev.clock.now_ms(),
             last_seq: self.seq,
             link: self.rx.stats(),
+            mode: self.mode,
         };
         self.send(tag, &Response::Info(info)).await;
     }
@@ -398,9 +433,7 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
         match self.measure_once().await {
             Ok(mut reading) => {
                 if let Some(s) = stats {
-                    match reading.measurement {
-                        Measurement::Stem(stem) => s.push(stem.diameter as f64),
-                    }
+                    s.push(reading.measurement.value() as f64);
                     reading.stats = Some(s.summary());
                 }
                 if self.history.is_full() {
@@ -441,7 +474,7 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
             laser_mask: info.laser_mask,
         };
         let t0 = self.dev.clock.now_us();
-        let result = self.measurer.measure(&pair, cal);
+        let result = self.measurer.measure(self.mode, &pair, cal);
         let t1 = self.dev.clock.now_us();
         self.last_pipeline_us = t1.saturating_sub(t0);
         B::log(format_args!(

@@ -10,7 +10,7 @@ use std::rc::Rc;
 use std::task::{Context, Poll, Waker};
 
 use tangent_core::calibration::Calibration;
-use tangent_core::measurement::Measurement;
+use tangent_core::measurement::{Measurement, Mode};
 use tangent_core::protocol::codes::Failure;
 use tangent_core::protocol::{self, WireCalibration};
 
@@ -226,7 +226,12 @@ impl Watchdog for FakeWatchdog {
 pub struct FailingMeasurer;
 
 impl Measurer for FailingMeasurer {
-    fn measure(&mut self, _: &FramePair<'_>, _: &Calibration) -> Result<Measurement, Failure> {
+    fn measure(
+        &mut self,
+        _: Mode,
+        _: &FramePair<'_>,
+        _: &Calibration,
+    ) -> Result<Measurement, Failure> {
         Err(Failure::Frame)
     }
 }

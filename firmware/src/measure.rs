@@ -6,12 +6,11 @@
 
 use tangent_core::calibration::Calibration;
 use tangent_core::image::Frame;
-use tangent_core::instrument::{self, Stem};
-use tangent_core::measurement::Measurement;
+use tangent_core::instrument::{self, InstrumentParams};
+use tangent_core::measurement::{Measurement, Mode};
 use tangent_core::pipeline::{self, PipelineConfig, PipelineError, Stage, Workspace};
 use tangent_core::protocol::codes::Failure;
 use tangent_core::real::Real;
-use tangent_core::solvers::stem::CylinderParams;
 
 /// A captured frame pair, 8-bit, row-major, `width` bytes per row.
 #[derive(Debug, Clone, Copy)]
@@ -32,23 +31,25 @@ pub struct FramePair<'a> {
 
 /// Runs the measurement on a frame pair.
 pub trait Measurer {
-    /// Measures; a failure is sent as [`Failure::device_error`] (the code map and the
-    /// sentence the host prints are in `tangent_core::protocol::codes`).
+    /// Measures with the instrument of `mode`; a failure is sent as
+    /// [`Failure::device_error`] (the code map and the sentence the host prints are in
+    /// `tangent_core::protocol::codes`).
     fn measure(
         &mut self,
+        mode: Mode,
         pair: &FramePair<'_>,
         calibration: &Calibration,
     ) -> Result<Measurement, Failure>;
 }
 
-/// The shared pipeline (`tangent_core::instrument`, the stem instrument) with its working
-/// memory.
+/// The shared pipeline (`tangent_core::instrument`, the instrument of the device's mode) with
+/// its working memory.
 pub struct PipelineMeasurer<'w> {
     ws: Workspace<'w, u8>,
     /// Image-chain parameters.
     pub config: PipelineConfig,
-    /// Cylinder-solver parameters.
-    pub params: CylinderParams,
+    /// Every instrument's solver parameters.
+    pub params: InstrumentParams,
     /// A free-running clock (µs) to time the pipeline's stages with, or `None`.
     pub stage_clock: Option<fn() -> u64>,
     /// Durations of the last measurement's stages (µs of `stage_clock`; zero without a clock
@@ -63,7 +64,7 @@ pub struct PipelineMeasurer<'w> {
 pub struct StageTimes {
     /// Subtraction, threshold, segmentation, selection, curve extraction, triangulation.
     pub image_us: [u64; 6],
-    /// Cylinder solver ([`instrument::solve_with`] of [`Stem`]).
+    /// The mode's solver ([`instrument::solve`]).
     pub solver_us: u64,
 }
 
@@ -73,7 +74,7 @@ impl<'w> PipelineMeasurer<'w> {
         PipelineMeasurer {
             ws,
             config: PipelineConfig::default(),
-            params: CylinderParams::default(),
+            params: InstrumentParams::default(),
             stage_clock: None,
             last_stages: StageTimes::default(),
         }
@@ -93,9 +94,13 @@ pub fn window_calibration(cal: &Calibration, row_offset: usize, height: usize) -
 impl Measurer for PipelineMeasurer<'_> {
     fn measure(
         &mut self,
+        mode: Mode,
         pair: &FramePair<'_>,
         calibration: &Calibration,
     ) -> Result<Measurement, Failure> {
+        if !instrument::supports(mode) {
+            return Err(Failure::UnsupportedMode(mode));
+        }
         let frame = |data| {
             Frame::new(data, pair.width, pair.height, pair.width)
                 .map_err(|e| Failure::of(&PipelineError::Frame(e)))
@@ -130,7 +135,8 @@ impl Measurer for PipelineMeasurer<'_> {
         self.last_stages = stages;
         let profile = profile.map_err(|e| Failure::of(&e))?;
         let t = now();
-        let solved = instrument::solve_with::<Stem, u8>(
+        let solved = instrument::solve(
+            mode,
             &profile,
             on.max_value(),
             cal,
@@ -138,7 +144,6 @@ impl Measurer for PipelineMeasurer<'_> {
             &mut self.ws,
         );
         self.last_stages.solver_us = now().saturating_sub(t);
-        let solved = solved.map_err(|e| Failure::of(&e))?;
-        Ok(Measurement::from(&solved))
+        solved.map_err(|e| Failure::of(&e))
     }
 }

@@ -66,7 +66,8 @@ pub struct PlotHeader {
     pub note: String,
 }
 
-/// One tree reading.
+/// One reading (a tree's, or of any other instrument: [`TreeRecord::kind`]). The record keeps
+/// its historical name and `"type":"tree"` so that every log ever written still reads.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TreeRecord {
     /// Plot the tree belongs to.
@@ -75,7 +76,8 @@ pub struct TreeRecord {
     pub tree_id: u32,
     /// Species code (the inventory's code list, e.g. `PIAB` or `50`).
     pub species: String,
-    /// Diameter (millimetres).
+    /// Diameter (millimetres): [`Measurement::value`] of the reading — a stem's or a sphere's
+    /// diameter.
     pub diameter_mm: f64,
     /// Standard uncertainty of the diameter (millimetres).
     pub uncertainty_mm: f64,
@@ -93,6 +95,19 @@ pub struct TreeRecord {
     pub seq: u32,
     /// Device time of the reading (ms since its boot).
     pub device_time_ms: u64,
+    /// What the reading is of ([`Measurement::kind`]: `stem`, `sphere`, …), so that one log
+    /// mixes instruments; logs written before readings had kinds hold stems only.
+    #[serde(default = "stem_kind")]
+    pub kind: String,
+    /// The whole reading as the device sent it (any instrument's fields, SI units); absent
+    /// from logs written before readings had kinds.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub measurement: Option<Measurement>,
+}
+
+/// The kind of the readings of logs written before readings had kinds.
+fn stem_kind() -> String {
+    "stem".to_string()
 }
 
 impl TreeRecord {
@@ -104,24 +119,29 @@ impl TreeRecord {
         species: &str,
         device_id: &str,
     ) -> TreeRecord {
-        let Measurement::Stem(stem) = r.measurement;
+        let m = &r.measurement;
+        let tilt = match m {
+            Measurement::Stem(stem) => stem.tilt.map(|t| t.total),
+            #[allow(unreachable_patterns)] // the instruments without a tilt
+            _ => None,
+        };
         TreeRecord {
             plot_id: plot_id.to_string(),
             tree_id,
             species: species.to_string(),
             // Via f32, the precision of the wire, so a reading logs the same digits whatever
             // precision the host computes in.
-            diameter_mm: stem.diameter as f32 as f64 * 1e3,
-            uncertainty_mm: stem.uncertainty as f32 as f64 * 1e3,
-            tilt_deg: stem
-                .tilt
-                .map_or(0.0, |t| (t.total as f32 as f64).to_degrees()),
-            flags: stem.flags.0,
+            diameter_mm: m.value() as f32 as f64 * 1e3,
+            uncertainty_mm: m.uncertainty() as f32 as f64 * 1e3,
+            tilt_deg: tilt.map_or(0.0, |t| (t as f32 as f64).to_degrees()),
+            flags: m.flags().0,
             time: now_rfc3339(),
             device_id: device_id.to_string(),
             calib_id: r.calib_id,
             seq: r.seq,
             device_time_ms: r.timestamp_ms,
+            kind: m.kind().to_string(),
+            measurement: Some(*m),
         }
     }
 }

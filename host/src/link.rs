@@ -29,6 +29,7 @@ use std::collections::{BTreeMap, VecDeque};
 use std::io::{ErrorKind, Read, Write};
 use std::time::{Duration, Instant};
 
+use tangent_core::measurement::Mode;
 use tangent_core::protocol::{
     self, codes, Board, Decoder, DeviceError, ErrorCode, Feed, FrameEncoder, FrameSel,
     FrameSetInfo, FromDevice, LinkStats, ProtocolError, Reading, Request, Response, SelfTestReport,
@@ -173,6 +174,8 @@ pub struct DeviceIdentity {
     pub last_seq: u32,
     /// The device's receive counters.
     pub link: LinkStats,
+    /// The instrument the device measures with.
+    pub mode: Mode,
 }
 
 /// A device message, owned ([`Response`] borrows from the receive buffer).
@@ -227,6 +230,7 @@ impl From<Response<'_>> for Reply {
                 uptime_ms: i.uptime_ms,
                 last_seq: i.last_seq,
                 link: i.link,
+                mode: i.mode,
             }),
             Response::Reading(r) => Reply::Reading(r),
             Response::Error(e) => Reply::Error(e),
@@ -401,6 +405,8 @@ pub struct Link {
     peer_version: Option<u8>,
     fruitless_replays: u32,
     on_event: Option<EventSink>,
+    /// The mode asked for with [`Link::set_mode`], set again after a device restart.
+    mode: Option<Mode>,
 }
 
 /// What one frame turned out to be.
@@ -435,6 +441,7 @@ impl Link {
                 uptime_ms: 0,
                 last_seq: 0,
                 link: LinkStats::default(),
+                mode: Mode::Cylinder,
             },
             seq: SeqTracker::default(),
             streaming: false,
@@ -445,6 +452,7 @@ impl Link {
             peer_version: None,
             fruitless_replays: 0,
             on_event: None,
+            mode: None,
         };
         link.handshake()?;
         link.seq.last = link.identity.last_seq;
@@ -606,6 +614,11 @@ impl Link {
         // The handshake itself may hit another disconnect: it then recurses through
         // `write_bytes`, bounded by the reconnect timeout.
         self.handshake()?;
+        // A device that restarted forgot its mode: the readings must stay of the asked kind.
+        if let Some(mode) = self.mode.filter(|m| *m != self.identity.mode) {
+            self.expect_ack(Request::SetMode(mode), "SetMode")?;
+            self.identity.mode = mode;
+        }
         if self.streaming {
             self.request_inner(Request::StartStream, "StartStream", true)?;
         }
@@ -854,6 +867,16 @@ impl Link {
     pub fn start_stream(&mut self) -> Result<(), LinkError> {
         self.expect_ack(Request::StartStream, "StartStream")?;
         self.streaming = true;
+        Ok(())
+    }
+
+    /// Selects the instrument the device measures with from now on (and again after it
+    /// restarts). A mode the firmware cannot measure is [`LinkError::Device`] with the
+    /// sentence of [`Failure::UnsupportedMode`](tangent_core::protocol::codes::Failure).
+    pub fn set_mode(&mut self, mode: Mode) -> Result<(), LinkError> {
+        self.expect_ack(Request::SetMode(mode), "SetMode")?;
+        self.identity.mode = mode;
+        self.mode = Some(mode);
         Ok(())
     }
 

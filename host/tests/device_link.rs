@@ -10,7 +10,6 @@ mod test_device;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use tangent_core::measurement::Measurement;
 use tangent_core::protocol::{FrameSel, PROTOCOL_VERSION};
 use tangent_host::link::{Link, LinkConfig, LinkError, LinkEvent};
 use test_device::{diameter_of, test_frame, Faults, NotATangent, Setup, TestDevice, HISTORY};
@@ -34,9 +33,8 @@ fn collect(link: &mut Link, n: u32, timeout: Duration) -> Vec<u32> {
     let mut seqs = Vec::new();
     while (seqs.len() as u32) < n && Instant::now() < end {
         if let Some(r) = link.next_reading(Duration::from_millis(100)).unwrap() {
-            let Measurement::Stem(stem) = r.measurement;
             assert_eq!(
-                stem.diameter,
+                r.measurement.value(),
                 f64::from(diameter_of(r.seq)),
                 "content of reading {}",
                 r.seq
@@ -555,4 +553,33 @@ fn emulated_device_through_a_faulty_cut_link() {
     assert_eq!(seqs, (1..=made).collect::<Vec<_>>(), "{err}");
     assert!(made >= n / 2, "only {made} of {n} measurements made: {err}");
     assert!(err.contains("link lost"), "the cuts happened: {err}");
+}
+
+/// `Link::set_mode` on the real firmware application: a measured mode is taken and shows in
+/// the identity, any other is refused with the device's sentence naming the mode.
+#[test]
+fn the_link_sets_the_mode_and_names_a_refusal() {
+    use tangent_core::instrument;
+    use tangent_core::measurement::Mode;
+    let dev = TestDevice::start();
+    let mut link = open(&dev);
+    assert_eq!(link.identity().mode, Mode::Cylinder);
+    for mode in Mode::ALL {
+        match link.set_mode(mode) {
+            Ok(()) => {
+                assert!(instrument::supports(mode));
+                assert_eq!(link.identity().mode, mode);
+                assert_eq!(link.device_info().unwrap().mode, mode);
+            }
+            Err(e) => {
+                assert!(!instrument::supports(mode));
+                let text = e.to_string();
+                assert!(
+                    text.contains("SetMode") && text.contains(mode.name()),
+                    "{text}"
+                );
+                assert_ne!(link.device_info().unwrap().mode, mode);
+            }
+        }
+    }
 }

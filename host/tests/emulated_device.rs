@@ -13,7 +13,6 @@ use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
 use tangent_core::calibration::Calibration;
-use tangent_core::measurement::Measurement;
 use tangent_core::protocol::codes::Failure;
 use tangent_core::protocol::{
     self, calibration_record, DeviceError, ErrorCode, FrameSel, FromDevice, Request, Response,
@@ -422,6 +421,76 @@ fn measure_without_calibration_is_a_clear_error() {
     });
 }
 
+/// The mode from the host on the real firmware: the device boots in the stem's mode and says
+/// so in `Info`; every mode this build measures is taken and read back; any other is refused
+/// with the `UnsupportedMode` sentence and the mode stays; a reading is of the set mode's kind
+/// (a nothing-lit pair: the chain's failure, not the refusal of the mode).
+#[test]
+fn the_mode_is_set_from_the_host_and_read_back() {
+    use tangent_core::instrument;
+    use tangent_core::measurement::Mode;
+
+    let Some(elf) = firmware_elf() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let (off, on, _, _) = synthetic_pair(dir.path(), "mode");
+    let pairs = vec![(off.clone(), on.clone()), (off, on)];
+    let mut dev = Device::boot(&elf, &pairs, Some(&Calibration::reference_design()));
+    let mode_now = |dev: &mut Device| {
+        dev.request(Request::DeviceInfo, |r| match r {
+            Response::Info(i) => i.mode,
+            other => panic!("{other:?}"),
+        })
+    };
+    assert_eq!(
+        mode_now(&mut dev),
+        Mode::Cylinder,
+        "boots in the stem's mode"
+    );
+    let mut taken = Vec::new();
+    for mode in Mode::ALL {
+        let before = mode_now(&mut dev);
+        dev.request(Request::SetMode(mode), |r| match r {
+            Response::Ack => {
+                assert!(
+                    instrument::supports(mode),
+                    "{mode:?} taken without a solver"
+                );
+                taken.push(mode);
+            }
+            Response::Error(DeviceError { code, detail }) => {
+                assert!(!instrument::supports(mode), "{mode:?} refused");
+                assert_eq!(code, ErrorCode::MeasurementFailed);
+                assert_eq!(Failure::from_detail(detail), Failure::UnsupportedMode(mode));
+            }
+            other => panic!("{other:?}"),
+        });
+        let after = mode_now(&mut dev);
+        let expected = if taken.last() == Some(&mode) {
+            mode
+        } else {
+            before
+        };
+        assert_eq!(after, expected, "mode after SetMode({mode:?})");
+    }
+    assert!(taken.contains(&Mode::Cylinder));
+    // Measuring in each taken mode runs that mode's chain: this pair has a lit band across
+    // the frame, so whatever the outcome, it is not the refusal of the mode.
+    for mode in taken.iter().take(pairs.len()) {
+        dev.request(Request::SetMode(*mode), |r| assert_eq!(r, Response::Ack));
+        dev.request(Request::Measure, |r| match r {
+            Response::Reading(reading) => assert_eq!(reading.measurement.mode(), *mode),
+            Response::Error(DeviceError { code, detail }) => {
+                assert_eq!(code, ErrorCode::MeasurementFailed);
+                assert_ne!(
+                    Failure::from_detail(detail),
+                    Failure::UnsupportedMode(*mode)
+                );
+            }
+            other => panic!("{other:?}"),
+        });
+    }
+}
+
 /// 8-bit version of a capture frame: 8-bit data as is, deeper data reduced to its top 8
 /// bits (what the device's 8-bit DCMI bus on D9..D2 sees, and what the emulated camera does
 /// with a 16-bit PGM).
@@ -510,18 +579,19 @@ fn on_device_measurements_equal_the_hosts() {
         dev.request(Request::Measure, |r| match (host, r) {
             (Ok(h), Response::Reading(reading)) => {
                 let hs = &h.solution;
-                let Measurement::Stem(d) = reading.measurement;
-                let rel = (d.diameter - hs.diameter).abs() / hs.diameter;
+                let d = reading.measurement;
+                let rel = (d.value() - hs.diameter).abs() / hs.diameter;
                 eprintln!(
                     "{name}: host {:.4} mm {:?}, device {:.4} mm {:?}, relative difference {rel:.2e}",
                     hs.diameter * 1e3,
                     hs.method,
-                    d.diameter * 1e3,
-                    d.method
+                    d.value() * 1e3,
+                    d.method()
                 );
-                assert_eq!(d.method, hs.method, "{name}: method");
-                assert!(rel <= 1e-4, "{name}: device {} m vs host {} m", d.diameter, hs.diameter);
-                assert_eq!(d.flags, hs.flags, "{name}: flags");
+                assert_eq!(d.kind(), "stem", "{name}: kind");
+                assert_eq!(d.method(), hs.method, "{name}: method");
+                assert!(rel <= 1e-4, "{name}: device {} m vs host {} m", d.value(), hs.diameter);
+                assert_eq!(d.flags(), hs.flags, "{name}: flags");
                 compared += 1;
             }
             (Err(e), Response::Error(DeviceError { code, detail })) => {

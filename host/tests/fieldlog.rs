@@ -40,6 +40,8 @@ fn tree(plot_id: &str, tree_id: u32, species: &str, d: f64, flags: u16, seq: u32
         calib_id: 7,
         seq,
         device_time_ms: 1000 * seq as u64,
+        kind: "stem".into(),
+        measurement: None,
     })
 }
 
@@ -104,17 +106,17 @@ started,2025-06-01T08:00:00Z
 note,
 trees,2
 
-tree_id,species,dbh_mm,uncertainty_mm,tilt_deg,flags,time,device_id,calib_id,seq,plot_id
-1,PIAB,314.1,1.2,3.0,,2025-06-01T08:01:00Z,H743-0001,7,1,P-017
-2,PISY,202.0,1.2,3.0,POOR_FIT+TILT_IGNORED,2025-06-01T08:02:00Z,H743-0001,7,2,P-017
+tree_id,species,dbh_mm,uncertainty_mm,tilt_deg,flags,time,device_id,calib_id,seq,plot_id,kind
+1,PIAB,314.1,1.2,3.0,,2025-06-01T08:01:00Z,H743-0001,7,1,P-017,stem
+2,PISY,202.0,1.2,3.0,POOR_FIT+TILT_IGNORED,2025-06-01T08:02:00Z,H743-0001,7,2,P-017,stem
 
 plot_id,\"P 18, \"\"north\"\"\"
 started,2025-06-01T08:00:00Z
 note,
 trees,1
 
-tree_id,species,dbh_mm,uncertainty_mm,tilt_deg,flags,time,device_id,calib_id,seq,plot_id
-1,50,88.0,1.2,3.0,0x8000,2025-06-01T08:01:00Z,H743-0001,7,3,\"P 18, \"\"north\"\"\"
+tree_id,species,dbh_mm,uncertainty_mm,tilt_deg,flags,time,device_id,calib_id,seq,plot_id,kind
+1,50,88.0,1.2,3.0,0x8000,2025-06-01T08:01:00Z,H743-0001,7,3,\"P 18, \"\"north\"\"\",stem
 ";
     assert_eq!(fieldlog::export(&sample(), ExportFormat::Csv), want);
 }
@@ -123,14 +125,14 @@ tree_id,species,dbh_mm,uncertainty_mm,tilt_deg,flags,time,device_id,calib_id,seq
 fn tsv_export_is_exactly_the_documented_layout() {
     let got = fieldlog::export(&sample()[..3], ExportFormat::Tsv);
     let want = "plot_id\tP-017\nstarted\t2025-06-01T08:00:00Z\nnote\t\ntrees\t2\n\n\
-tree_id\tspecies\tdbh_mm\tuncertainty_mm\ttilt_deg\tflags\ttime\tdevice_id\tcalib_id\tseq\tplot_id\n\
-1\tPIAB\t314.1\t1.2\t3.0\t\t2025-06-01T08:01:00Z\tH743-0001\t7\t1\tP-017\n\
-2\tPISY\t202.0\t1.2\t3.0\tPOOR_FIT+TILT_IGNORED\t2025-06-01T08:02:00Z\tH743-0001\t7\t2\tP-017\n";
+tree_id\tspecies\tdbh_mm\tuncertainty_mm\ttilt_deg\tflags\ttime\tdevice_id\tcalib_id\tseq\tplot_id\tkind\n\
+1\tPIAB\t314.1\t1.2\t3.0\t\t2025-06-01T08:01:00Z\tH743-0001\t7\t1\tP-017\tstem\n\
+2\tPISY\t202.0\t1.2\t3.0\tPOOR_FIT+TILT_IGNORED\t2025-06-01T08:02:00Z\tH743-0001\t7\t2\tP-017\tstem\n";
     assert_eq!(got, want);
     // Field-Map's calliper import skips the header lines and reads tab-separated columns:
     // every tree row has exactly as many fields as the column line.
     let rows: Vec<&str> = got.lines().skip(5).collect();
-    assert!(rows.iter().all(|r| r.split('\t').count() == 11));
+    assert!(rows.iter().all(|r| r.split('\t').count() == 12));
 }
 
 #[test]

@@ -171,10 +171,38 @@ pub fn measure<P: Pixel>(
     params: &InstrumentParams,
     ws: &mut Workspace<'_, P>,
 ) -> Result<Measurement, PipelineError> {
+    // Refused before the image work: a mode without a solver is a setting, not a scene.
+    if !supports(mode) {
+        return Err(PipelineError::UnsupportedMode(mode));
+    }
+    let profile = extract_profile(off, on, calibration, config, ws)?;
+    solve(mode, &profile, on.max_value(), calibration, params, ws)
+}
+
+/// Whether this build has a solver for `mode`: the modes [`measure`] and [`solve`] accept
+/// (the device refuses to be set to any other).
+pub fn supports(mode: Mode) -> bool {
+    match mode {
+        Mode::Cylinder => true,
+        Mode::Sphere | Mode::Wall | Mode::Road => false,
+    }
+}
+
+/// The solver half of [`measure`] for the instrument of `mode` ([`solve_with`] of it, its
+/// solution made a [`Measurement`]), on the points [`extract_profile`] left in `ws`. The
+/// device calls it after its timed extraction, so every reading path goes through here.
+pub fn solve<P: Pixel>(
+    mode: Mode,
+    profile: &Profile,
+    full_scale: u32,
+    calibration: &Calibration,
+    params: &InstrumentParams,
+    ws: &mut Workspace<'_, P>,
+) -> Result<Measurement, PipelineError> {
     match mode {
         Mode::Cylinder => {
-            measure_with::<Stem, P>(off, on, calibration, config, &params.cylinder, ws)
-                .map(|m| Measurement::from(&m.solution))
+            solve_with::<Stem, P>(profile, full_scale, calibration, &params.cylinder, ws)
+                .map(|s| Measurement::from(&s))
         }
         Mode::Sphere | Mode::Wall | Mode::Road => Err(PipelineError::UnsupportedMode(mode)),
     }

@@ -27,6 +27,14 @@ pub enum Mode {
 }
 
 impl Mode {
+    /// Every mode, in the order of their wire numbers.
+    pub const ALL: [Mode; 4] = [Mode::Cylinder, Mode::Sphere, Mode::Wall, Mode::Road];
+
+    /// The mode of a [`Mode::name`], `None` for any other word.
+    pub fn from_name(name: &str) -> Option<Mode> {
+        Mode::ALL.into_iter().find(|m| m.name() == name)
+    }
+
     /// The name used in capture files, on the command line and in logs.
     pub fn name(self) -> &'static str {
         match self {
@@ -64,6 +72,28 @@ impl Measurement {
     pub fn method(&self) -> Method {
         match self {
             Measurement::Stem(s) => s.method,
+        }
+    }
+
+    /// What the reading is of, as logs and exports name it: `"stem"`, `"sphere"`, …
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Measurement::Stem(_) => "stem",
+        }
+    }
+
+    /// The reading's headline number (metres): what running statistics average and the
+    /// field log's size column keeps — a stem's diameter.
+    pub fn value(&self) -> Real {
+        match self {
+            Measurement::Stem(s) => s.diameter,
+        }
+    }
+
+    /// Predicted 1σ of [`Measurement::value`] (metres).
+    pub fn uncertainty(&self) -> Real {
+        match self {
+            Measurement::Stem(s) => s.uncertainty,
         }
     }
 }

@@ -260,3 +260,39 @@ fn a_hang_in_the_main_loop_stops_the_feeding() {
     }
     assert_eq!(feeds.borrow().len(), 1, "{:?}", feeds.borrow());
 }
+
+/// The mode from the host: every mode this build measures is taken and remembered, every
+/// other refused with the `UnsupportedMode` failure and the mode left as it was; the device
+/// starts in the stem's mode.
+#[test]
+fn set_mode_takes_what_the_build_measures_and_refuses_the_rest() {
+    use tangent_core::instrument;
+    use tangent_core::measurement::Mode;
+    let mut rig = Rig::new();
+    let mut app = rig.app(CameraBehaviour::Works, false);
+    assert_eq!(app.mode(), Mode::Cylinder);
+    let mut refused = 0;
+    for mode in Mode::ALL {
+        let before = app.mode();
+        match app.set_mode(mode) {
+            Ok(()) => {
+                assert!(
+                    instrument::supports(mode),
+                    "{mode:?} taken without a solver"
+                );
+                assert_eq!(app.mode(), mode);
+            }
+            Err(failure) => {
+                refused += 1;
+                assert!(!instrument::supports(mode), "{mode:?} refused");
+                assert_eq!(failure, Failure::UnsupportedMode(mode));
+                assert_eq!(failure.device_error().code, ErrorCode::MeasurementFailed);
+                assert_eq!(app.mode(), before, "a refused mode changes nothing");
+            }
+        }
+    }
+    assert!(
+        refused < Mode::ALL.len(),
+        "the stem's mode is always measured"
+    );
+}

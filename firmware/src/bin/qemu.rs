@@ -13,7 +13,6 @@
 use core::panic::PanicInfo;
 
 use cortex_m_rt::{entry, exception};
-use tangent_core::measurement::Measurement;
 use tangent_firmware::app::App;
 use tangent_firmware::board::qemu::{self, Qemu};
 use tangent_firmware::measure::PipelineMeasurer;
@@ -60,19 +59,20 @@ fn bench(app: &mut App<'_, Qemu<'static>, PipelineMeasurer<'_>>, scenes: usize) 
         let mut ok = true;
         for i in 0..scenes {
             match app.measure_once().await {
-                Ok(r) => match r.measurement {
-                    Measurement::Stem(stem) => qemu::log(format_args!(
+                Ok(r) => {
+                    let m = r.measurement;
+                    qemu::log(format_args!(
                         "bench scene={} pipeline_us={} stages_us={:?} solver_us={} diameter_m={} uncertainty_m={} method={:?} flags={:#x}",
                         i,
                         app.last_pipeline_us,
                         app.measurer().last_stages.image_us,
                         app.measurer().last_stages.solver_us,
-                        stem.diameter,
-                        stem.uncertainty,
-                        stem.method,
-                        stem.flags.0
-                    )),
-                },
+                        m.value(),
+                        m.uncertainty(),
+                        m.method(),
+                        m.flags().0
+                    ))
+                }
                 Err(e) => {
                     ok = false;
                     qemu::log(format_args!(

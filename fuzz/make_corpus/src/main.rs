@@ -186,6 +186,8 @@ fn main() {
             calib_id: 7,
             seq: tree_id,
             device_time_ms: 1000 * tree_id as u64,
+            kind: "stem".into(),
+            measurement: None,
         })
     };
     let records = [

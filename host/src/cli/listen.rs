@@ -14,6 +14,7 @@ use std::time::Duration;
 
 use anyhow::{Context, Result};
 use plotters::prelude::*;
+use tangent_core::measurement::Mode;
 use tangent_core::protocol::Reading;
 use tangent_host::fieldlog::{self, FieldLog, PlotHeader, Record, TreeRecord};
 use tangent_host::link::{self, Link, LinkConfig, LinkEvent};
@@ -45,6 +46,10 @@ pub struct Args {
     /// Also keep a PNG of this session's diameters (± 2σ) by tree id, updated per reading.
     #[arg(long, value_name = "PNG")]
     plot: Option<PathBuf>,
+    /// Set the device to this instrument first (cylinder, sphere, wall, road); it keeps it
+    /// until told otherwise or restarted (the link sets it again after a restart).
+    #[arg(long, value_parser = parse_mode)]
+    mode: Option<Mode>,
     /// Ask the device to measure continuously (as if the trigger were held).
     #[arg(long)]
     stream: bool,
@@ -57,6 +62,14 @@ pub struct Args {
     /// Give up when the device has been gone this long (seconds; default: wait forever).
     #[arg(long, value_name = "S")]
     reconnect_timeout: Option<f64>,
+}
+
+/// A [`Mode`] by its name, for `--mode`.
+pub(crate) fn parse_mode(name: &str) -> Result<Mode, String> {
+    Mode::from_name(name).ok_or_else(|| {
+        let names: Vec<&str> = Mode::ALL.iter().map(|m| m.name()).collect();
+        format!("unknown mode `{name}` (one of: {})", names.join(", "))
+    })
 }
 
 /// What the forester typed: a tree id, a species code, or both.
@@ -102,6 +115,9 @@ pub fn run(args: Args) -> Result<ExitCode> {
         cfg.reply_timeout = Duration::from_secs(5);
     }
     let mut link = Link::open(&path, cfg)?;
+    if let Some(mode) = args.mode {
+        link.set_mode(mode)?;
+    }
     // The error names the file.
     let mut log = FieldLog::open(&args.log).context("cannot open the field log")?;
     if log.torn_bytes() > 0 {
@@ -152,12 +168,13 @@ pub fn run(args: Args) -> Result<ExitCode> {
         }
     }
     eprintln!(
-        "listening to {} on {path} (firmware {}, calibration {}), plot {plot_id}, log {}",
+        "listening to {} on {path} (firmware {}, calibration {}, mode {}), plot {plot_id}, log {}",
         device_id,
         id.fw_version,
         id.calib_id
             .map(|c| c.to_string())
             .unwrap_or_else(|| "NONE — push one with `tangent device-calibration push`".into()),
+        id.mode.name(),
         args.log.display()
     );
 
@@ -261,18 +278,22 @@ pub fn run(args: Args) -> Result<ExitCode> {
 }
 
 fn describe(t: &TreeRecord, r: &Reading) -> String {
-    let mut s = format!(
-        "tree {:>4} {:<6} {:7.1} mm ± {:.1}  tilt {:4.1}°",
-        t.tree_id,
-        if t.species.is_empty() {
-            "-"
-        } else {
-            &t.species
-        },
-        t.diameter_mm,
-        t.uncertainty_mm,
-        t.tilt_deg
-    );
+    let species = if t.species.is_empty() {
+        "-"
+    } else {
+        &t.species
+    };
+    let mut s = if t.kind == "stem" {
+        format!(
+            "tree {:>4} {:<6} {:7.1} mm ± {:.1}  tilt {:4.1}°",
+            t.tree_id, species, t.diameter_mm, t.uncertainty_mm, t.tilt_deg
+        )
+    } else {
+        format!(
+            "{} {:>4} {:<6} d = {:7.1} mm ± {:.1}",
+            t.kind, t.tree_id, species, t.diameter_mm, t.uncertainty_mm
+        )
+    };
     if let Some(st) = r.stats.filter(|s| s.count > 1) {
         s += &format!(
             "  (held: {} readings, mean {:.1} mm, spread {:.1} mm)",

@@ -19,8 +19,10 @@ pub enum ExportFormat {
     Json,
 }
 
-/// The tree-level columns of the CSV/TSV exports, in order.
-pub const TREE_COLUMNS: [&str; 11] = [
+/// The tree-level columns of the CSV/TSV exports, in order (`kind`, last so that the
+/// column numbers importers are set up with stay, says what each row measured: `stem`,
+/// `sphere`, …; `dbh_mm` is then that reading's diameter).
+pub const TREE_COLUMNS: [&str; 12] = [
     "tree_id",
     "species",
     "dbh_mm",
@@ -32,6 +34,7 @@ pub const TREE_COLUMNS: [&str; 11] = [
     "calib_id",
     "seq",
     "plot_id",
+    "kind",
 ];
 
 /// A plot with its trees, as exported.
@@ -144,6 +147,7 @@ fn export_table(plots: &[ExportPlot], sep: char) -> String {
                 t.calib_id.to_string(),
                 t.seq.to_string(),
                 field(&t.plot_id, s),
+                field(&t.kind, s),
             ];
             out += &row.join(&sep.to_string());
             out.push('\n');

@@ -314,6 +314,8 @@ fn arb_record(seq: u32) -> impl Strategy<Value = Record> {
                     calib_id,
                     seq,
                     device_time_ms: ms,
+                    kind: "stem".into(),
+                    measurement: None,
                 })
             },
         );

@@ -8,7 +8,7 @@ use std::task::{Context, Poll, Waker};
 use std::time::{Duration, Instant};
 
 use tangent_core::calibration::Calibration;
-use tangent_core::measurement::{Measurement, StemReading, TiltAngles};
+use tangent_core::measurement::{Measurement, Mode, StemReading, TiltAngles};
 use tangent_core::protocol::codes::Failure;
 use tangent_core::protocol::{
     self, FrameSel, FromDevice, Method, ToDevice, WireCalibration, MAX_FRAME_LEN, MAX_RAW_LEN,
@@ -173,7 +173,12 @@ pub(super) struct TestMeasurer {
 }
 
 impl Measurer for TestMeasurer {
-    fn measure(&mut self, pair: &FramePair<'_>, _: &Calibration) -> Result<Measurement, Failure> {
+    fn measure(
+        &mut self,
+        _: Mode,
+        pair: &FramePair<'_>,
+        _: &Calibration,
+    ) -> Result<Measurement, Failure> {
         assert_eq!(
             (pair.width, pair.height, pair.row_offset),
             (

@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 use crate::calibration::{Calibration, CalibrationError, MAX_PLANES};
 use crate::camera::{Camera, Distortion};
 use crate::laser_plane::LaserPlane;
-use crate::measurement::Measurement;
+use crate::measurement::{Measurement, Mode};
 use crate::real::{Real, Vec3};
 
 /// A host → device frame: a request and the tag its response will echo.
@@ -79,6 +79,12 @@ pub enum Request {
     SetExposure(Option<u32>),
     /// Runs the self-test → [`Response::SelfTest`].
     SelfTest,
+    /// Selects the instrument every later reading measures with (trigger, [`Request::Measure`],
+    /// stream) → [`Response::Ack`]; the device remembers it ([`DeviceInfo::mode`] reports it).
+    /// A mode this firmware has no solver for is refused with [`ErrorCode::MeasurementFailed`]
+    /// and the detail of [`Failure::UnsupportedMode`](super::codes::Failure::UnsupportedMode),
+    /// and the mode stays as it was.
+    SetMode(Mode),
 }
 
 /// One frame of a captured pair.
@@ -150,6 +156,8 @@ pub struct DeviceInfo<'a> {
     pub last_seq: u32,
     /// Link health since boot.
     pub link: LinkStats,
+    /// The instrument the device measures with ([`Request::SetMode`]).
+    pub mode: Mode,
 }
 
 /// Hardware the firmware runs on.

@@ -4,7 +4,7 @@ use serde::Serialize;
 
 use super::*;
 use crate::calibration::{Calibration, CalibrationError, MAX_PLANES};
-use crate::measurement::{Measurement, StemReading, TiltAngles};
+use crate::measurement::{Measurement, Mode, StemReading, TiltAngles};
 use crate::real::Real;
 use crate::solvers::result::Flags;
 
@@ -74,6 +74,9 @@ fn every_request_round_trips() {
         Request::SetExposure(Some(1200)),
         Request::SetExposure(None),
         Request::SelfTest,
+        Request::SetMode(Mode::Cylinder),
+        Request::SetMode(Mode::Sphere),
+        Request::SetMode(Mode::Road),
     ];
     for (i, request) in requests.into_iter().enumerate() {
         let msg = ToDevice {
@@ -484,4 +487,38 @@ fn a_reading_carries_the_shared_measurement() {
     assert_eq!(r, reading(3));
     assert_eq!(r.measurement.method(), Method::CylinderFit);
     assert_eq!(r.measurement.flags(), Flags(0x1803));
+}
+
+/// The mode travels as its number (the order of [`Mode::ALL`]), in `SetMode` and in the
+/// device's `Info`, so both ends agree on it byte for byte.
+#[test]
+fn the_mode_travels_as_its_number() {
+    for (number, mode) in Mode::ALL.into_iter().enumerate() {
+        let mut buf = [0u8; 8];
+        let bytes = postcard::to_slice(&Request::SetMode(mode), &mut buf).unwrap();
+        // Variant index of SetMode, then the mode's.
+        assert_eq!(bytes.len(), 2);
+        assert_eq!(bytes[1] as usize, number);
+        assert_eq!(Mode::from_name(mode.name()), Some(mode));
+    }
+    assert_eq!(Mode::from_name("stem"), None);
+    let info = Response::Info(DeviceInfo {
+        protocol_version: PROTOCOL_VERSION,
+        fw_version: "1.2.3",
+        board: Board::Emulated,
+        calib_id: Some(7),
+        frame_width: 752,
+        frame_height: 480,
+        uptime_ms: 1234,
+        last_seq: 9,
+        link: LinkStats::default(),
+        mode: Mode::Sphere,
+    });
+    let msg = FromDevice {
+        tag: 3,
+        response: info,
+    };
+    let (mut out, n) = frame_of(&msg);
+    let back: FromDevice = decode(&mut out[..n]).unwrap();
+    assert_eq!(back, msg);
 }
