@@ -343,7 +343,10 @@ fn run<I: Instrument, P: Pixel>(
     calibration: &Calibration,
     config: &PipelineConfig,
     params: &I::Params,
-) -> (Result<Measured<I::Solution>, PipelineError>, OwnedBuffers<P>) {
+) -> (
+    Result<Measured<I::Solution>, PipelineError>,
+    OwnedBuffers<P>,
+) {
     let planes = calibration.planes.len();
     let mut hw = OwnedBuffers::<P>::for_frame(pgm.width, pgm.height, pgm.bit_depth(), planes);
     let result = (|| {
@@ -494,7 +497,11 @@ fn solve_capture<I: Instrument>(
             let (r, hw) = run::<I, u16>(a, b, &on, calibration, config, params);
             (
                 r,
-                (hw.diff().to_vec(), hw.curve().to_vec(), hw.points().to_vec()),
+                (
+                    hw.diff().to_vec(),
+                    hw.curve().to_vec(),
+                    hw.points().to_vec(),
+                ),
             )
         }
         _ => return Err(MeasureError::MixedDepth),

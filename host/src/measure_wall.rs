@@ -182,7 +182,10 @@ impl WallReport {
             );
         }
         if let Some(p) = self.parallel_mm {
-            s += &format!("; parallel walls {:.1} mm ± {:.1} mm apart", p.value, p.sigma);
+            s += &format!(
+                "; parallel walls {:.1} mm ± {:.1} mm apart",
+                p.value, p.sigma
+            );
         }
         if let Some(g) = &self.segment {
             s += &format!(
@@ -300,8 +303,8 @@ fn true_planes(capture: &Capture) -> Vec<Option<TruePlane>> {
         .collect()
 }
 
-/// The truth plane a fitted wall lies on: the one (containing its centroid in its bounds)
-/// nearest the centroid, within 20 mm and 5°.
+/// The truth plane a fitted wall lies on: the one nearest its centroid, within 20 mm and 5°
+/// (a wall cut by a door is two truth pieces of one plane: either will do).
 fn match_plane(planes: &[Option<TruePlane>], n: Vec3d, c: Vec3d) -> Option<usize> {
     planes
         .iter()
@@ -309,10 +312,7 @@ fn match_plane(planes: &[Option<TruePlane>], n: Vec3d, c: Vec3d) -> Option<usize
         .filter_map(|(i, p)| {
             let p = p.as_ref()?;
             let dist = (p.n.dot(&c) - p.d).abs();
-            let inside = p.bounds.is_none_or(|[lo, hi]| {
-                (0..3).all(|k| c[k] >= lo[k] - 0.05 && c[k] <= hi[k] + 0.05)
-            });
-            (inside && dist < 0.02 && p.n.dot(&n) > 5f64.to_radians().cos()).then_some((i, dist))
+            (dist < 0.02 && p.n.dot(&n) > 5f64.to_radians().cos()).then_some((i, dist))
         })
         .min_by(|a, b| a.1.total_cmp(&b.1))
         .map(|(i, _)| i)
@@ -363,9 +363,22 @@ pub fn wall_truth(capture: &Capture, s: &WallSolution) -> Option<WallTruth> {
     let segment_mm = s.segment.filter(|g| g.bounded()).and_then(|g| {
         let curve = capture.truth_curve.as_ref()?;
         let object = matched.get(s.aimed).copied().flatten()?;
+        // Only a wall's (a board's printed squares cut its line where the wall's would go on).
+        let truth = capture.meta.truth.as_ref()?;
+        if !matches!(truth.objects.get(object), Some(Object::Plane(_))) {
+            return None;
+        }
         let laser = capture.calibration.planes.get(g.curve)?;
-        true_segment(curve, &planes, object, g.curve, laser, vec3(g.ends[0]), vec3(g.ends[1]))
-            .map(|l| l * 1e3)
+        true_segment(
+            curve,
+            &planes,
+            object,
+            g.curve,
+            laser,
+            vec3(g.ends[0]),
+            vec3(g.ends[1]),
+        )
+        .map(|l| l * 1e3)
     });
     Some(WallTruth {
         axis_distance_mm: orient.map(|o| o.0),
@@ -411,7 +424,10 @@ fn true_segment(
         lo -= 1;
     }
     let mut hi = centre;
-    while hi + 1 < pts.len() && pts[hi + 1].object == object && pts[hi].column + 1 == pts[hi + 1].column {
+    while hi + 1 < pts.len()
+        && pts[hi + 1].object == object
+        && pts[hi].column + 1 == pts[hi + 1].column
+    {
         hi += 1;
     }
     let end = |inner: usize, outer: Option<usize>| -> Vec3d {

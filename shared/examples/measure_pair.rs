@@ -55,6 +55,15 @@ fn main() -> Result<(), String> {
             method_name(stem.method),
             stem.distance
         ),
+        // The example measures a stem; another instrument's reading by its headline number.
+        Ok(other) => println!(
+            "{}: {} {:.1} mm ± {:.1} mm ({})",
+            dir.display(),
+            other.kind(),
+            other.value() * 1e3,
+            other.uncertainty() * 1e3,
+            method_name(other.method())
+        ),
         // The sentence the CLI and the caliper's companion print for the same failure.
         Err(e) => println!("{}: no reading: {}", dir.display(), Failure::of(&e)),
     }

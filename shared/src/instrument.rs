@@ -183,8 +183,8 @@ pub fn measure<P: Pixel>(
 /// (the device refuses to be set to any other).
 pub fn supports(mode: Mode) -> bool {
     match mode {
-        Mode::Cylinder => true,
-        Mode::Sphere | Mode::Wall | Mode::Road => false,
+        Mode::Cylinder | Mode::Wall => true,
+        Mode::Sphere | Mode::Road => false,
     }
 }
 
@@ -204,7 +204,9 @@ pub fn solve<P: Pixel>(
             solve_with::<Stem, P>(profile, full_scale, calibration, &params.cylinder, ws)
                 .map(|s| Measurement::from(&s))
         }
-        Mode::Sphere | Mode::Wall | Mode::Road => Err(PipelineError::UnsupportedMode(mode)),
+        Mode::Wall => solve_with::<Wall, P>(profile, full_scale, calibration, &params.wall, ws)
+            .map(|s| Measurement::from(&s)),
+        Mode::Sphere | Mode::Road => Err(PipelineError::UnsupportedMode(mode)),
     }
 }
 

@@ -591,7 +591,14 @@ pub fn entries() -> Vec<CorpusEntry> {
     // --- rooms: appended last so that no older capture's seed changes --------------------------
     for w in super::wall_corpus::entries() {
         let params = super::wall_corpus::wall_params;
-        b.add(w.name, Mode::Wall, &w.description, w.calibration, w.objects, params);
+        b.add(
+            w.name,
+            Mode::Wall,
+            &w.description,
+            w.calibration,
+            w.objects,
+            params,
+        );
     }
     b.entries
 }

@@ -152,28 +152,32 @@ pub fn entries() -> Vec<WallEntry> {
         },
         WallEntry {
             name: "wall-corner-z150-a100-brick",
-            description: "room corner of 100° in brick, edge 1.5 m away 0.1 m right of the axis, turned 10°"
-                .into(),
+            description:
+                "room corner of 100° in brick, edge 1.5 m away 0.1 m right of the axis, turned 10°"
+                    .into(),
             calibration: two(),
             objects: corner(0.1, 1.5, 100.0, 10.0, BRICK),
         },
         WallEntry {
             name: "wall-niche-z200-w600-d150",
-            description: "plaster wall 2.0 m away with a niche 600 mm wide and 150 mm deep on the axis"
-                .into(),
+            description:
+                "plaster wall 2.0 m away with a niche 600 mm wide and 150 mm deep on the axis"
+                    .into(),
             calibration: two(),
             objects: niche(0.0, 2.0, 0.6, 0.15, PLASTER),
         },
         WallEntry {
             name: "wall-door-z150-w900",
-            description: "wooden wall 1.5 m away with a door opening 900 mm wide into a room 2 m deeper"
-                .into(),
+            description:
+                "wooden wall 1.5 m away with a door opening 900 mm wide into a room 2 m deeper"
+                    .into(),
             calibration: two(),
             objects: niche(0.05, 1.5, 0.9, 2.0, WOOD),
         },
         WallEntry {
             name: "wall-z200-one-line",
-            description: "plaster wall 2.0 m away seen by a one-line head (no plane: refused)".into(),
+            description: "plaster wall 2.0 m away seen by a one-line head (no plane: refused)"
+                .into(),
             calibration: one_plane_calibration(),
             objects: vec![turned_wall(2.0, 0.0, 0.0, PLASTER)],
         },
@@ -244,7 +248,11 @@ pub fn random_room(seed: u64, kind: RoomKind, range: (f64, f64)) -> SimSpec {
             let depth = rng.random_range(0.05..0.5);
             (
                 niche(0.0, z, width, depth, m),
-                format!("niche {:.0} mm wide, {:.0} mm deep", width * 1e3, depth * 1e3),
+                format!(
+                    "niche {:.0} mm wide, {:.0} mm deep",
+                    width * 1e3,
+                    depth * 1e3
+                ),
             )
         }
     };

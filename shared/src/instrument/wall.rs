@@ -3,10 +3,12 @@
 //! readings) on the points of every plane, with the image's quality flags added
 //! (`docs/building.md`).
 
-use crate::measurement::Mode;
+use crate::measurement::{Measurement, Mode, ValueSigma, WallReading};
 use crate::noise::NoiseModel;
 use crate::pipeline::PipelineError;
 use crate::real::Real;
+use crate::solvers::plane_pca::Estimate;
+use crate::solvers::result::Method;
 use crate::solvers::walls::{self, WallInput, WallParams, WallSolution};
 
 use super::{Instrument, Measured, PlanePoints, Scratch};
@@ -67,5 +69,34 @@ impl Instrument for Wall {
             .flags
             .insert(points.profile.image_flags(points.full_scale));
         Ok(solution)
+    }
+}
+
+fn value_sigma(e: Estimate) -> ValueSigma {
+    ValueSigma {
+        value: e.value,
+        sigma: e.sigma,
+    }
+}
+
+impl From<&WallSolution> for Measurement {
+    fn from(s: &WallSolution) -> Self {
+        let aimed = s.walls.get(s.aimed);
+        let o = &s.orientation;
+        Measurement::Wall(WallReading {
+            walls: s.walls.len() as u8,
+            distance: o.axis_distance.value,
+            distance_sigma: o.axis_distance.sigma,
+            yaw: value_sigma(o.yaw),
+            pitch: value_sigma(o.pitch),
+            quality: aimed.map_or(0.0, |w| w.plane.quality),
+            rms: aimed.map_or(0.0, |w| w.plane.rms),
+            corner: s.corner.map(|c| value_sigma(c.angle)),
+            parallel: s.parallel.map(value_sigma),
+            segment: s.segment.map(|g| (value_sigma(g.length), g.bounded())),
+            plumb: s.plumb.map(value_sigma),
+            method: Method::PlanePca,
+            flags: s.flags,
+        })
     }
 }

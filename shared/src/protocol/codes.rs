@@ -71,6 +71,7 @@ pub fn method_name(method: Method) -> &'static str {
         Method::CircleFit => "circle_fit",
         Method::CylinderFit => "cylinder_fit",
         Method::GeneralisedThreeTangent => "generalised_three_tangent",
+        Method::PlanePca => "plane_pca",
     }
 }
 

@@ -98,8 +98,8 @@ where
     let chi2 = chi2_sum / dof;
     let inflation = chi2.max(1.0);
     // docs/building.md, eq. (B3): var(δn·e_k) = s² / (W λ_k) for the in-plane axes e_k.
-    let normal_cov = (e0 * e0.transpose() / spread[0] + e1 * e1.transpose() / spread[1])
-        * (inflation / w_sum);
+    let normal_cov =
+        (e0 * e0.transpose() / spread[0] + e1 * e1.transpose() / spread[1]) * (inflation / w_sum);
     Ok(PlaneFit {
         normal,
         offset,

@@ -4,7 +4,11 @@ use super::*;
 use crate::real::PI;
 
 /// Exactness of noise-free fits: 1e-6 in f64, what f32 rounding leaves of metres otherwise.
-const TOL: Real = if core::mem::size_of::<Real>() == 4 { 2e-4 } else { 1e-6 };
+const TOL: Real = if core::mem::size_of::<Real>() == 4 {
+    2e-4
+} else {
+    1e-6
+};
 
 /// A small deterministic Gaussian source (LCG + Box–Muller), enough for Monte-Carlo checks.
 pub(crate) struct Gauss(u64);
@@ -83,9 +87,14 @@ fn collinear_points_are_degenerate_and_bad_values_refused() {
 #[test]
 fn predicted_sigmas_cover_the_scatter() {
     let normal = Vec3::new(0.2, 0.0, 1.0).normalize();
-    let truth = orientation(&fit_plane(
-        two_lines(normal, 2.0, 0.6, 150, 0.0, 0)[..300].iter().map(|&p| (p, 1e-3)),
-    ).unwrap())
+    let truth = orientation(
+        &fit_plane(
+            two_lines(normal, 2.0, 0.6, 150, 0.0, 0)[..300]
+                .iter()
+                .map(|&p| (p, 1e-3)),
+        )
+        .unwrap(),
+    )
     .unwrap();
     let (mut inside_pitch, mut inside_yaw, mut inside_z, runs) = (0, 0, 0, 400);
     for seed in 0..runs {
@@ -97,7 +106,11 @@ fn predicted_sigmas_cover_the_scatter() {
         inside_z += ((o.axis_distance.value - truth.axis_distance.value).abs()
             <= 2.0 * o.axis_distance.sigma) as u32;
     }
-    for (name, k) in [("pitch", inside_pitch), ("yaw", inside_yaw), ("z", inside_z)] {
+    for (name, k) in [
+        ("pitch", inside_pitch),
+        ("yaw", inside_yaw),
+        ("z", inside_z),
+    ] {
         let c = k as f64 / runs as f64;
         assert!((0.90..=0.98).contains(&c), "{name}: 2σ coverage {c}");
     }
@@ -131,7 +144,11 @@ fn angle_distance_and_plumb_of_known_planes() {
     // A vertical wall is plumb; a gravity 1° off the camera's y axis towards z reads 1°.
     let tilt = (1.0 as Real).to_radians();
     let p = plumb_deviation(&a, Vec3::new(0.0, tilt.cos(), tilt.sin()), 0.0).unwrap();
-    assert!((p.value - tilt * (0.5 as Real).sqrt()).abs() < TOL, "{}", p.value);
+    assert!(
+        (p.value - tilt * (0.5 as Real).sqrt()).abs() < TOL,
+        "{}",
+        p.value
+    );
     let (point, dir) = plane_intersection(a.normal, a.offset, b.normal, b.offset).unwrap();
     assert!(dir.x.abs() < TOL && dir.z.abs() < TOL);
     assert!((point - Vec3::new(0.0, 0.0, 2.0)).norm() < TOL);

@@ -20,6 +20,8 @@ pub enum Method {
     CylinderFit,
     /// Three-tangent method on the curves projected along the fitted axis (tilt measured).
     GeneralisedThreeTangent,
+    /// Walls by weighted principal components of the lines' points (`docs/building.md`).
+    PlanePca,
 }
 
 /// Quality flags of a solution (a bit set; `Flags::ARC_TOO_SHORT.0 | …`).

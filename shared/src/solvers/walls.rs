@@ -16,8 +16,8 @@ use crate::laser_plane::LaserPlane;
 use crate::noise::DisplacementField;
 
 use super::plane_pca::{
-    fit_plane, normal_angle, orientation, parallel_distance, plane_intersection,
-    plumb_deviation, Estimate, Orientation, PlaneFit,
+    fit_plane, normal_angle, orientation, parallel_distance, plane_intersection, plumb_deviation,
+    Estimate, Orientation, PlaneFit,
 };
 use super::result::Flags;
 use super::SolveError;
@@ -87,7 +87,7 @@ impl Default for WallParams {
             split_floor: 1.5e-3,
             gap_px: 4.0,
             min_segment_points: 12,
-            trim_points: 3,
+            trim_points: 6,
             roughness: 2e-4,
             coplanar_chi2: 9.0,
             coplanar_rms: 2.0e-3,
@@ -214,7 +214,11 @@ pub struct WallSolution {
 /// laser line (a plane needs two); `NotPlanar` when runs of different lines share no plane or
 /// the surface is curved; `TooFewPoints` when no run is long enough.
 pub fn solve(input: &WallInput<'_>, params: &WallParams) -> Result<WallSolution, SolveError> {
-    let n_curves = input.curves.len().min(input.sigmas.len()).min(input.planes.len());
+    let n_curves = input
+        .curves
+        .len()
+        .min(input.sigmas.len())
+        .min(input.planes.len());
     if n_curves == 0 {
         return Err(SolveError::PlaneCount);
     }
@@ -251,7 +255,10 @@ pub fn solve(input: &WallInput<'_>, params: &WallParams) -> Result<WallSolution,
             lines: wall.lines,
         });
     }
-    if runs.iter().any(|r| r.wall.is_none() && r.len() >= 4 * params.min_segment_points) {
+    if runs
+        .iter()
+        .any(|r| r.wall.is_none() && r.len() >= 4 * params.min_segment_points)
+    {
         // A long straight run on no wall: another object, or a wall lit by one line only.
         flags.insert(Flags::SEVERAL_OBJECTS);
     }
@@ -392,13 +399,21 @@ struct Group {
 fn on_plane(input: &WallInput<'_>, params: &WallParams, run: &Run, plane: &PlaneFit) -> bool {
     let one = [*run];
     let (mut chi2, mut sq, mut n) = (0.0 as Real, 0.0 as Real, 0usize);
-    for (p, s) in samples(input, &one, |_, _| true, Some(plane.normal), 0, params.roughness) {
+    for (p, s) in samples(
+        input,
+        &one,
+        |_, _| true,
+        Some(plane.normal),
+        0,
+        params.roughness,
+    ) {
         let r = plane.signed_distance(p);
         chi2 += (r / s) * (r / s);
         sq += r * r;
         n += 1;
     }
-    n > 0 && (chi2 / n as Real <= params.coplanar_chi2 || sqrt(sq / n as Real) <= params.coplanar_rms)
+    n > 0
+        && (chi2 / n as Real <= params.coplanar_chi2 || sqrt(sq / n as Real) <= params.coplanar_rms)
 }
 
 /// Groups the runs into walls: the pair of runs of different curves with the most points that
@@ -421,7 +436,14 @@ fn group(
                 if best.is_some_and(|(_, _, c, _)| c >= count) {
                     continue;
                 }
-                let pair = samples(input, runs, move |k, _| k == i || k == j, None, 0, params.roughness);
+                let pair = samples(
+                    input,
+                    runs,
+                    move |k, _| k == i || k == j,
+                    None,
+                    0,
+                    params.roughness,
+                );
                 let Ok(fit) = fit_plane(pair) else { continue };
                 if sqrt(fit.spread[1]) < params.min_width {
                     continue;
@@ -440,7 +462,14 @@ fn group(
         for k in 0..runs.len() {
             if runs[k].wall.is_none() && on_plane(input, params, &runs[k], &plane) {
                 runs[k].wall = Some(w);
-                let all = samples(input, runs, move |_, r| r.wall == Some(w), None, 0, params.roughness);
+                let all = samples(
+                    input,
+                    runs,
+                    move |_, r| r.wall == Some(w),
+                    None,
+                    0,
+                    params.roughness,
+                );
                 plane = fit_plane(all)?;
             }
         }
@@ -470,7 +499,10 @@ fn group(
     }
     for r in runs.iter_mut() {
         if let Some(w) = r.wall {
-            r.wall = order.iter().position(|&(_, o)| o == w as usize).map(|p| p as u8);
+            r.wall = order
+                .iter()
+                .position(|&(_, o)| o == w as usize)
+                .map(|p| p as u8);
         }
     }
     Ok(sorted)
@@ -486,7 +518,9 @@ fn check_not_curved(
 ) -> Result<(), SolveError> {
     for pair in runs.windows(2) {
         let (a, b) = (pair[0], pair[1]);
-        let (Some(wa), Some(wb)) = (a.wall, b.wall) else { continue };
+        let (Some(wa), Some(wb)) = (a.wall, b.wall) else {
+            continue;
+        };
         if a.curve != b.curve || wa == wb || b.start != a.end {
             continue;
         }
@@ -594,7 +628,12 @@ fn segment(
     let mine = |r: &&Run| r.curve as usize == curve && r.wall == Some(aimed as u8);
     let first = runs.iter().filter(mine).min_by_key(|r| r.start)?;
     let last = runs.iter().filter(mine).max_by_key(|r| r.end)?;
-    let (origin, dir) = plane_intersection(wall.plane.normal, wall.plane.offset, plane.normal, plane.offset)?;
+    let (origin, dir) = plane_intersection(
+        wall.plane.normal,
+        wall.plane.offset,
+        plane.normal,
+        plane.offset,
+    )?;
     let pts = input.curves[curve];
     let mut ends = [Vec3::zeros(); 2];
     let mut kinds = [EndKind::Edge; 2];
@@ -603,7 +642,10 @@ fn segment(
         let (inner, outer) = if side == 0 {
             (first.start as usize, (first.start as usize).checked_sub(1))
         } else {
-            (last.end as usize - 1, Some(last.end as usize).filter(|&i| i < pts.len()))
+            (
+                last.end as usize - 1,
+                Some(last.end as usize).filter(|&i| i < pts.len()),
+            )
         };
         let sign = if side == 0 { -1.0 } else { 1.0 };
         let u_in = column(pts[inner], params);
@@ -611,8 +653,13 @@ fn segment(
         let next = runs.iter().find(|r| {
             r.curve as usize == curve
                 && r.wall.is_some_and(|w| w as usize != aimed)
-                && if side == 0 { r.end as usize + 2 * params.trim_points + 2 >= first.start as usize && r.end <= first.start }
-                   else { r.start as usize <= last.end as usize + 2 * params.trim_points + 2 && r.start >= last.end }
+                && if side == 0 {
+                    r.end as usize + 2 * params.trim_points + 2 >= first.start as usize
+                        && r.end <= first.start
+                } else {
+                    r.start as usize <= last.end as usize + 2 * params.trim_points + 2
+                        && r.start >= last.end
+                }
         });
         let corner_end = next.and_then(|r| {
             let other = &walls[r.wall? as usize].plane;

@@ -61,7 +61,10 @@ impl Curves {
                     let Some(inv) = m.try_inverse() else { continue };
                     let x = inv * Vec3::new(lp.offset, s.offset, 0.0);
                     let v = 1000.0 * x.y / x.z + 239.5;
-                    if x.z > 0.2 && x.x >= s.x_range.0 && x.x <= s.x_range.1 && (0.0..479.0).contains(&v)
+                    if x.z > 0.2
+                        && x.x >= s.x_range.0
+                        && x.x <= s.x_range.1
+                        && (0.0..479.0).contains(&v)
                         && best.is_none_or(|b| x.z < b.z)
                     {
                         best = Some(x);
@@ -70,7 +73,8 @@ impl Curves {
                 let Some(x) = best else { continue };
                 let sigma = displacement_sigma(lp, 1000.0, x, noise.image_px()).unwrap();
                 let i = c.len[k];
-                c.points[k][i] = x + field.direction(x) * (sigma * sigma_px / noise.image_px() * g.next());
+                c.points[k][i] =
+                    x + field.direction(x) * (sigma * sigma_px / noise.image_px() * g.next());
                 c.sigmas[k][i] = sigma * (sigma_px / noise.image_px()).max(1e-3);
                 c.len[k] += 1;
             }
@@ -79,8 +83,14 @@ impl Curves {
     }
 
     fn solve(&self, params: &WallParams) -> Result<WallSolution, SolveError> {
-        let curves = [&self.points[0][..self.len[0]], &self.points[1][..self.len[1]]];
-        let sigmas = [&self.sigmas[0][..self.len[0]], &self.sigmas[1][..self.len[1]]];
+        let curves = [
+            &self.points[0][..self.len[0]],
+            &self.points[1][..self.len[1]],
+        ];
+        let sigmas = [
+            &self.sigmas[0][..self.len[0]],
+            &self.sigmas[1][..self.len[1]],
+        ];
         solve(
             &WallInput {
                 curves: &curves,
@@ -101,11 +111,16 @@ fn deg(x: Real) -> Real {
 #[test]
 fn a_frontal_wall_faces_the_camera() {
     let scene = [piece(Vec3::z(), Vec3::new(0.0, 0.0, 1.5), ALL)];
-    let s = Curves::of(&scene, 0.05, 1).solve(&WallParams::default()).unwrap();
+    let s = Curves::of(&scene, 0.05, 1)
+        .solve(&WallParams::default())
+        .unwrap();
     assert_eq!(s.walls.len(), 1);
     assert_eq!(s.walls[0].lines, 0b11);
     let o = s.orientation;
-    assert!(deg(o.yaw.value).abs() < 3.0 * deg(o.yaw.sigma) + 0.01, "{o:?}");
+    assert!(
+        deg(o.yaw.value).abs() < 3.0 * deg(o.yaw.sigma) + 0.01,
+        "{o:?}"
+    );
     assert!((o.axis_distance.value - 1.5).abs() < 1e-3, "{o:?}");
     assert!(s.corner.is_none() && s.parallel.is_none());
     // The line runs off both sides of the frame: an open segment.
@@ -118,12 +133,21 @@ fn a_frontal_wall_faces_the_camera() {
 fn a_far_turned_wall_is_found() {
     // 3 m away, turned 25°: the points scatter by several millimetres, as predicted.
     let y = (25.0 as Real).to_radians();
-    let scene = [piece(Vec3::new(y.sin(), 0.0, y.cos()), Vec3::new(0.0, 0.0, 3.0), ALL)];
-    let s = Curves::of(&scene, 0.085, 11).solve(&WallParams::default()).unwrap();
+    let scene = [piece(
+        Vec3::new(y.sin(), 0.0, y.cos()),
+        Vec3::new(0.0, 0.0, 3.0),
+        ALL,
+    )];
+    let s = Curves::of(&scene, 0.085, 11)
+        .solve(&WallParams::default())
+        .unwrap();
     assert_eq!(s.walls.len(), 1);
     let o = s.orientation;
     assert!((o.yaw.value - y).abs() < 4.0 * o.yaw.sigma, "{o:?}");
-    assert!((o.axis_distance.value - 3.0).abs() < 4.0 * o.axis_distance.sigma, "{o:?}");
+    assert!(
+        (o.axis_distance.value - 3.0).abs() < 4.0 * o.axis_distance.sigma,
+        "{o:?}"
+    );
 }
 
 #[test]
@@ -131,14 +155,28 @@ fn a_room_corner_reads_its_angle() {
     for (opening, seed) in [(90.0 as Real, 2u64), (80.0, 3), (100.0, 4)] {
         // Walls symmetric about the axis meeting 2 m away; `opening` between them.
         let half = (opening / 2.0).to_radians();
-        let left = piece(Vec3::new(-half.cos(), 0.0, half.sin()), Vec3::new(0.0, 0.0, 2.0), (-100.0, 0.0));
-        let right = piece(Vec3::new(half.cos(), 0.0, half.sin()), Vec3::new(0.0, 0.0, 2.0), (0.0, 100.0));
-        let s = Curves::of(&[left, right], 0.05, seed).solve(&WallParams::default()).unwrap();
+        let left = piece(
+            Vec3::new(-half.cos(), 0.0, half.sin()),
+            Vec3::new(0.0, 0.0, 2.0),
+            (-100.0, 0.0),
+        );
+        let right = piece(
+            Vec3::new(half.cos(), 0.0, half.sin()),
+            Vec3::new(0.0, 0.0, 2.0),
+            (0.0, 100.0),
+        );
+        let s = Curves::of(&[left, right], 0.05, seed)
+            .solve(&WallParams::default())
+            .unwrap();
         assert_eq!(s.walls.len(), 2, "{opening}");
         let c = s.corner.unwrap();
         assert!(!c.convex);
         let err = deg(c.angle.value) - opening;
-        assert!(err.abs() < 0.1 && err.abs() < 4.0 * deg(c.angle.sigma), "{opening}: {err}° σ {}", deg(c.angle.sigma));
+        assert!(
+            err.abs() < 0.1 && err.abs() < 4.0 * deg(c.angle.sigma),
+            "{opening}: {err}° σ {}",
+            deg(c.angle.sigma)
+        );
         // The aimed wall's segment ends at the corner and at the frame's side.
         let seg = s.segment.unwrap();
         assert!(seg.kinds.contains(&EndKind::Corner), "{:?}", seg.kinds);
@@ -153,11 +191,17 @@ fn a_door_frame_and_a_cable_do_not_split_the_wall() {
     let wall_r = piece(Vec3::z(), Vec3::new(0.0, 0.0, 2.0), (0.5, 100.0));
     let behind = piece(Vec3::z(), Vec3::new(0.0, 0.0, 3.0), ALL);
     let cable = piece(Vec3::z(), Vec3::new(0.0, 0.0, 1.7), (-0.52, -0.50));
-    let s = Curves::of(&[wall_l, wall_r, behind, cable], 0.05, 5).solve(&WallParams::default()).unwrap();
+    let s = Curves::of(&[wall_l, wall_r, behind, cable], 0.05, 5)
+        .solve(&WallParams::default())
+        .unwrap();
     // The two wall pieces either side of the door are one plane (the cable's points none);
     // the room behind the door another, parallel, 1 m on.
     assert_eq!(s.walls.len(), 2);
-    let front = s.walls.iter().find(|w| (w.plane.offset - 2.0).abs() < 1e-3).unwrap();
+    let front = s
+        .walls
+        .iter()
+        .find(|w| (w.plane.offset - 2.0).abs() < 1e-3)
+        .unwrap();
     // Columns left of the door (x < −0.3 at 2 m: 225) and right of it (x > 0.5: 125), less
     // the cable's and the trimmed ends, on both lines.
     assert!(front.plane.points > 2 * 300, "{:?}", front.plane);
@@ -172,7 +216,9 @@ fn the_door_opening_is_a_bounded_segment() {
     let front_l = piece(Vec3::z(), Vec3::new(0.0, 0.0, 1.5), (-100.0, -0.45));
     let front_r = piece(Vec3::z(), Vec3::new(0.0, 0.0, 1.5), (0.45, 100.0));
     let behind = piece(Vec3::z(), Vec3::new(0.0, 0.0, 1.8), ALL);
-    let s = Curves::of(&[front_l, front_r, behind], 0.05, 6).solve(&WallParams::default()).unwrap();
+    let s = Curves::of(&[front_l, front_r, behind], 0.05, 6)
+        .solve(&WallParams::default())
+        .unwrap();
     let aimed = &s.walls[s.aimed].plane;
     assert!((aimed.offset - 1.8).abs() < 1e-3);
     let seg = s.segment.unwrap();
@@ -180,7 +226,11 @@ fn the_door_opening_is_a_bounded_segment() {
     // Seen from the camera the far wall shows between the rays through the jambs: at 1.8 m
     // the visible width is 0.9 · 1.8 / 1.5.
     let want = 0.9 * 1.8 / 1.5;
-    assert!((seg.length.value - want).abs() < 2e-3, "{} vs {want}", seg.length.value);
+    assert!(
+        (seg.length.value - want).abs() < 2e-3,
+        "{} vs {want}",
+        seg.length.value
+    );
 }
 
 #[test]
@@ -198,7 +248,11 @@ fn bad_input_is_named() {
         let n = Vec3::new(a.sin(), 0.0, -a.cos());
         let at = Vec3::new(0.0, 0.0, z0) + n * r;
         let half = r * (1.0 / 39.0);
-        *p = piece(-n, at, (at.x - half * a.cos() - 1e-4, at.x + half * a.cos() + 1e-4));
+        *p = piece(
+            -n,
+            at,
+            (at.x - half * a.cos() - 1e-4, at.x + half * a.cos() + 1e-4),
+        );
     }
     let err = Curves::of(&pieces, 0.05, 8).solve(&WallParams::default());
     assert_eq!(err.clone().err(), Some(SolveError::NotPlanar), "{err:?}");
