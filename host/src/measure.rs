@@ -242,12 +242,14 @@ impl Reading {
 }
 
 /// The core's detailed solution of one capture, by instrument.
+// The stem's solution is kept inline (the common case); the walls' is boxed.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone)]
 pub enum Solved {
     /// A stem ([`Mode::Cylinder`]).
     Stem(StemMeasurement),
-    /// Walls ([`Mode::Wall`]).
-    Wall(WallMeasurement),
+    /// Walls ([`Mode::Wall`]; boxed: four planes and the runs are large beside a stem).
+    Wall(Box<WallMeasurement>),
 }
 
 impl Solved {
@@ -440,7 +442,7 @@ pub fn measure_loaded(
             let params = wall_params(&calibration, params);
             let (r, buffers) = solve_capture::<Wall>(capture, &calibration, config, &params)?;
             let reading = Reading::from_wall(name, &r, capture);
-            (r.map(Solved::Wall), reading, buffers)
+            (r.map(|m| Solved::Wall(Box::new(m))), reading, buffers)
         }
         mode @ (Mode::Sphere | Mode::Road) => return Err(MeasureError::UnsupportedMode(mode)),
     };

@@ -319,7 +319,7 @@ fn match_plane(planes: &[Option<TruePlane>], n: Vec3d, c: Vec3d) -> Option<usize
 }
 
 fn vec3(v: tangent_core::real::Vec3) -> Vec3d {
-    Vec3d::new(v.x as f64, v.y as f64, v.z as f64)
+    Vec3d::new(v.x, v.y, v.z)
 }
 
 /// The truth of `capture` for the walls of `s` (`None` without truth objects).

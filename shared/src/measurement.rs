@@ -265,7 +265,7 @@ mod tests {
             pitch: vs(0.001, 2e-3),
             quality: 0.999,
             rms: 4e-4,
-            corner: Some(vs(1.5708, 3e-4)),
+            corner: Some(vs(1.55, 3e-4)),
             parallel: None,
             segment: Some((vs(0.6, 6e-4), true)),
             plumb: None,

@@ -52,7 +52,7 @@ where
 {
     let (mut w_sum, mut c, mut n) = (0.0 as Real, Vec3::zeros(), 0usize);
     for (p, s) in samples.clone() {
-        if !(s > 0.0 && s.is_finite()) || !p.iter().all(|v| v.is_finite()) {
+        if !(s > 0.0 && s.is_finite() && p.iter().all(|v| v.is_finite())) {
             return Err(SolveError::NonFinite);
         }
         let w = 1.0 / (s * s);

@@ -492,7 +492,7 @@ fn group(
     for (w, g) in walls.iter().enumerate() {
         let _ = order.push((g.plane.points, w));
     }
-    order.sort_unstable_by(|a, b| b.0.cmp(&a.0));
+    order.sort_unstable_by_key(|o| core::cmp::Reverse(o.0));
     let mut sorted: heapless::Vec<Group, MAX_WALLS> = heapless::Vec::new();
     for &(_, w) in &order {
         let _ = sorted.push(walls[w]);
