@@ -18,6 +18,7 @@ pub mod evaluate_sphere;
 pub mod fieldlog;
 pub mod link;
 pub mod measure;
+pub mod measure_wall;
 pub mod pgm;
 pub mod plot;
 pub mod road;

@@ -14,7 +14,10 @@ use tangent_core::curve::CurvePoint;
 use tangent_core::image::{Frame, Pixel};
 use tangent_core::instrument::sphere::SphereMeasurement;
 use tangent_core::instrument::stem::StemMeasurement;
-use tangent_core::instrument::{self, Instrument, Measured, Sphere, Stem};
+use tangent_core::instrument::wall::WallMeasurement;
+use tangent_core::instrument::{
+    self, Instrument, Measured, Sphere, Stem, Wall, WallInstrumentParams,
+};
 use tangent_core::pipeline::{OwnedBuffers, PipelineConfig, PipelineError, Profile};
 use tangent_core::protocol::codes::{self, Failure};
 use tangent_core::real::Vec3;
@@ -22,6 +25,7 @@ use tangent_core::solvers::sphere::SphereParams;
 use tangent_core::solvers::stem::CylinderParams;
 
 use crate::capture::{Capture, CaptureError, Mode};
+use crate::measure_wall::{self, WallReport};
 use crate::pgm::{Pgm, PgmSamples};
 use crate::truth::Object;
 
@@ -35,7 +39,7 @@ pub enum MeasureError {
     #[error(transparent)]
     Capture(#[from] CaptureError),
     /// The capture is not of a mode this command measures.
-    #[error("capture mode {0:?} is not measured yet (only cylinder and sphere captures are)")]
+    #[error("capture mode {0:?} is not measured here (cylinder, sphere and wall captures are; road captures by `tangent measure`)")]
     UnsupportedMode(Mode),
     /// No frame lit every plane of the calibration.
     #[error("no laser-on frame lights all {0} planes of the calibration")]
@@ -117,6 +121,9 @@ pub struct Reading {
     /// A road capture's reading (`docs/road.md`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub road: Option<crate::road::RoadReport>,
+    /// The wall instrument's readings (captures of mode `wall`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub wall: Option<WallReport>,
 }
 
 impl Reading {
@@ -149,6 +156,7 @@ impl Reading {
                     truth_diameter_m: truth,
                     truth_curve_unreadable: None,
                     road: None,
+                    wall: None,
                 }
             }
             Ok(Solved::Stem(m)) => {
@@ -177,8 +185,11 @@ impl Reading {
                     truth_diameter_m: truth,
                     truth_curve_unreadable: None,
                     road: None,
+                    wall: None,
                 }
             }
+            // The walls' keys come from `from_wall`; this arm keeps `from_result` total.
+            Ok(Solved::Wall(m)) => Reading::from_wall(&capture, &Ok((**m).clone()), None),
             Err(e) => Reading {
                 capture,
                 instrument: None,
@@ -200,6 +211,52 @@ impl Reading {
                 truth_diameter_m: truth,
                 truth_curve_unreadable: None,
                 road: None,
+                wall: None,
+            },
+        }
+    }
+
+    /// The reading of a wall capture: the walls' report, or the error.
+    fn from_wall(
+        capture: &str,
+        result: &Result<WallMeasurement, PipelineError>,
+        loaded: Option<&Capture>,
+    ) -> Self {
+        let blank = Reading {
+            capture: capture.to_string(),
+            instrument: Some("wall"),
+            centre_m: None,
+            sections_diameter_m: None,
+            random_uncertainty_m: None,
+            diameter_m: None,
+            uncertainty_m: None,
+            method: None,
+            flags: Vec::new(),
+            tilt: None,
+            axes_m: None,
+            three_tangent_diameter_m: None,
+            fit_diameter_m: None,
+            distance_m: None,
+            points: None,
+            error: None,
+            truth_diameter_m: None,
+            truth_curve_unreadable: None,
+            road: None,
+            wall: None,
+        };
+        match result {
+            Ok(m) => Reading {
+                flags: measure_wall::flag_names(m),
+                points: Some(m.solution.points),
+                wall: Some(WallReport::of(
+                    &m.solution,
+                    loaded.and_then(|c| measure_wall::wall_truth(c, &m.solution)),
+                )),
+                ..blank
+            },
+            Err(e) => Reading {
+                error: Some(Failure::of(e).to_string()),
+                ..blank
             },
         }
     }
@@ -230,6 +287,7 @@ impl Reading {
             truth_diameter_m: None,
             truth_curve_unreadable: None,
             road,
+            wall: None,
         }
     }
 
@@ -245,6 +303,9 @@ impl Reading {
     fn result_text(&self) -> String {
         if let Some(r) = &self.road {
             return r.summary();
+        }
+        if let Some(w) = &self.wall {
+            return w.summary(&self.flags);
         }
         match (self.diameter_m, &self.error) {
             (Some(d), _) if self.instrument == Some("sphere") => {
@@ -296,21 +357,26 @@ impl Reading {
     }
 }
 
-/// The core's detailed solution of one capture, per instrument.
-#[derive(Debug, Clone, PartialEq)]
+/// The core's detailed solution of one capture, by instrument.
+// The stem's solution is kept inline (the common case); the walls' is boxed.
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug, Clone)]
 pub enum Solved {
     /// A stem ([`Mode::Cylinder`]).
     Stem(StemMeasurement),
     /// A sphere ([`Mode::Sphere`]).
     Sphere(SphereMeasurement),
+    /// Walls ([`Mode::Wall`]; boxed: four planes and the runs are large beside a stem).
+    Wall(Box<WallMeasurement>),
 }
 
 impl Solved {
-    /// The image part of the chain.
+    /// The image summary the solution came from.
     pub fn profile(&self) -> &Profile {
         match self {
             Solved::Stem(m) => &m.profile,
             Solved::Sphere(m) => &m.profile,
+            Solved::Wall(m) => &m.profile,
         }
     }
 }
@@ -421,30 +487,6 @@ fn run<I: Instrument, P: Pixel>(
     (result, hw)
 }
 
-/// The instrument of a capture's mode on one frame pair, its detailed solution kept.
-fn run_mode<P: Pixel>(
-    mode: Mode,
-    off: &[P],
-    on: &[P],
-    pgm: &Pgm,
-    calibration: &Calibration,
-    config: &PipelineConfig,
-    params: &CylinderParams,
-) -> Result<(Result<Solved, PipelineError>, OwnedBuffers<P>), MeasureError> {
-    Ok(match mode {
-        Mode::Cylinder => {
-            let (r, hw) = run::<Stem, P>(off, on, pgm, calibration, config, params);
-            (r.map(Solved::Stem), hw)
-        }
-        Mode::Sphere => {
-            let params = sphere_params(params);
-            let (r, hw) = run::<Sphere, P>(off, on, pgm, calibration, config, &params);
-            (r.map(Solved::Sphere), hw)
-        }
-        mode @ (Mode::Wall | Mode::Road) => return Err(MeasureError::UnsupportedMode(mode)),
-    })
-}
-
 /// The sphere solver's settings with the noise model and focal length of the stem's (one
 /// head, one noise model).
 pub fn sphere_params(params: &CylinderParams) -> SphereParams {
@@ -528,41 +570,35 @@ pub fn measure_loaded(
     config: &PipelineConfig,
     params: &CylinderParams,
 ) -> Result<Outcome, MeasureError> {
-    let mode = capture.meta.mode;
-    if let Mode::Wall | Mode::Road = mode {
-        return Err(MeasureError::UnsupportedMode(mode));
-    }
     let calibration = calibration
         .cloned()
         .unwrap_or_else(|| capture.calibration.clone());
-    let (off, on) = frame_pair(capture, calibration.planes.len())?;
-    let (result, diff, curve, points) = match (&off.samples, &on.samples) {
-        (PgmSamples::U8(a), PgmSamples::U8(b)) => {
-            let (r, hw) = run_mode(mode, a, b, &on, &calibration, config, params)?;
-            (
-                r,
-                hw.diff().iter().map(|&v| v as u16).collect(),
-                hw.curve().to_vec(),
-                hw.points().to_vec(),
-            )
+    // The instruments the host reports on: each one's detailed solution feeds its keys of
+    // `Reading`.
+    let (result, mut reading, buffers) = match capture.meta.mode {
+        Mode::Cylinder => {
+            let (r, buffers) = solve_capture::<Stem>(capture, &calibration, config, params)?;
+            let r = r.map(Solved::Stem);
+            let reading = Reading::from_result(name, &r, truth_diameter(capture));
+            (r, reading, buffers)
         }
-        (PgmSamples::U16(a), PgmSamples::U16(b)) => {
-            let (r, hw) = run_mode(mode, a, b, &on, &calibration, config, params)?;
-            (
-                r,
-                hw.diff().to_vec(),
-                hw.curve().to_vec(),
-                hw.points().to_vec(),
-            )
+        Mode::Sphere => {
+            let params = sphere_params(params);
+            let (r, buffers) = solve_capture::<Sphere>(capture, &calibration, config, &params)?;
+            let r = r.map(Solved::Sphere);
+            let reading = Reading::from_result(name, &r, truth_sphere_diameter(capture));
+            (r, reading, buffers)
         }
-        _ => return Err(MeasureError::MixedDepth),
+        Mode::Wall => {
+            let params = wall_params(&calibration, params);
+            let (r, buffers) = solve_capture::<Wall>(capture, &calibration, config, &params)?;
+            let reading = Reading::from_wall(name, &r, Some(capture));
+            (r.map(|m| Solved::Wall(Box::new(m))), reading, buffers)
+        }
+        mode @ Mode::Road => return Err(MeasureError::UnsupportedMode(mode)),
     };
-    let truth = match mode {
-        Mode::Sphere => truth_sphere_diameter(capture),
-        _ => truth_diameter(capture),
-    };
-    let mut reading = Reading::from_result(name, &result, truth);
     reading.truth_curve_unreadable = capture.truth_curve_unreadable.clone();
+    let (diff, curve, points) = buffers;
     Ok(Outcome {
         reading,
         result,
@@ -570,5 +606,57 @@ pub fn measure_loaded(
         curve,
         points,
         calibration,
+    })
+}
+
+/// The wall instrument's settings for `calibration`'s camera, with the stem's noise model.
+pub fn wall_params(calibration: &Calibration, params: &CylinderParams) -> WallInstrumentParams {
+    let mut p = WallInstrumentParams {
+        noise: params.noise,
+        focal_px: calibration.camera.fy,
+        ..WallInstrumentParams::default()
+    };
+    p.walls.focal_px = calibration.camera.fx;
+    p.walls.principal_u = calibration.camera.cx;
+    p.walls.width_px = calibration.camera.width as f64;
+    p
+}
+
+/// The buffers a plot shows: the difference frame (16-bit), the curve points, the 3-D points.
+type PlotBuffers = (Vec<u16>, Vec<CurvePoint>, Vec<Vec3>);
+
+/// Runs instrument `I` on the capture's frame pair.
+#[allow(clippy::type_complexity)]
+fn solve_capture<I: Instrument>(
+    capture: &Capture,
+    calibration: &Calibration,
+    config: &PipelineConfig,
+    params: &I::Params,
+) -> Result<(Result<Measured<I::Solution>, PipelineError>, PlotBuffers), MeasureError> {
+    let (off, on) = frame_pair(capture, calibration.planes.len())?;
+    Ok(match (&off.samples, &on.samples) {
+        (PgmSamples::U8(a), PgmSamples::U8(b)) => {
+            let (r, hw) = run::<I, u8>(a, b, &on, calibration, config, params);
+            (
+                r,
+                (
+                    hw.diff().iter().map(|&v| v as u16).collect(),
+                    hw.curve().to_vec(),
+                    hw.points().to_vec(),
+                ),
+            )
+        }
+        (PgmSamples::U16(a), PgmSamples::U16(b)) => {
+            let (r, hw) = run::<I, u16>(a, b, &on, calibration, config, params);
+            (
+                r,
+                (
+                    hw.diff().to_vec(),
+                    hw.curve().to_vec(),
+                    hw.points().to_vec(),
+                ),
+            )
+        }
+        _ => return Err(MeasureError::MixedDepth),
     })
 }

@@ -108,7 +108,7 @@ pub fn measurement_png(path: &Path, outcome: &Outcome, title: &str) -> Result<()
                 }
             }
         }
-        Err(_) => {}
+        Ok(Solved::Wall(_)) | Err(_) => {}
     }
     let (mut a0, mut a1, mut b0, mut b1) = (
         f64::INFINITY,

@@ -103,6 +103,10 @@ pub struct Plane {
     /// Depth of the pattern.
     #[serde(default = "default_contrast")]
     pub texture_contrast: f64,
+    /// The part of the plane that exists: inside this box `[min, max]` (metres, camera
+    /// frame); absent = the whole plane. A wall ending at a door jamb or a corner.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bounds_m: Option<[[f64; 3]; 2]>,
 }
 
 /// One sinusoidal component of a road profile.

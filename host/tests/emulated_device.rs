@@ -786,3 +786,99 @@ fn road_profiles_on_the_device_equal_the_hosts() {
         });
     }
 }
+
+/// The wall instrument on the device: set to `Mode::Wall` from the host, the emulated
+/// firmware (f32) reads the corpus's walls as the host (f64) does — same number of walls,
+/// axis distance within 1e-4 relative, angles within 0.01° — or fails with the same sentence
+/// (`docs/building.md`).
+#[test]
+fn on_device_wall_readings_equal_the_hosts() {
+    use tangent_core::instrument::{measure_with, Wall, WallInstrumentParams};
+    use tangent_core::measurement::{Measurement, Mode};
+    use tangent_core::pipeline::{OwnedBuffers, PipelineConfig};
+    use tangent_host::simulate::{corpus, simulate};
+
+    let Some(elf) = firmware_elf() else { return };
+    let wanted = [
+        "wall-z150-frontal",
+        "wall-corner-z200",
+        "wall-corner-z150-a100-brick",
+        "wall-z200-one-line",
+    ];
+    let dir = tempfile::tempdir().unwrap();
+    let (mut pairs, mut cases) = (Vec::new(), Vec::new());
+    for entry in corpus::entries()
+        .into_iter()
+        .filter(|e| wanted.contains(&e.name.as_str()))
+    {
+        let (capture, _) = simulate(&entry.spec).expect("simulate the corpus capture");
+        let off_pgm = capture.off_frame();
+        let (_, on_pgm) = capture.on_frames().next().expect("an on frame");
+        let (w, h) = (off_pgm.width, off_pgm.height);
+        let (off, on) = (to_u8(off_pgm), to_u8(on_pgm));
+        let off_path = dir.path().join(format!("{}-off.pgm", entry.name));
+        let on_path = dir.path().join(format!("{}-on.pgm", entry.name));
+        write_pgm(&off_path, w, h, &off);
+        write_pgm(&on_path, w, h, &on);
+        pairs.push((off_path, on_path));
+        let off_f = tangent_core::image::Frame::new(&off, w, h, w).unwrap();
+        let on_f = tangent_core::image::Frame::new(&on, w, h, w).unwrap();
+        let mut ws = OwnedBuffers::<u8>::for_frame(w, h, 8, capture.calibration.planes.len());
+        let host = measure_with::<Wall, u8>(
+            &off_f,
+            &on_f,
+            &capture.calibration,
+            &PipelineConfig::default(),
+            &WallInstrumentParams::default(),
+            &mut ws.workspace(),
+        )
+        .map(|m| Measurement::from(&m.solution));
+        cases.push((entry.name.clone(), capture.calibration.clone(), host));
+    }
+    assert_eq!(cases.len(), wanted.len(), "corpus entries missing");
+
+    let mut dev = Device::boot(&elf, &pairs, None);
+    dev.request(Request::SetMode(Mode::Wall), |r| {
+        assert_eq!(r, Response::Ack)
+    });
+    let mut compared = 0;
+    for (name, cal, host) in &cases {
+        dev.request(Request::WriteCalibration(WireCalibration::from(cal)), |r| {
+            assert_eq!(r, Response::Ack, "{name}")
+        });
+        dev.request(Request::Measure, |r| match (host, r) {
+            (Ok(Measurement::Wall(h)), Response::Reading(reading)) => {
+                let Measurement::Wall(d) = reading.measurement else {
+                    panic!("{name}: not a wall reading: {:?}", reading.measurement)
+                };
+                eprintln!("{name}: host {h:?}\n{name}: device {d:?}");
+                assert_eq!(d.walls, h.walls, "{name}: walls");
+                assert!(
+                    (d.distance - h.distance).abs() <= 1e-4 * h.distance,
+                    "{name}"
+                );
+                let deg = 0.01f64.to_radians() as tangent_core::real::Real;
+                assert!((d.yaw.value - h.yaw.value).abs() <= deg, "{name}: yaw");
+                match (d.corner, h.corner) {
+                    (Some(a), Some(b)) => assert!((a.value - b.value).abs() <= deg, "{name}"),
+                    (None, None) => {}
+                    other => panic!("{name}: corners {other:?}"),
+                }
+                compared += 1;
+            }
+            (Err(e), Response::Error(DeviceError { code, detail })) => {
+                assert_eq!(code, ErrorCode::MeasurementFailed, "{name}");
+                assert_eq!(
+                    Failure::from_detail(detail).to_string(),
+                    Failure::of(e).to_string(),
+                    "{name}"
+                );
+            }
+            (h, r) => panic!("{name}: host {h:?}, device {r:?}"),
+        });
+    }
+    assert!(
+        compared >= 3,
+        "only {compared} wall captures measured on both sides"
+    );
+}

@@ -24,6 +24,7 @@ fn wall(z: f64, texture: Texture) -> Object {
         albedo: 0.5,
         texture,
         texture_contrast: 0.3,
+        bounds_m: None,
     })
 }
 

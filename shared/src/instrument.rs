@@ -11,6 +11,8 @@
 //! * [`stem`]: [`Mode::Cylinder`], the stem's diameter.
 //! * [`sphere`]: [`Mode::Sphere`], a ball's diameter and centre.
 //! * [`road`]: [`Mode::Road`], a road profile's mean profile depth and microtexture.
+//! * [`wall`]: [`Mode::Wall`], walls by principal components: orientation, corner angle,
+//!   distance between parallel walls, segment length (`docs/building.md`).
 
 use crate::calibration::{Calibration, MAX_PLANES};
 use crate::curve::CurvePoint;
@@ -28,10 +30,12 @@ use crate::solvers::stem::CylinderParams;
 pub mod road;
 pub mod sphere;
 pub mod stem;
+pub mod wall;
 
 pub use road::Road;
 pub use sphere::Sphere;
 pub use stem::Stem;
+pub use wall::{Wall, WallInstrumentParams};
 
 /// What an instrument's solver reads: per laser plane, the 3-D points of its curve (camera
 /// frame, metres, ordered by image column), the planes themselves, and the image summary.
@@ -161,6 +165,8 @@ pub struct InstrumentParams {
     pub sphere: SphereParams,
     /// [`Mode::Road`] ([`Road`]).
     pub road: road::RoadParams,
+    /// [`Mode::Wall`] ([`Wall`]).
+    pub wall: WallInstrumentParams,
 }
 
 /// Measures a frame pair with the instrument of `mode`: [`extract_profile`], then its solver.
@@ -208,8 +214,7 @@ pub fn measure<P: Pixel>(
 /// (the device refuses to be set to any other).
 pub fn supports(mode: Mode) -> bool {
     match mode {
-        Mode::Cylinder | Mode::Sphere | Mode::Road => true,
-        Mode::Wall => false,
+        Mode::Cylinder | Mode::Sphere | Mode::Wall | Mode::Road => true,
     }
 }
 
@@ -235,7 +240,8 @@ pub fn solve<P: Pixel>(
         }
         Mode::Road => solve_with::<Road, P>(profile, full_scale, calibration, &params.road, ws)
             .map(|s| Measurement::from(&s)),
-        Mode::Wall => Err(PipelineError::UnsupportedMode(mode)),
+        Mode::Wall => solve_with::<Wall, P>(profile, full_scale, calibration, &params.wall, ws)
+            .map(|s| Measurement::from(&s)),
     }
 }
 

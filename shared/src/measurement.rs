@@ -55,6 +55,8 @@ pub enum Measurement {
     Sphere(SphereReading),
     /// A road profile's texture ([`Mode::Road`]).
     Road(RoadReading),
+    /// Walls: orientation, corner, parallel distance, segment ([`Mode::Wall`]).
+    Wall(WallReading),
 }
 
 impl Measurement {
@@ -64,6 +66,7 @@ impl Measurement {
             Measurement::Stem(_) => Mode::Cylinder,
             Measurement::Sphere(_) => Mode::Sphere,
             Measurement::Road(_) => Mode::Road,
+            Measurement::Wall(_) => Mode::Wall,
         }
     }
 
@@ -73,6 +76,7 @@ impl Measurement {
             Measurement::Stem(s) => s.flags,
             Measurement::Sphere(s) => s.flags,
             Measurement::Road(r) => r.flags,
+            Measurement::Wall(w) => w.flags,
         }
     }
 
@@ -82,6 +86,7 @@ impl Measurement {
             Measurement::Stem(s) => s.method,
             Measurement::Sphere(s) => s.method,
             Measurement::Road(_) => Method::MeanProfileDepth,
+            Measurement::Wall(w) => w.method,
         }
     }
 
@@ -91,16 +96,19 @@ impl Measurement {
             Measurement::Stem(_) => "stem",
             Measurement::Sphere(_) => "sphere",
             Measurement::Road(_) => "road",
+            Measurement::Wall(_) => "wall",
         }
     }
 
     /// The reading's headline number (metres): what running statistics average and the
-    /// field log's size column keeps — a stem's or a sphere's diameter.
+    /// field log's size column keeps — a stem's or a sphere's diameter, a road's mean profile
+    /// depth, a wall's distance on the optical axis.
     pub fn value(&self) -> Real {
         match self {
             Measurement::Stem(s) => s.diameter,
             Measurement::Sphere(s) => s.diameter,
             Measurement::Road(r) => r.mpd,
+            Measurement::Wall(w) => w.distance,
         }
     }
 
@@ -110,6 +118,7 @@ impl Measurement {
             Measurement::Stem(s) => s.uncertainty,
             Measurement::Sphere(s) => s.uncertainty,
             Measurement::Road(r) => r.uncertainty,
+            Measurement::Wall(w) => w.distance_sigma,
         }
     }
 }
@@ -239,6 +248,54 @@ pub struct Axes {
     pub minor: Real,
 }
 
+/// The wall instrument's reading (`docs/building.md`): the aimed wall seen from the
+/// instrument and what the capture's other walls add. Angles in radians, lengths in metres.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct WallReading {
+    /// Walls found in the capture.
+    pub walls: u8,
+    /// The aimed wall's distance along the optical axis.
+    #[serde(with = "wire_real")]
+    pub distance: Real,
+    /// Its 1σ.
+    #[serde(with = "wire_real")]
+    pub distance_sigma: Real,
+    /// The aimed wall's turn about the camera's vertical axis (positive: right part nearer).
+    pub yaw: ValueSigma,
+    /// Its tilt about the camera's horizontal axis (positive: lower part nearer).
+    pub pitch: ValueSigma,
+    /// Quality index `1 − λ₃/λ₂` of its plane fit.
+    #[serde(with = "wire_real")]
+    pub quality: Real,
+    /// Rms distance of its points from the plane.
+    #[serde(with = "wire_real")]
+    pub rms: Real,
+    /// Angle between the two largest non-parallel walls (π/2 for a square corner).
+    pub corner: Option<ValueSigma>,
+    /// Distance between the two largest parallel walls.
+    pub parallel: Option<ValueSigma>,
+    /// Length of the aimed wall's segment along a laser line, and whether both its ends are
+    /// edges or corners (otherwise a lower bound).
+    pub segment: Option<(ValueSigma, bool)>,
+    /// The aimed wall's deviation from the plumb, when the device knows the vertical.
+    pub plumb: Option<ValueSigma>,
+    /// The computation ([`Method::PlanePca`]).
+    pub method: Method,
+    /// Quality flags (solver and image).
+    pub flags: Flags,
+}
+
+/// A value and its 1σ (metres or radians).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ValueSigma {
+    /// The value.
+    #[serde(with = "wire_real")]
+    pub value: Real,
+    /// Its 1σ.
+    #[serde(with = "wire_real")]
+    pub sigma: Real,
+}
+
 /// Serialises a [`Real`] as `f32` so the wire format does not depend on the build's
 /// precision (the device computes in f32, the host in f64).
 mod wire_real {
@@ -283,11 +340,40 @@ mod tests {
         assert_eq!(bytes.len(), 1 + 12 + 1 + 1 + 12 + 1 + 1);
         let back: Measurement = postcard::from_bytes(bytes).expect("decodes");
         let Measurement::Stem(b) = back else {
-            panic!("{back:?}")
+            panic!("a stem came back as {back:?}")
         };
         assert_eq!(b.diameter, 0.3001f32 as Real);
         assert_eq!(b.method, Method::CircleFit);
         assert_eq!(back.mode(), Mode::Cylinder);
         assert_eq!(back.flags(), Flags::TILT_IGNORED);
+    }
+
+    #[test]
+    fn a_wall_reading_travels_as_f32_and_names_itself() {
+        let vs = |value: Real, sigma: Real| ValueSigma { value, sigma };
+        let wall = Measurement::Wall(WallReading {
+            walls: 2,
+            distance: 2.0,
+            distance_sigma: 1e-4,
+            yaw: vs(0.78, 2e-4),
+            pitch: vs(0.001, 2e-3),
+            quality: 0.999,
+            rms: 4e-4,
+            corner: Some(vs(1.55, 3e-4)),
+            parallel: None,
+            segment: Some((vs(0.6, 6e-4), true)),
+            plumb: None,
+            method: Method::PlanePca,
+            flags: Flags::default(),
+        });
+        let mut buf = [0u8; 128];
+        let bytes = postcard::to_slice(&wall, &mut buf).expect("fits");
+        // Variant + walls + 8 scalars + corner (1 + 8) + None + segment (1 + 8 + 1) + None
+        // + method + flags.
+        assert_eq!(bytes.len(), 1 + 1 + 32 + 9 + 1 + 10 + 1 + 1 + 1);
+        let back: Measurement = postcard::from_bytes(bytes).expect("decodes");
+        assert_eq!((back.mode(), back.kind()), (Mode::Wall, "wall"));
+        assert_eq!(back.value(), 2.0);
+        assert_eq!(back.method(), Method::PlanePca);
     }
 }

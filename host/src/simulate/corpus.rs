@@ -94,6 +94,7 @@ pub fn ground() -> Object {
         albedo: 0.15,
         texture: Texture::Stone,
         texture_contrast: 0.6,
+        bounds_m: None,
     })
 }
 
@@ -518,13 +519,14 @@ pub fn entries() -> Vec<CorpusEntry> {
             albedo: 0.6,
             texture: Texture::Stone,
             texture_contrast: 0.15,
+            bounds_m: None,
         })
     };
     b.add(
         "wall-z150-frontal",
         Mode::Wall,
         "plaster wall perpendicular to the optical axis at 1.5 m",
-        one_plane_calibration(),
+        two_plane_calibration(),
         vec![wall([0.0, 0.0, 1.5], [0.0, 0.0, -1.0])],
         |_| {},
     );
@@ -532,7 +534,7 @@ pub fn entries() -> Vec<CorpusEntry> {
         "wall-corner-z200",
         Mode::Wall,
         "concave corner of two perpendicular walls, 2.0 m away on the axis",
-        one_plane_calibration(),
+        two_plane_calibration(),
         vec![
             wall([0.0, 0.0, 2.0], [1.0, 0.0, -1.0]),
             wall([0.0, 0.0, 2.0], [-1.0, 0.0, -1.0]),
@@ -591,6 +593,18 @@ pub fn entries() -> Vec<CorpusEntry> {
     b.entries.extend(super::sphere_corpus::entries());
     // --- the road head (`docs/road.md`): own calibration and seeds -------------------------
     b.entries.extend(super::road_corpus::entries());
+    // --- rooms: appended last so that no older capture's seed changes --------------------------
+    for w in super::wall_corpus::entries() {
+        let params = super::wall_corpus::wall_params;
+        b.add(
+            w.name,
+            Mode::Wall,
+            &w.description,
+            w.calibration,
+            w.objects,
+            params,
+        );
+    }
     b.entries
 }
 
@@ -643,6 +657,7 @@ pub fn lab_wall() -> Object {
         albedo: 0.5,
         texture: Texture::Stone,
         texture_contrast: 0.2,
+        bounds_m: None,
     })
 }
 

@@ -18,6 +18,7 @@ pub mod road_corpus;
 pub mod scene;
 pub mod sensor;
 pub mod sphere_corpus;
+pub mod wall_corpus;
 
 use rand::{RngExt, SeedableRng};
 use rand_pcg::Pcg64;

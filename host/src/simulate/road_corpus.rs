@@ -171,6 +171,7 @@ pub fn piezo_spec(step: f64, seed: u64) -> SimSpec {
         timestamp: "2025-06-03T11:00:00Z".into(),
         calibration: calibration(),
         objects: vec![Object::Plane(Plane {
+            bounds_m: None,
             point_m: [0.0, 0.0, ROAD_HEAD_STANDOFF - step],
             normal: [0.0, 0.0, -1.0],
             albedo: 0.5,
@@ -242,6 +243,7 @@ pub fn tilted_spec(degrees: f64, seed: u64) -> SimSpec {
         timestamp: "2025-06-03T13:00:00Z".into(),
         calibration: calibration(),
         objects: vec![Object::Plane(Plane {
+            bounds_m: None,
             point_m: [0.0, 0.0, ROAD_HEAD_STANDOFF],
             normal: [t.sin(), 0.0, -t.cos()],
             albedo: 0.12,

@@ -66,6 +66,8 @@ enum Shape {
         n: Vec3,
         u: Vec3,
         w: Vec3,
+        /// The box `(min, max)` the plane is cut to, if any.
+        bounds: Option<(Vec3, Vec3)>,
     },
     Road {
         z0: f64,
@@ -191,6 +193,7 @@ impl Scene {
                         n,
                         u,
                         w,
+                        bounds: p.bounds_m.map(|[a, b]| (v3(a), v3(b))),
                     }
                 }
                 Object::Road(r) => {
@@ -455,13 +458,17 @@ impl Shape {
                     .find(|&t| accept(t))
                     .map(|t| (t, (o + d * t - c) / *r))
             }
-            Shape::Plane { p, n, .. } => {
+            Shape::Plane { p, n, bounds, .. } => {
                 let den = n.dot(&d);
                 if den.abs() < 1e-15 {
                     return None;
                 }
                 let t = n.dot(&(p - o)) / den;
-                accept(t).then_some((t, *n))
+                let inside = |(lo, hi): &(Vec3, Vec3)| {
+                    let x = o + d * t;
+                    (0..3).all(|k| x[k] >= lo[k] && x[k] <= hi[k])
+                };
+                (accept(t) && bounds.as_ref().is_none_or(inside)).then_some((t, *n))
             }
             Shape::Road {
                 z0,

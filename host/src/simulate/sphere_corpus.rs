@@ -53,6 +53,7 @@ pub fn ball(d_mm: f64, z: f64, x: f64, shift: f64, finish: Finish) -> Object {
 /// The floor a ball at `(centre, r)` rests on.
 pub fn floor_under(centre_y: f64, r: f64) -> Object {
     Object::Plane(Plane {
+        bounds_m: None,
         point_m: [0.0, centre_y + r, 0.0],
         normal: [0.0, -1.0, 0.0],
         albedo: 0.2,
@@ -172,6 +173,7 @@ pub fn entries() -> Vec<CorpusEntry> {
         "notsphere-wall-z120-2p",
         "a flat wall 1.2 m ahead in sphere mode: straight sections",
         vec![Object::Plane(Plane {
+            bounds_m: None,
             point_m: [0.0, 0.0, 1.2],
             normal: [0.3, 0.0, -1.0],
             albedo: 0.5,

@@ -52,7 +52,8 @@ fn a_toy_instrument_measures_through_the_real_pipeline() {
     );
     assert_eq!(m.profile.points(b.points(), 0).len(), 150);
     assert_eq!(MeanDistance::MODE, Mode::Wall);
-    // Not in the dispatch yet: `measure` says so instead of guessing.
+    // The toy is not in the dispatch: `measure` runs the real wall instrument, which needs
+    // two lines on a wall and says so instead of guessing.
     let params = InstrumentParams::default();
     let err = measure(
         Mode::Wall,
@@ -63,5 +64,58 @@ fn a_toy_instrument_measures_through_the_real_pipeline() {
         &params,
         &mut b.workspace(),
     );
-    assert_eq!(err, Err(PipelineError::UnsupportedMode(Mode::Wall)));
+    assert_eq!(
+        err,
+        Err(PipelineError::Solve(crate::solvers::SolveError::SingleLine))
+    );
+}
+
+#[test]
+fn the_wall_instrument_measures_a_frontal_wall_through_the_real_pipeline() {
+    // Both reference lines on a wall 1.2 m away, facing the camera, over 450 columns.
+    let cal = calibration(2);
+    let z = 1.2;
+    let (off, on) = render(&cal, &[0, 1], z, 150..600, 150.0, 12);
+    let (off_f, on_f) = frames(&off, &on);
+    let mut b = buffers(2);
+    let config = PipelineConfig::default();
+    let params = WallInstrumentParams::default();
+    let m = measure_with::<Wall, u8>(&off_f, &on_f, &cal, &config, &params, &mut b.workspace())
+        .unwrap();
+    let s = &m.solution;
+    assert_eq!(s.walls.len(), 1);
+    let o = s.orientation;
+    assert!((o.axis_distance.value - z).abs() < 1e-3, "{o:?}");
+    assert!(
+        o.yaw.value.abs() < 1e-3 && o.pitch.value.abs() < 0.02,
+        "{o:?}"
+    );
+    // The lit part of the wall ends inside the frame at both sides: a bounded segment of
+    // 450 columns at 1.2 m, i.e. 0.54 m.
+    let seg = s.segment.unwrap();
+    assert!(seg.bounded());
+    assert!((seg.length.value - 0.54).abs() < 2e-3, "{seg:?}");
+    // Through the dispatch: the same solution as a `Measurement::Wall`.
+    let all = InstrumentParams::default();
+    let reading = measure(
+        Mode::Wall,
+        &off_f,
+        &on_f,
+        &cal,
+        &config,
+        &all,
+        &mut b.workspace(),
+    );
+    assert_eq!(reading, Ok(Measurement::from(s)));
+    assert_eq!(reading.map(|r| r.kind()), Ok("wall"));
+    // With one plane there is no wall to measure.
+    let cal1 = calibration(1);
+    let (off, on) = render(&cal1, &[0], z, 150..600, 150.0, 12);
+    let (off_f, on_f) = frames(&off, &on);
+    let mut b = buffers(1);
+    let err = measure_with::<Wall, u8>(&off_f, &on_f, &cal1, &config, &params, &mut b.workspace());
+    assert_eq!(
+        err.map(|_| ()),
+        Err(PipelineError::Solve(crate::solvers::SolveError::SingleLine))
+    );
 }

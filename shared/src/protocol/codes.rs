@@ -78,6 +78,7 @@ pub fn method_name(method: Method) -> &'static str {
         Method::SphereSections => "sections",
         Method::SphereThreeTangent => "sphere_three_tangent",
         Method::MeanProfileDepth => "mean_profile_depth",
+        Method::PlanePca => "plane_pca",
     }
 }
 
@@ -341,6 +342,9 @@ fn solve_error_number(e: SolveError) -> u32 {
         SolveError::NotRound => 9,
         SolveError::OneSection => 10,
         SolveError::NotSpherical => 11,
+        // The wall solver's (numbers from 20 keep clear of other instruments').
+        SolveError::SingleLine => 20,
+        SolveError::NotPlanar => 21,
     }
 }
 
@@ -359,6 +363,8 @@ fn solve_error_of_number(n: u32) -> Option<SolveError> {
         9 => SolveError::NotRound,
         10 => SolveError::OneSection,
         11 => SolveError::NotSpherical,
+        20 => SolveError::SingleLine,
+        21 => SolveError::NotPlanar,
         _ => return None,
     })
 }

@@ -38,14 +38,16 @@ pub mod cylinder_fit;
 pub mod ellipse;
 pub mod lm;
 pub mod mpd;
+pub mod plane_pca;
 pub mod result;
+pub mod road_profile;
 pub mod sphere;
 pub mod sphere_fit;
 pub mod sphere_sections;
 pub mod sphere_three_tangent;
-pub mod road_profile;
 pub mod stem;
 pub mod three_tangent;
+pub mod walls;
 
 /// Why a solver could not produce a trustworthy answer.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -80,6 +82,11 @@ pub enum SolveError {
     /// The sections cannot belong to one sphere: two objects, or a flat or elongated one
     /// (`docs/sphere.md`, "Is it a sphere?").
     NotSpherical,
+    /// Every straight run of the lit points lies on one laser line: a plane needs points
+    /// off that line (`docs/building.md`, "One line is not a plane").
+    SingleLine,
+    /// No plane fits: the lit surface is curved, or the lines fall on different objects.
+    NotPlanar,
 }
 
 impl fmt::Display for SolveError {
@@ -100,6 +107,12 @@ impl fmt::Display for SolveError {
             }
             SolveError::NotSpherical => {
                 "the laser lines do not lie on one sphere (two objects in view, or not a ball)"
+            }
+            SolveError::SingleLine => {
+                "only one laser line lies on the surface: a plane needs two (aim so that both lines cross the wall)"
+            }
+            SolveError::NotPlanar => {
+                "the lit surface is not flat (curved, or the lines fall on different objects): no wall plane fits"
             }
         };
         f.write_str(s)

@@ -28,6 +28,8 @@ pub enum Method {
     SphereThreeTangent,
     /// ISO 13473-1 mean profile depth of a road profile (`docs/road.md`).
     MeanProfileDepth,
+    /// Walls by weighted principal components of the lines' points (`docs/building.md`).
+    PlanePca,
 }
 
 /// Quality flags of a solution (a bit set; `Flags::ARC_TOO_SHORT.0 | …`).

@@ -1,0 +1,719 @@
+//! The walls of one capture (`docs/building.md`, "Finding the walls" and "From planes to
+//! readings"): each laser curve is cut into straight runs (split at kinks and jumps), runs of
+//! different curves that share a plane seed a wall, the other runs of that plane join it, and
+//! each wall is fitted by [`super::plane_pca`]. From the walls: the aimed wall's orientation,
+//! the corner angle between the two largest non-parallel walls, the distance between parallel
+//! ones, the length of the aimed wall's segment along a laser line and, given gravity, its
+//! deviation from the plumb.
+//!
+//! Fixed capacities ([`MAX_SEGMENTS`], [`MAX_WALLS`]); no allocation, no scratch memory.
+
+#[allow(unused_imports)]
+use crate::real::Float;
+use crate::real::{norm, sqrt, Real, Vec3, PI};
+
+use crate::laser_plane::LaserPlane;
+use crate::noise::DisplacementField;
+
+use super::plane_pca::{
+    fit_plane, normal_angle, orientation, parallel_distance, plane_intersection, plumb_deviation,
+    Estimate, Orientation, PlaneFit,
+};
+use super::result::Flags;
+use super::SolveError;
+
+/// Most straight runs kept over all curves of one capture.
+pub const MAX_SEGMENTS: usize = 24;
+/// Most walls reported from one capture.
+pub const MAX_WALLS: usize = 4;
+/// Depth of the splitting recursion's explicit stack.
+const SPLIT_STACK: usize = 48;
+
+/// Settings of the wall solver. [`Default`] suits the reference head (f = 1000 px, 752 px
+/// wide, `docs/building.md`, "Settings").
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WallParams {
+    /// Focal length (pixels), for columns of points and the edge σ.
+    pub focal_px: Real,
+    /// Principal point column (pixels).
+    pub principal_u: Real,
+    /// Image width (pixels): a run ending within `edge_margin_px` of a side is cut by the
+    /// field of view, not by an edge.
+    pub width_px: Real,
+    /// See `width_px`.
+    pub edge_margin_px: Real,
+    /// A run is straight while every point is within `split_sigmas`·σ + `split_floor` of its
+    /// chord.
+    pub split_sigmas: Real,
+    /// See `split_sigmas` (metres).
+    pub split_floor: Real,
+    /// Two neighbouring points farther apart than this many pixels' worth of distance
+    /// (`gap_px`·|X|/f) start a new run (a jump: door frame, cable, step).
+    pub gap_px: Real,
+    /// Fewest points of a run (shorter ones are clutter or the stripe's ends).
+    pub min_segment_points: usize,
+    /// Points dropped at each end of a run before the plane fit (the kink or jump smears
+    /// them).
+    pub trim_points: usize,
+    /// Surface roughness allowed beside the point noise (metres, 1σ along the normal).
+    pub roughness: Real,
+    /// Runs share a plane when their χ² per point about it is below this.
+    pub coplanar_chi2: Real,
+    /// … or their rms distance from it is below this (metres).
+    pub coplanar_rms: Real,
+    /// A wall needs runs at least this far apart across them (metres): `√λ₂` of its points.
+    pub min_width: Real,
+    /// Normals within this angle make two walls parallel (radians).
+    pub parallel_max: Real,
+    /// Two walls adjoining without a jump at less than this angle are facets of a curved
+    /// surface, not a corner (radians).
+    pub curved_max: Real,
+    /// A wall whose rms distance from its plane exceeds this, and its χ² per point
+    /// `coplanar_chi2`, is not flat (metres).
+    pub max_rms: Real,
+    /// Gravity in the camera frame (pointing down, any length) and its direction's 1σ
+    /// (radians), when the instrument knows it: enables [`WallSolution::plumb`].
+    pub gravity: Option<(Vec3, Real)>,
+}
+
+impl Default for WallParams {
+    fn default() -> Self {
+        WallParams {
+            focal_px: 1000.0,
+            principal_u: 375.5,
+            width_px: 752.0,
+            edge_margin_px: 3.0,
+            split_sigmas: 4.0,
+            split_floor: 1.5e-3,
+            gap_px: 4.0,
+            min_segment_points: 12,
+            trim_points: 6,
+            roughness: 2e-4,
+            coplanar_chi2: 9.0,
+            coplanar_rms: 2.0e-3,
+            min_width: 0.01,
+            parallel_max: 2.0 * PI / 180.0,
+            curved_max: 30.0 * PI / 180.0,
+            max_rms: 6.0e-3,
+            gravity: None,
+        }
+    }
+}
+
+/// The solver's input: per laser plane, its curve's 3-D points (ordered by image column) and
+/// each point's 1σ along its noise direction, and the planes.
+#[derive(Debug, Clone, Copy)]
+pub struct WallInput<'a> {
+    /// Points per plane.
+    pub curves: &'a [&'a [Vec3]],
+    /// 1σ per point, same layout.
+    pub sigmas: &'a [&'a [Real]],
+    /// The laser planes, in curve order.
+    pub planes: &'a [LaserPlane],
+}
+
+/// A straight run of one curve: points `start..end` of curve `curve`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Run {
+    /// The curve (laser plane) index.
+    pub curve: u8,
+    /// First point.
+    pub start: u16,
+    /// One past the last point.
+    pub end: u16,
+    /// The wall it belongs to, if any.
+    pub wall: Option<u8>,
+}
+
+impl Run {
+    fn len(&self) -> usize {
+        (self.end - self.start) as usize
+    }
+}
+
+/// One wall: its plane and which curves lit it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Wall {
+    /// The fitted plane.
+    pub plane: PlaneFit,
+    /// Bit `k` set when curve `k` has points on it.
+    pub lines: u8,
+}
+
+/// The corner between two walls.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Corner {
+    /// Indices of the two walls in [`WallSolution::walls`].
+    pub walls: (usize, usize),
+    /// Angle between the walls, `π − ∠(n_a, n_b)` (π/2 for a square corner, inside or out).
+    pub angle: Estimate,
+    /// The corner projects towards the camera (a pillar's edge), rather than receding (a room's
+    /// corner).
+    pub convex: bool,
+}
+
+/// How one end of a segment was located.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EndKind {
+    /// Where the laser line meets the next wall (three planes).
+    Corner,
+    /// Where the line leaves its plane (a jump, the wall's edge), to subpixel.
+    Edge,
+    /// The frame's side: the wall goes on beyond the view, the length is a lower bound.
+    FrameSide,
+}
+
+/// A segment of a wall along a laser line, between two ends.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Segment {
+    /// The curve (laser plane) it lies on.
+    pub curve: usize,
+    /// End points (metres, camera frame), left then right in the image.
+    pub ends: [Vec3; 2],
+    /// How each end was found.
+    pub kinds: [EndKind; 2],
+    /// Length between the ends and its 1σ (metres).
+    pub length: Estimate,
+}
+
+impl Segment {
+    /// Both ends are edges or corners (not the frame's side).
+    pub fn bounded(&self) -> bool {
+        !self.kinds.contains(&EndKind::FrameSide)
+    }
+}
+
+/// The walls of one capture and the readings taken from them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WallSolution {
+    /// The walls found, most points first.
+    pub walls: heapless::Vec<Wall, MAX_WALLS>,
+    /// The wall at the image centre (index into `walls`).
+    pub aimed: usize,
+    /// Its orientation seen from the instrument.
+    pub orientation: Orientation,
+    /// The corner between the two largest non-parallel walls.
+    pub corner: Option<Corner>,
+    /// Distance between the two largest parallel walls, when two are.
+    pub parallel: Option<Estimate>,
+    /// The aimed wall's segment along the first line that lights it.
+    pub segment: Option<Segment>,
+    /// The aimed wall's deviation from the plumb (with gravity in the parameters).
+    pub plumb: Option<Estimate>,
+    /// Points used in the wall fits.
+    pub points: usize,
+    /// The straight runs each curve was cut into, left to right per curve, with their wall.
+    pub runs: heapless::Vec<Run, MAX_SEGMENTS>,
+    /// Quality flags.
+    pub flags: Flags,
+}
+
+/// Finds the walls and takes the readings (`docs/building.md`).
+///
+/// Errors: `PlaneCount` without curves; `SingleLine` when every straight run lies on one
+/// laser line (a plane needs two); `NotPlanar` when runs of different lines share no plane or
+/// the surface is curved; `TooFewPoints` when no run is long enough.
+pub fn solve(input: &WallInput<'_>, params: &WallParams) -> Result<WallSolution, SolveError> {
+    let n_curves = input
+        .curves
+        .len()
+        .min(input.sigmas.len())
+        .min(input.planes.len());
+    if n_curves == 0 {
+        return Err(SolveError::PlaneCount);
+    }
+    if !(params.focal_px > 0.0) || params.min_segment_points < 3 {
+        return Err(SolveError::InvalidParameter);
+    }
+    let mut runs: heapless::Vec<Run, MAX_SEGMENTS> = heapless::Vec::new();
+    let mut flags = Flags::default();
+    for k in 0..n_curves {
+        if split_curve(input, k, params, &mut runs).is_err() {
+            flags.insert(Flags::SEVERAL_OBJECTS);
+        }
+    }
+    if runs.is_empty() {
+        return Err(SolveError::TooFewPoints);
+    }
+    let walls = group(input, params, &mut runs)?;
+    check_not_curved(input, params, &runs, &walls)?;
+    let mut walls_out: heapless::Vec<Wall, MAX_WALLS> = heapless::Vec::new();
+    let mut points = 0;
+    for (w, wall) in walls.iter().enumerate() {
+        let plane = refit(input, params, &runs, w, &wall.plane)?;
+        // Far walls scatter by millimetres: only scatter the noise does not explain is
+        // a surface that is not flat.
+        if plane.rms > params.max_rms && plane.chi2 > params.coplanar_chi2 {
+            return Err(SolveError::NotPlanar);
+        }
+        if plane.chi2 > params.coplanar_chi2 {
+            flags.insert(Flags::POOR_FIT);
+        }
+        points += plane.points;
+        let _ = walls_out.push(Wall {
+            plane,
+            lines: wall.lines,
+        });
+    }
+    if runs
+        .iter()
+        .any(|r| r.wall.is_none() && r.len() >= 4 * params.min_segment_points)
+    {
+        // A long straight run on no wall: another object, or a wall lit by one line only.
+        flags.insert(Flags::SEVERAL_OBJECTS);
+    }
+    let aimed = aimed_wall(input, params, &runs);
+    let aimed_plane = walls_out[aimed].plane;
+    let orientation = orientation(&aimed_plane).ok_or(SolveError::Degenerate)?;
+    let corner = corner(&walls_out);
+    let parallel = parallel(&walls_out, params);
+    let segment = segment(input, params, &runs, &walls_out, aimed);
+    let plumb = params
+        .gravity
+        .and_then(|(g, s)| plumb_deviation(&aimed_plane, g, s));
+    Ok(WallSolution {
+        walls: walls_out,
+        aimed,
+        orientation,
+        corner,
+        parallel,
+        segment,
+        plumb,
+        points,
+        runs,
+        flags,
+    })
+}
+
+/// The image column of a point (pinhole; the points are undistorted already).
+fn column(p: Vec3, params: &WallParams) -> Real {
+    params.focal_px * p.x / p.z + params.principal_u
+}
+
+/// Cuts curve `k` into straight runs (Douglas–Peucker with a σ-scaled tolerance, after
+/// cutting at jumps); `Err` when [`MAX_SEGMENTS`] overflowed (the rest is dropped).
+fn split_curve(
+    input: &WallInput<'_>,
+    k: usize,
+    params: &WallParams,
+    runs: &mut heapless::Vec<Run, MAX_SEGMENTS>,
+) -> Result<(), ()> {
+    let pts = input.curves[k];
+    let sig = input.sigmas[k];
+    let n = pts.len().min(sig.len()).min(u16::MAX as usize);
+    let mut stack: heapless::Vec<(usize, usize), SPLIT_STACK> = heapless::Vec::new();
+    // Jumps first: each gap-free stretch onto the stack.
+    let mut start = 0;
+    for i in 1..=n {
+        let jump = i == n || {
+            let step = norm(&(pts[i] - pts[i - 1]));
+            let spacing = params.gap_px * norm(&pts[i]) / params.focal_px;
+            !(step <= spacing + params.split_sigmas * (sig[i] + sig[i - 1]))
+        };
+        if jump {
+            if i - start >= params.min_segment_points {
+                stack.push((start, i)).map_err(|_| ())?;
+            }
+            start = i;
+        }
+    }
+    // Reverse so that runs come out left to right.
+    stack.reverse();
+    while let Some((s, e)) = stack.pop() {
+        let (a, b) = (pts[s], pts[e - 1]);
+        let chord = b - a;
+        let len = norm(&chord);
+        let mut worst = (0.0 as Real, s);
+        if len > 0.0 {
+            let dir = chord / len;
+            for i in s + 1..e - 1 {
+                let d = pts[i] - a;
+                let off = norm(&(d - dir * d.dot(&dir)));
+                let tol = params.split_sigmas * sig[i] + params.split_floor;
+                let excess = off / tol;
+                if excess > worst.0 {
+                    worst = (excess, i);
+                }
+            }
+        }
+        if worst.0 > 1.0 {
+            let i = worst.1;
+            // Right half pushed first so that the left one is handled first.
+            for (s2, e2) in [(i, e), (s, i)] {
+                if e2 - s2 >= params.min_segment_points {
+                    stack.push((s2, e2)).map_err(|_| ())?;
+                }
+            }
+        } else {
+            runs.push(Run {
+                curve: k as u8,
+                start: s as u16,
+                end: e as u16,
+                wall: None,
+            })
+            .map_err(|_| ())?;
+        }
+    }
+    Ok(())
+}
+
+/// The points of `runs` selected by `take`, with each point's σ along `normal` (its noise
+/// direction projected, with the roughness added), trimmed by `trim` at each run's ends.
+fn samples<'a>(
+    input: &'a WallInput<'a>,
+    runs: &'a [Run],
+    take: impl Fn(usize, &Run) -> bool + Clone + 'a,
+    normal: Option<Vec3>,
+    trim: usize,
+    roughness: Real,
+) -> impl Iterator<Item = (Vec3, Real)> + Clone + 'a {
+    runs.iter()
+        .enumerate()
+        .filter(move |(i, r)| take(*i, r))
+        .flat_map(move |(_, r)| {
+            let k = r.curve as usize;
+            let field = DisplacementField::of(&input.planes[k]);
+            let t = trim.min(r.len().saturating_sub(3) / 2);
+            let range = r.start as usize + t..r.end as usize - t;
+            input.curves[k][range.clone()]
+                .iter()
+                .zip(&input.sigmas[k][range])
+                .map(move |(&p, &s)| {
+                    let along = match normal {
+                        Some(n) => s * field.direction(p).dot(&n).abs(),
+                        None => s,
+                    };
+                    (p, sqrt(along * along + roughness * roughness))
+                })
+        })
+}
+
+/// A wall being grouped: its plane so far and its curves.
+#[derive(Debug, Clone, Copy)]
+struct Group {
+    plane: PlaneFit,
+    lines: u8,
+}
+
+/// Whether the points of run `run` lie on `plane` (χ² or rms test).
+fn on_plane(input: &WallInput<'_>, params: &WallParams, run: &Run, plane: &PlaneFit) -> bool {
+    let one = [*run];
+    let (mut chi2, mut sq, mut n) = (0.0 as Real, 0.0 as Real, 0usize);
+    for (p, s) in samples(
+        input,
+        &one,
+        |_, _| true,
+        Some(plane.normal),
+        0,
+        params.roughness,
+    ) {
+        let r = plane.signed_distance(p);
+        chi2 += (r / s) * (r / s);
+        sq += r * r;
+        n += 1;
+    }
+    n > 0
+        && (chi2 / n as Real <= params.coplanar_chi2 || sqrt(sq / n as Real) <= params.coplanar_rms)
+}
+
+/// Groups the runs into walls: the pair of runs of different curves with the most points that
+/// share a plane seeds a wall, every run on that plane joins it; repeated on what is left.
+fn group(
+    input: &WallInput<'_>,
+    params: &WallParams,
+    runs: &mut [Run],
+) -> Result<heapless::Vec<Group, MAX_WALLS>, SolveError> {
+    let mut walls: heapless::Vec<Group, MAX_WALLS> = heapless::Vec::new();
+    while walls.len() < MAX_WALLS {
+        let mut best: Option<(usize, usize, usize, PlaneFit)> = None;
+        for i in 0..runs.len() {
+            for j in i + 1..runs.len() {
+                let (a, b) = (runs[i], runs[j]);
+                if a.wall.is_some() || b.wall.is_some() || a.curve == b.curve {
+                    continue;
+                }
+                let count = a.len() + b.len();
+                if best.is_some_and(|(_, _, c, _)| c >= count) {
+                    continue;
+                }
+                let pair = samples(
+                    input,
+                    runs,
+                    move |k, _| k == i || k == j,
+                    None,
+                    0,
+                    params.roughness,
+                );
+                let Ok(fit) = fit_plane(pair) else { continue };
+                if sqrt(fit.spread[1]) < params.min_width {
+                    continue;
+                }
+                if on_plane(input, params, &a, &fit) && on_plane(input, params, &b, &fit) {
+                    best = Some((i, j, count, fit));
+                }
+            }
+        }
+        let Some((i, j, _, seed)) = best else { break };
+        let w = walls.len() as u8;
+        runs[i].wall = Some(w);
+        runs[j].wall = Some(w);
+        let mut plane = seed;
+        // Join every other free run on the plane, refitting as the wall grows.
+        for k in 0..runs.len() {
+            if runs[k].wall.is_none() && on_plane(input, params, &runs[k], &plane) {
+                runs[k].wall = Some(w);
+                let all = samples(
+                    input,
+                    runs,
+                    move |_, r| r.wall == Some(w),
+                    None,
+                    0,
+                    params.roughness,
+                );
+                plane = fit_plane(all)?;
+            }
+        }
+        let lines = runs
+            .iter()
+            .filter(|r| r.wall == Some(w))
+            .fold(0u8, |m, r| m | (1 << r.curve));
+        let _ = walls.push(Group { plane, lines });
+    }
+    if walls.is_empty() {
+        let first = runs[0].curve;
+        return Err(if runs.iter().all(|r| r.curve == first) {
+            SolveError::SingleLine
+        } else {
+            SolveError::NotPlanar
+        });
+    }
+    // Most points first; the runs' wall indices follow.
+    let mut order: heapless::Vec<(usize, usize), MAX_WALLS> = heapless::Vec::new();
+    for (w, g) in walls.iter().enumerate() {
+        let _ = order.push((g.plane.points, w));
+    }
+    order.sort_unstable_by_key(|o| core::cmp::Reverse(o.0));
+    let mut sorted: heapless::Vec<Group, MAX_WALLS> = heapless::Vec::new();
+    for &(_, w) in &order {
+        let _ = sorted.push(walls[w]);
+    }
+    for r in runs.iter_mut() {
+        if let Some(w) = r.wall {
+            r.wall = order
+                .iter()
+                .position(|&(_, o)| o == w as usize)
+                .map(|p| p as u8);
+        }
+    }
+    Ok(sorted)
+}
+
+/// Two walls that adjoin along a curve without a jump, at a shallow angle, are facets of a
+/// curved surface (a column, a vault): `NotPlanar`.
+fn check_not_curved(
+    input: &WallInput<'_>,
+    params: &WallParams,
+    runs: &[Run],
+    walls: &[Group],
+) -> Result<(), SolveError> {
+    for pair in runs.windows(2) {
+        let (a, b) = (pair[0], pair[1]);
+        let (Some(wa), Some(wb)) = (a.wall, b.wall) else {
+            continue;
+        };
+        if a.curve != b.curve || wa == wb || b.start != a.end {
+            continue;
+        }
+        let angle = normal_angle(&walls[wa as usize].plane, &walls[wb as usize].plane).value;
+        let pts = input.curves[a.curve as usize];
+        let step = norm(&(pts[b.start as usize] - pts[a.end as usize - 1]));
+        let spacing = params.gap_px * norm(&pts[a.end as usize - 1]) / params.focal_px;
+        if angle < params.curved_max && angle > params.parallel_max && step <= spacing {
+            return Err(SolveError::NotPlanar);
+        }
+    }
+    Ok(())
+}
+
+/// Final fit of wall `w`: its runs trimmed at their ends, each point's σ along the wall's
+/// normal.
+fn refit(
+    input: &WallInput<'_>,
+    params: &WallParams,
+    runs: &[Run],
+    w: usize,
+    first: &PlaneFit,
+) -> Result<PlaneFit, SolveError> {
+    let w = w as u8;
+    let take = move |_: usize, r: &Run| r.wall == Some(w);
+    let mut plane = *first;
+    for _ in 0..2 {
+        plane = fit_plane(samples(
+            input,
+            runs,
+            take,
+            Some(plane.normal),
+            params.trim_points,
+            params.roughness,
+        ))?;
+    }
+    Ok(plane)
+}
+
+/// The wall whose run comes nearest the principal point's column.
+fn aimed_wall(input: &WallInput<'_>, params: &WallParams, runs: &[Run]) -> usize {
+    let mut best = (Real::INFINITY, 0usize);
+    for r in runs {
+        let Some(w) = r.wall else { continue };
+        let pts = &input.curves[r.curve as usize][r.start as usize..r.end as usize];
+        for &p in pts {
+            let off = (column(p, params) - params.principal_u).abs();
+            if off < best.0 {
+                best = (off, w as usize);
+            }
+        }
+    }
+    best.1
+}
+
+/// The corner between the two largest walls more than 30° apart.
+fn corner(walls: &[Wall]) -> Option<Corner> {
+    for a in 0..walls.len() {
+        for b in a + 1..walls.len() {
+            let (pa, pb) = (&walls[a].plane, &walls[b].plane);
+            let between = normal_angle(pa, pb);
+            if between.value < PI / 6.0 {
+                continue;
+            }
+            return Some(Corner {
+                walls: (a, b),
+                angle: Estimate {
+                    value: PI - between.value,
+                    sigma: between.sigma,
+                },
+                // A receding (room) corner puts each wall on the camera's side of the other.
+                convex: pa.signed_distance(pb.centroid) > 0.0,
+            });
+        }
+    }
+    None
+}
+
+/// Distance between the two largest parallel walls.
+fn parallel(walls: &[Wall], params: &WallParams) -> Option<Estimate> {
+    for a in 0..walls.len() {
+        for b in a + 1..walls.len() {
+            let (pa, pb) = (&walls[a].plane, &walls[b].plane);
+            if normal_angle(pa, pb).value <= params.parallel_max {
+                return Some(parallel_distance(pa, pb));
+            }
+        }
+    }
+    None
+}
+
+/// The aimed wall's segment along the lowest curve that lights it: its points' first and
+/// last run, each end at the next wall (corner), at the edge where the line leaves the plane,
+/// or at the frame's side (`docs/building.md`, "Segment length").
+fn segment(
+    input: &WallInput<'_>,
+    params: &WallParams,
+    runs: &[Run],
+    walls: &[Wall],
+    aimed: usize,
+) -> Option<Segment> {
+    let wall = &walls[aimed];
+    let curve = (0..8).find(|k| wall.lines & (1 << k) != 0)?;
+    let plane = &input.planes[curve];
+    let mine = |r: &&Run| r.curve as usize == curve && r.wall == Some(aimed as u8);
+    let first = runs.iter().filter(mine).min_by_key(|r| r.start)?;
+    let last = runs.iter().filter(mine).max_by_key(|r| r.end)?;
+    let (origin, dir) = plane_intersection(
+        wall.plane.normal,
+        wall.plane.offset,
+        plane.normal,
+        plane.offset,
+    )?;
+    let pts = input.curves[curve];
+    let mut ends = [Vec3::zeros(); 2];
+    let mut kinds = [EndKind::Edge; 2];
+    let mut var = 0.0;
+    for side in 0..2 {
+        let (inner, outer) = if side == 0 {
+            (first.start as usize, (first.start as usize).checked_sub(1))
+        } else {
+            (
+                last.end as usize - 1,
+                Some(last.end as usize).filter(|&i| i < pts.len()),
+            )
+        };
+        let sign = if side == 0 { -1.0 } else { 1.0 };
+        let u_in = column(pts[inner], params);
+        // The neighbouring run on the same curve, if it is another wall's and adjoins.
+        let next = runs.iter().find(|r| {
+            r.curve as usize == curve
+                && r.wall.is_some_and(|w| w as usize != aimed)
+                && if side == 0 {
+                    r.end as usize + 2 * params.trim_points + 2 >= first.start as usize
+                        && r.end <= first.start
+                } else {
+                    r.start as usize <= last.end as usize + 2 * params.trim_points + 2
+                        && r.start >= last.end
+                }
+        });
+        let corner_end = next.and_then(|r| {
+            let other = &walls[r.wall? as usize].plane;
+            let along = dir.dot(&other.normal);
+            if along.abs() < 1e-3 {
+                return None;
+            }
+            let t = (other.offset - other.normal.dot(&origin)) / along;
+            let p = origin + dir * t;
+            Some((p, other.sigma_at(p) / along.abs()))
+        });
+        if let Some((p, s)) = corner_end {
+            ends[side] = p;
+            kinds[side] = EndKind::Corner;
+            var += s * s;
+            continue;
+        }
+        // The plane's stripe is seen up to its last column and not in the next: the edge is
+        // within that column's outer half-pixel whatever follows (a deeper surface, a gap of
+        // unlit columns), uniform: σ = 1/√12 px (docs/building.md, "Segment length").
+        let at_side = if side == 0 {
+            u_in < params.edge_margin_px
+        } else {
+            u_in > params.width_px - 1.0 - params.edge_margin_px
+        };
+        if outer.is_none() && at_side {
+            kinds[side] = EndKind::FrameSide;
+        }
+        let (u_edge, sigma_u) = (u_in + 0.5 * sign, 1.0 / sqrt(12.0));
+        let at = |u: Real| -> Option<Real> {
+            let a = u - params.principal_u;
+            let den = params.focal_px * dir.x - a * dir.z;
+            (den.abs() > 1e-9).then(|| (a * origin.z - params.focal_px * origin.x) / den)
+        };
+        let t = at(u_edge)?;
+        let dt = (at(u_edge + 0.5)? - at(u_edge - 0.5)?).abs();
+        ends[side] = origin + dir * t;
+        var += (dt * sigma_u) * (dt * sigma_u);
+    }
+    let length = norm(&(ends[1] - ends[0]));
+    // The wall's depth scales the segment: δL/L = δz/z.
+    let scale = wall.plane.centroid_sigma / wall.plane.offset.max(1e-3);
+    var += (length * scale) * (length * scale);
+    Some(Segment {
+        curve,
+        ends,
+        kinds,
+        length: Estimate {
+            value: length,
+            sigma: sqrt(var),
+        },
+    })
+}
+
+#[cfg(test)]
+#[path = "walls_tests.rs"]
+mod tests;

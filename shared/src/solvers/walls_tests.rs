@@ -1,0 +1,259 @@
+#![allow(clippy::unnecessary_cast)]
+
+use super::*;
+use crate::calibration::Calibration;
+use crate::noise::{displacement_sigma, NoiseModel};
+use crate::solvers::plane_pca::tests::Gauss;
+
+/// A flat piece of a scene: the plane `normal·X = offset` where `x_range` holds (camera x).
+#[derive(Clone, Copy)]
+struct Piece {
+    normal: Vec3,
+    offset: Real,
+    x_range: (Real, Real),
+}
+
+fn piece(normal: Vec3, through: Vec3, x_range: (Real, Real)) -> Piece {
+    let n = normal.normalize();
+    Piece {
+        normal: n,
+        offset: n.dot(&through),
+        x_range,
+    }
+}
+
+const W: usize = 752;
+
+/// The laser curves of `scene` seen by the reference head with 1σ image noise `sigma_px`
+/// (per point, along its noise direction): each column's plane of sight, each laser plane,
+/// the nearest piece.
+struct Curves {
+    points: [[Vec3; W]; 2],
+    sigmas: [[Real; W]; 2],
+    len: [usize; 2],
+    planes: [LaserPlane; 2],
+}
+
+impl Curves {
+    fn of(scene: &[Piece], sigma_px: Real, seed: u64) -> Curves {
+        let cal = Calibration::reference_design();
+        let planes = [cal.planes[0], cal.planes[1]];
+        let mut c = Curves {
+            points: [[Vec3::zeros(); W]; 2],
+            sigmas: [[0.0; W]; 2],
+            len: [0; 2],
+            planes,
+        };
+        let mut g = Gauss::new(seed);
+        let noise = NoiseModel::reference();
+        for (k, lp) in planes.iter().enumerate() {
+            let field = DisplacementField::of(lp);
+            for u in 0..W {
+                let a = (u as Real - 375.5) / 1000.0;
+                let mut best: Option<Vec3> = None;
+                for s in scene {
+                    // Solve n_L·X = d_L, n·X = d, X.x − a·X.z = 0.
+                    let m = crate::real::Mat3::from_rows(&[
+                        lp.normal.transpose(),
+                        s.normal.transpose(),
+                        Vec3::new(1.0, 0.0, -a).transpose(),
+                    ]);
+                    let Some(inv) = m.try_inverse() else { continue };
+                    let x = inv * Vec3::new(lp.offset, s.offset, 0.0);
+                    let v = 1000.0 * x.y / x.z + 239.5;
+                    if x.z > 0.2
+                        && x.x >= s.x_range.0
+                        && x.x <= s.x_range.1
+                        && (0.0..479.0).contains(&v)
+                        && best.is_none_or(|b| x.z < b.z)
+                    {
+                        best = Some(x);
+                    }
+                }
+                let Some(x) = best else { continue };
+                let sigma = displacement_sigma(lp, 1000.0, x, noise.image_px()).unwrap();
+                let i = c.len[k];
+                c.points[k][i] =
+                    x + field.direction(x) * (sigma * sigma_px / noise.image_px() * g.next());
+                c.sigmas[k][i] = sigma * (sigma_px / noise.image_px()).max(1e-3);
+                c.len[k] += 1;
+            }
+        }
+        c
+    }
+
+    fn solve(&self, params: &WallParams) -> Result<WallSolution, SolveError> {
+        let curves = [
+            &self.points[0][..self.len[0]],
+            &self.points[1][..self.len[1]],
+        ];
+        let sigmas = [
+            &self.sigmas[0][..self.len[0]],
+            &self.sigmas[1][..self.len[1]],
+        ];
+        solve(
+            &WallInput {
+                curves: &curves,
+                sigmas: &sigmas,
+                planes: &self.planes,
+            },
+            params,
+        )
+    }
+}
+
+const ALL: (Real, Real) = (-100.0, 100.0);
+
+fn deg(x: Real) -> Real {
+    x * 180.0 / PI
+}
+
+#[test]
+fn a_frontal_wall_faces_the_camera() {
+    let scene = [piece(Vec3::z(), Vec3::new(0.0, 0.0, 1.5), ALL)];
+    let s = Curves::of(&scene, 0.05, 1)
+        .solve(&WallParams::default())
+        .unwrap();
+    assert_eq!(s.walls.len(), 1);
+    assert_eq!(s.walls[0].lines, 0b11);
+    let o = s.orientation;
+    assert!(
+        deg(o.yaw.value).abs() < 3.0 * deg(o.yaw.sigma) + 0.01,
+        "{o:?}"
+    );
+    assert!((o.axis_distance.value - 1.5).abs() < 1e-3, "{o:?}");
+    assert!(s.corner.is_none() && s.parallel.is_none());
+    // The line runs off both sides of the frame: an open segment.
+    let seg = s.segment.unwrap();
+    assert_eq!(seg.kinds, [EndKind::FrameSide; 2]);
+    assert!(!seg.bounded());
+}
+
+#[test]
+fn a_far_turned_wall_is_found() {
+    // 3 m away, turned 25°: the points scatter by several millimetres, as predicted.
+    let y = (25.0 as Real).to_radians();
+    let scene = [piece(
+        Vec3::new(y.sin(), 0.0, y.cos()),
+        Vec3::new(0.0, 0.0, 3.0),
+        ALL,
+    )];
+    let s = Curves::of(&scene, 0.085, 11)
+        .solve(&WallParams::default())
+        .unwrap();
+    assert_eq!(s.walls.len(), 1);
+    let o = s.orientation;
+    assert!((o.yaw.value - y).abs() < 4.0 * o.yaw.sigma, "{o:?}");
+    assert!(
+        (o.axis_distance.value - 3.0).abs() < 4.0 * o.axis_distance.sigma,
+        "{o:?}"
+    );
+}
+
+#[test]
+fn a_room_corner_reads_its_angle() {
+    for (opening, seed) in [(90.0 as Real, 2u64), (80.0, 3), (100.0, 4)] {
+        // Walls symmetric about the axis meeting 2 m away; `opening` between them.
+        let half = (opening / 2.0).to_radians();
+        let left = piece(
+            Vec3::new(-half.cos(), 0.0, half.sin()),
+            Vec3::new(0.0, 0.0, 2.0),
+            (-100.0, 0.0),
+        );
+        let right = piece(
+            Vec3::new(half.cos(), 0.0, half.sin()),
+            Vec3::new(0.0, 0.0, 2.0),
+            (0.0, 100.0),
+        );
+        let s = Curves::of(&[left, right], 0.05, seed)
+            .solve(&WallParams::default())
+            .unwrap();
+        assert_eq!(s.walls.len(), 2, "{opening}");
+        let c = s.corner.unwrap();
+        assert!(!c.convex);
+        let err = deg(c.angle.value) - opening;
+        assert!(
+            err.abs() < 0.1 && err.abs() < 4.0 * deg(c.angle.sigma),
+            "{opening}: {err}° σ {}",
+            deg(c.angle.sigma)
+        );
+        // The aimed wall's segment ends at the corner and at the frame's side.
+        let seg = s.segment.unwrap();
+        assert!(seg.kinds.contains(&EndKind::Corner), "{:?}", seg.kinds);
+    }
+}
+
+#[test]
+fn a_door_frame_and_a_cable_do_not_split_the_wall() {
+    // A wall 2 m away with a 0.8 m door opening (a wall 1 m behind it) and a cable 0.3 m in
+    // front of it.
+    let wall_l = piece(Vec3::z(), Vec3::new(0.0, 0.0, 2.0), (-100.0, -0.3));
+    let wall_r = piece(Vec3::z(), Vec3::new(0.0, 0.0, 2.0), (0.5, 100.0));
+    let behind = piece(Vec3::z(), Vec3::new(0.0, 0.0, 3.0), ALL);
+    let cable = piece(Vec3::z(), Vec3::new(0.0, 0.0, 1.7), (-0.52, -0.50));
+    let s = Curves::of(&[wall_l, wall_r, behind, cable], 0.05, 5)
+        .solve(&WallParams::default())
+        .unwrap();
+    // The two wall pieces either side of the door are one plane (the cable's points none);
+    // the room behind the door another, parallel, 1 m on.
+    assert_eq!(s.walls.len(), 2);
+    let front = s
+        .walls
+        .iter()
+        .find(|w| (w.plane.offset - 2.0).abs() < 1e-3)
+        .unwrap();
+    // Columns left of the door (x < −0.3 at 2 m: 225) and right of it (x > 0.5: 125), less
+    // the cable's and the trimmed ends, on both lines.
+    assert!(front.plane.points > 2 * 300, "{:?}", front.plane);
+    let gap = s.parallel.unwrap();
+    assert!((gap.value - 1.0).abs() < 3e-3, "{gap:?}");
+}
+
+#[test]
+fn the_door_opening_is_a_bounded_segment() {
+    // Aim at the far wall through a 0.9 m opening: the segment is the opening's width,
+    // between two edges where the line leaves the far wall (behind the jambs).
+    let front_l = piece(Vec3::z(), Vec3::new(0.0, 0.0, 1.5), (-100.0, -0.45));
+    let front_r = piece(Vec3::z(), Vec3::new(0.0, 0.0, 1.5), (0.45, 100.0));
+    let behind = piece(Vec3::z(), Vec3::new(0.0, 0.0, 1.8), ALL);
+    let s = Curves::of(&[front_l, front_r, behind], 0.05, 6)
+        .solve(&WallParams::default())
+        .unwrap();
+    let aimed = &s.walls[s.aimed].plane;
+    assert!((aimed.offset - 1.8).abs() < 1e-3);
+    let seg = s.segment.unwrap();
+    assert_eq!(seg.kinds, [EndKind::Edge; 2]);
+    // Seen from the camera the far wall shows between the rays through the jambs: at 1.8 m
+    // the visible width is 0.9 · 1.8 / 1.5.
+    let want = 0.9 * 1.8 / 1.5;
+    assert!(
+        (seg.length.value - want).abs() < 2e-3,
+        "{} vs {want}",
+        seg.length.value
+    );
+}
+
+#[test]
+fn bad_input_is_named() {
+    // One line only: the second plane's curve is empty.
+    let scene = [piece(Vec3::z(), Vec3::new(0.0, 0.0, 1.5), ALL)];
+    let mut c = Curves::of(&scene, 0.05, 7);
+    c.len[1] = 0;
+    assert_eq!(c.solve(&WallParams::default()), Err(SolveError::SingleLine));
+    // A round column 1 m across, 1.5 m away: facets, not walls.
+    let mut pieces = [piece(Vec3::z(), Vec3::zeros(), ALL); 40];
+    let (r, z0) = (0.5 as Real, 2.0 as Real);
+    for (i, p) in pieces.iter_mut().enumerate() {
+        let a = -1.0 + 2.0 * i as Real / 39.0;
+        let n = Vec3::new(a.sin(), 0.0, -a.cos());
+        let at = Vec3::new(0.0, 0.0, z0) + n * r;
+        let half = r * (1.0 / 39.0);
+        *p = piece(
+            -n,
+            at,
+            (at.x - half * a.cos() - 1e-4, at.x + half * a.cos() + 1e-4),
+        );
+    }
+    let err = Curves::of(&pieces, 0.05, 8).solve(&WallParams::default());
+    assert_eq!(err.clone().err(), Some(SolveError::NotPlanar), "{err:?}");
+}
