@@ -97,7 +97,9 @@ impl fmt::Display for SolveError {
             SolveError::Degenerate => "points do not determine the model (collinear or singular)",
             SolveError::NotConverged => "iterative fit did not converge",
             SolveError::ScratchTooSmall => "scratch buffer shorter than the point count",
-            SolveError::ArcTooShort => "visible arc too short for a trustworthy radius",
+            SolveError::ArcTooShort => {
+                "visible arc too short: the circle fit's σ exceeds a third of its radius"
+            }
             SolveError::RadiusOutOfRange => "radius outside the plausible range",
             SolveError::InvalidParameter => "solver parameter out of range",
             SolveError::PlaneCount => "wrong number of laser planes for this solution",

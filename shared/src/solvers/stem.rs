@@ -322,33 +322,29 @@ fn non_round(
         .then_some(e)
 }
 
+/// Largest relative 1σ of a short-arc fit that is still reported (`docs/cylinder.md` §6,
+/// rule 3): above it the fit's 3σ interval reaches a zero radius, so the reading does not
+/// bound the stem's size and the capture is refused.
+const SHORT_ARC_MAX_REL_SIGMA: Real = 1.0 / 3.0;
+
 /// Choice between a three-tangent radius and a fit radius (`docs/cylinder.md`, "Choosing
-/// the method"): `(use_fit, inconsistent)`.
+/// the method"): `(use_fit, inconsistent)`, or `None` when there is no trustworthy answer.
 fn choose(tt: Option<(Real, Real)>, fit: Option<(Real, Real, bool)>) -> Option<(bool, bool)> {
-    match (tt, fit) {
-        (None, None) => None,
-        // The three-tangent alone has no check on the fade-out of its edges (docs/cylinder.md
-        // §5b: biased low by up to tens of percent, and a fragment of the curve looks like a
-        // small stem): without a fit to judge it there is no trustworthy answer.
-        (Some(_), None) => None,
-        (None, Some((_, _, short))) => {
-            if short {
-                None
-            } else {
-                Some((true, false))
-            }
-        }
-        (Some((rt, st)), Some((rf, sf, short))) => {
-            let inconsistent = (rt - rf).abs() > 3.0 * sqrt(st * st + sf * sf);
-            if short {
-                Some((false, inconsistent))
-            } else if inconsistent {
-                Some((true, true))
-            } else {
-                Some((sf < st, false))
-            }
-        }
+    // The three-tangent alone has no check on the fade-out of its edges (docs/cylinder.md
+    // §5b: biased low by up to tens of percent, and a fragment of the curve looks like a
+    // small stem): without a fit to judge it there is no trustworthy answer.
+    let (rf, sf, short) = fit?;
+    let inconsistent = tt.is_some_and(|(rt, st)| (rt - rf).abs() > 3.0 * sqrt(st * st + sf * sf));
+    if short {
+        // Rule 3: on a short arc the visible ends are not the tangent points (§5b), so the
+        // three-tangent is never better than the fit: the fit with its honest σ, or nothing.
+        return (sf.is_finite() && sf <= SHORT_ARC_MAX_REL_SIGMA * rf.abs())
+            .then_some((true, inconsistent));
     }
+    Some(match tt {
+        Some((_, st)) if !inconsistent => (sf < st, false),
+        _ => (true, inconsistent),
+    })
 }
 
 /// Solves the stem diameter of one capture (`docs/cylinder.md`, "Choosing the method").
@@ -360,10 +356,11 @@ fn choose(tt: Option<(Real, Real)>, fit: Option<(Real, Real, bool)>) -> Option<(
 ///   ([`Flags::TILT_FIT_FAILED`]).
 ///
 /// The reported diameter is the method with the smaller 1σ, except: the fit when the two
-/// disagree beyond 3σ ([`Flags::INCONSISTENT`], occluded edge), the three-tangent when the
-/// arc is too short for the fit. Errors: [`SolveError::PlaneCount`] (no curve, or
-/// curves ≠ planes), [`SolveError::ScratchTooSmall`], [`SolveError::ArcTooShort`] (fit
-/// ill-conditioned and three-tangent failed), [`SolveError::RadiusOutOfRange`], and the
+/// disagree beyond 3σ ([`Flags::INCONSISTENT`], occluded edge), and the fit with
+/// [`Flags::ARC_TOO_SHORT`] when the arc is short. Errors: [`SolveError::PlaneCount`] (no
+/// curve, or curves ≠ planes), [`SolveError::ScratchTooSmall`], [`SolveError::ArcTooShort`]
+/// (short arc and the fit's σ above a third of its radius), [`SolveError::RadiusOutOfRange`],
+/// and the
 /// [`SolveError::NotConverged`] when both methods fail.
 pub fn solve(
     input: &CylinderInput<'_>,

@@ -297,3 +297,44 @@ fn budget_keeps_the_reading() {
     }
     std::println!("largest change of the reading: {worst:.3} σ");
 }
+
+/// Rule 3 (`docs/cylinder.md` §6): a short arc reports the fit with its σ, never the
+/// three-tangent, and is refused once the fit's σ exceeds a third of its radius.
+#[test]
+fn choose_rules() {
+    // Rule 1: both agree → the smaller σ.
+    assert_eq!(
+        choose(Some((0.10, 0.001)), Some((0.101, 0.002, false))),
+        Some((false, false))
+    );
+    assert_eq!(
+        choose(Some((0.10, 0.002)), Some((0.101, 0.001, false))),
+        Some((true, false))
+    );
+    // Rule 2: disagreement beyond 3σ → the fit, inconsistent.
+    assert_eq!(
+        choose(Some((0.05, 0.001)), Some((0.10, 0.001, false))),
+        Some((true, true))
+    );
+    // Rule 3: short arc → the fit even when the three-tangent's σ is smaller.
+    assert_eq!(
+        choose(Some((0.10, 0.001)), Some((0.101, 0.01, true))),
+        Some((true, false))
+    );
+    assert_eq!(
+        choose(Some((0.05, 0.001)), Some((0.30, 0.09, true))),
+        Some((true, true))
+    );
+    assert_eq!(choose(None, Some((0.30, 0.09, true))), Some((true, false)));
+    // …refused when the fit's 3σ interval reaches a zero radius.
+    assert_eq!(choose(Some((0.10, 0.001)), Some((0.30, 0.11, true))), None);
+    assert_eq!(choose(None, Some((0.30, 0.11, true))), None);
+    assert_eq!(choose(None, Some((0.30, Real::NAN, true))), None);
+    // Rule 4: no fit → no answer; no three-tangent → the fit.
+    assert_eq!(choose(Some((0.10, 0.001)), None), None);
+    assert_eq!(
+        choose(None, Some((0.10, 0.001, false))),
+        Some((true, false))
+    );
+    assert_eq!(choose(None, None), None);
+}
