@@ -322,7 +322,7 @@ fn choose_rules() {
         Some((true, false))
     );
     assert_eq!(
-        choose(Some((0.05, 0.001)), Some((0.30, 0.09, true))),
+        choose(Some((0.05, 0.001)), Some((0.30, 0.08, true))),
         Some((true, true))
     );
     assert_eq!(choose(None, Some((0.30, 0.09, true))), Some((true, false)));
