@@ -7,7 +7,7 @@ use tangent_core::solvers::result::Flags;
 
 /// The sentence for every flag of [`codes::FLAG_NAMES`], in the same order (a test checks
 /// that each flag has one).
-pub const FLAG_ADVICE: [(Flags, &str); 14] = [
+pub const FLAG_ADVICE: [(Flags, &str); 16] = [
     (
         Flags::ARC_TOO_SHORT,
         "too little of the stem was lit: step back or aim at its centre",
@@ -61,6 +61,14 @@ pub const FLAG_ADVICE: [(Flags, &str); 14] = [
         Flags::ELLIPTIC,
         "the stem is not round: the mean of its two diameters is shown",
     ),
+    (
+        Flags::NEAR_POLE,
+        "a laser line crosses the ball near its top or bottom: aim at the ball's middle",
+    ),
+    (
+        Flags::NOT_SPHERICAL,
+        "the object is not a ball: this reading is not a sphere's diameter",
+    ),
 ];
 
 /// Flags that describe the instrument rather than the reading: a one-laser caliper sets
@@ -94,9 +102,9 @@ mod tests {
         assert_eq!(codes::FLAG_NAMES.len(), FLAG_ADVICE.len());
         assert_eq!(warnings(0), Vec::<String>::new());
         assert_eq!(warnings(Flags::TILT_IGNORED.0), Vec::<String>::new());
-        let w = warnings(Flags::ARC_TOO_SHORT.0 | 0x0400);
+        let w = warnings(Flags::ARC_TOO_SHORT.0 | Flags::NEAR_POLE.0);
         assert_eq!(w.len(), 2);
         assert!(w[0].contains("step back or aim at its centre"));
-        assert!(w[1].contains("0x0400"));
+        assert!(w[1].contains("the ball's middle"));
     }
 }

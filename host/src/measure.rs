@@ -64,7 +64,7 @@ pub struct TiltReport {
 /// sphere's reading adds `instrument = "sphere"`, `centre_m` and `sections_diameter_m`, and
 /// gives its joint fit as `fit_diameter_m`, its three-tangent construction as
 /// `three_tangent_diameter_m` and its centre's distance from the camera as `distance_m`.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct Reading {
     /// The capture directory.
     pub capture: String,
@@ -127,18 +127,25 @@ pub struct Reading {
 }
 
 impl Reading {
+    /// A reading of `capture` with no key set but the capture's name (the base every
+    /// instrument's reading fills in).
+    fn of_capture(capture: &str, instrument: Option<&'static str>) -> Self {
+        Reading {
+            capture: capture.to_string(),
+            instrument,
+            ..Reading::default()
+        }
+    }
+
     fn from_result(
         capture: &str,
         result: &Result<Solved, PipelineError>,
         truth: Option<f64>,
     ) -> Self {
-        let capture = capture.to_string();
         match result {
             Ok(Solved::Sphere(m)) => {
                 let s = &m.solution;
                 Reading {
-                    capture,
-                    instrument: Some("sphere"),
                     centre_m: Some([s.centre.x, s.centre.y, s.centre.z]),
                     sections_diameter_m: s.sections.map(|e| e.diameter),
                     random_uncertainty_m: Some(s.random_uncertainty),
@@ -146,27 +153,17 @@ impl Reading {
                     uncertainty_m: Some(s.uncertainty),
                     method: Some(codes::method_name(s.method)),
                     flags: codes::flag_names(s.flags).collect(),
-                    tilt: None,
-                    axes_m: None,
                     three_tangent_diameter_m: s.three_tangent.map(|e| e.diameter),
                     fit_diameter_m: s.joint_fit.map(|e| e.diameter),
                     distance_m: Some(s.distance),
                     points: Some(m.profile.plane_points.iter().map(|(a, b)| b - a).sum()),
-                    error: None,
                     truth_diameter_m: truth,
-                    truth_curve_unreadable: None,
-                    road: None,
-                    wall: None,
+                    ..Reading::of_capture(capture, Some("sphere"))
                 }
             }
             Ok(Solved::Stem(m)) => {
                 let s = &m.solution;
                 Reading {
-                    capture,
-                    instrument: None,
-                    centre_m: None,
-                    sections_diameter_m: None,
-                    random_uncertainty_m: None,
                     diameter_m: Some(s.diameter),
                     uncertainty_m: Some(s.uncertainty),
                     method: Some(codes::method_name(s.method)),
@@ -181,37 +178,17 @@ impl Reading {
                     fit_diameter_m: s.fit_diameter,
                     distance_m: Some(s.distance),
                     points: Some(s.n_points),
-                    error: None,
                     truth_diameter_m: truth,
-                    truth_curve_unreadable: None,
-                    road: None,
-                    wall: None,
+                    ..Reading::of_capture(capture, None)
                 }
             }
             // The walls' keys come from `from_wall`; this arm keeps `from_result` total.
-            Ok(Solved::Wall(m)) => Reading::from_wall(&capture, &Ok((**m).clone()), None),
+            Ok(Solved::Wall(m)) => Reading::from_wall(capture, Ok(m), None),
             Err(e) => Reading {
-                capture,
-                instrument: None,
-                centre_m: None,
-                sections_diameter_m: None,
-                random_uncertainty_m: None,
-                diameter_m: None,
-                uncertainty_m: None,
-                method: None,
-                flags: Vec::new(),
-                tilt: None,
-                axes_m: None,
-                three_tangent_diameter_m: None,
-                fit_diameter_m: None,
-                distance_m: None,
-                points: None,
                 // The sentence the caliper's report of this failure reads as.
                 error: Some(Failure::of(e).to_string()),
                 truth_diameter_m: truth,
-                truth_curve_unreadable: None,
-                road: None,
-                wall: None,
+                ..Reading::of_capture(capture, None)
             },
         }
     }
@@ -219,31 +196,10 @@ impl Reading {
     /// The reading of a wall capture: the walls' report, or the error.
     fn from_wall(
         capture: &str,
-        result: &Result<WallMeasurement, PipelineError>,
+        result: Result<&WallMeasurement, &PipelineError>,
         loaded: Option<&Capture>,
     ) -> Self {
-        let blank = Reading {
-            capture: capture.to_string(),
-            instrument: Some("wall"),
-            centre_m: None,
-            sections_diameter_m: None,
-            random_uncertainty_m: None,
-            diameter_m: None,
-            uncertainty_m: None,
-            method: None,
-            flags: Vec::new(),
-            tilt: None,
-            axes_m: None,
-            three_tangent_diameter_m: None,
-            fit_diameter_m: None,
-            distance_m: None,
-            points: None,
-            error: None,
-            truth_diameter_m: None,
-            truth_curve_unreadable: None,
-            road: None,
-            wall: None,
-        };
+        let blank = Reading::of_capture(capture, Some("wall"));
         match result {
             Ok(m) => Reading {
                 flags: measure_wall::flag_names(m),
@@ -268,26 +224,9 @@ impl Reading {
             Err(e) => (None, Some(e)),
         };
         Reading {
-            capture: capture.to_string(),
-            instrument: Some("road"),
-            centre_m: None,
-            sections_diameter_m: None,
-            random_uncertainty_m: None,
-            diameter_m: None,
-            uncertainty_m: None,
-            method: None,
-            flags: Vec::new(),
-            tilt: None,
-            axes_m: None,
-            three_tangent_diameter_m: None,
-            fit_diameter_m: None,
-            distance_m: None,
-            points: None,
             error,
-            truth_diameter_m: None,
-            truth_curve_unreadable: None,
             road,
-            wall: None,
+            ..Reading::of_capture(capture, Some("road"))
         }
     }
 
@@ -592,7 +531,7 @@ pub fn measure_loaded(
         Mode::Wall => {
             let params = wall_params(&calibration, params);
             let (r, buffers) = solve_capture::<Wall>(capture, &calibration, config, &params)?;
-            let reading = Reading::from_wall(name, &r, Some(capture));
+            let reading = Reading::from_wall(name, r.as_ref(), Some(capture));
             (r.map(|m| Solved::Wall(Box::new(m))), reading, buffers)
         }
         mode @ Mode::Road => return Err(MeasureError::UnsupportedMode(mode)),
