@@ -71,7 +71,12 @@ fn walls_face_as_the_truth_says() {
         );
         // Pitch, the weak direction of two parallel lines (docs/building.md §1), with 3.5σ.
         within(name, a.pitch_deg, t.pitch_deg.unwrap(), 3.5, 0.0);
-        assert!(a.quality > 0.9, "{name}: {a:?}");
+        // The quality index 1 − λ₃/λ₂ of two parallel lines 50 mm apart falls with distance as
+        // the depth noise grows against their separation (docs/building.md, the third-line
+        // decision): at 3 m it is ≈ 0.9 by the error model itself, so it is no test there.
+        if t.axis_distance_mm.unwrap() <= 2000.0 {
+            assert!(a.quality > 0.9, "{name}: {a:?}");
+        }
     }
 }
 

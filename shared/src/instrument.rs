@@ -170,7 +170,8 @@ pub struct InstrumentParams {
 }
 
 /// Measures a frame pair with the instrument of `mode`: [`extract_profile`], then its solver.
-/// A mode without a solver yet is [`PipelineError::UnsupportedMode`].
+/// A mode this build has no solver for is [`PipelineError::UnsupportedMode`] (every mode has
+/// one today; see [`supports`]).
 ///
 /// ```
 /// use tangent_core::pipeline::WorkspaceSizes;
@@ -190,7 +191,7 @@ pub struct InstrumentParams {
 /// assert_eq!(reading, Err(PipelineError::NoLaserLight { max_difference: 0 }));
 /// let reading =
 ///     measure(Mode::Sphere, &frame, &frame, &calibration, &config, &params, &mut buffers.workspace());
-/// assert_eq!(reading, Err(PipelineError::UnsupportedMode(Mode::Sphere)));
+/// assert_eq!(reading, Err(PipelineError::NoLaserLight { max_difference: 0 }));
 /// # Ok::<(), tangent_core::image::FrameError>(())
 /// ```
 pub fn measure<P: Pixel>(

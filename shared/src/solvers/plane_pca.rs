@@ -7,6 +7,7 @@
 use crate::real::Float;
 use crate::real::{norm, sqrt, Mat3, Real, Vec3};
 
+use super::sphere_sections::correlation_inflation;
 use super::SolveError;
 
 /// A plane fitted to weighted points: `normal·X = offset`, with what qualifies it.
@@ -90,13 +91,22 @@ where
         offset = -offset;
     }
     let mut chi2_sum = 0.0;
-    for (p, s) in samples {
+    for (p, s) in samples.clone() {
         let r = normal.dot(&(p - c)) / s;
         chi2_sum += r * r;
     }
     let dof = (n - 3).max(1) as Real;
     let chi2 = chi2_sum / dof;
-    let inflation = chi2.max(1.0);
+    // Neighbouring points along a laser line share speckle and smoothing: their residuals are
+    // correlated, and n correlated points carry less than n points' information
+    // (docs/error-model.md §5b; the same AR(1) factor as the sphere's sections). Samples come
+    // in curve order; outliers beyond 4 residual scales do not set the correlation.
+    let cutoff = 4.0 * sqrt(chi2.max(1.0));
+    let correlation = correlation_inflation(
+        samples.clone().map(|(p, s)| normal.dot(&(p - c)) / s),
+        cutoff,
+    );
+    let inflation = chi2.max(1.0) * correlation;
     // docs/building.md, eq. (B3): var(δn·e_k) = s² / (W λ_k) for the in-plane axes e_k.
     let normal_cov =
         (e0 * e0.transpose() / spread[0] + e1 * e1.transpose() / spread[1]) * (inflation / w_sum);
