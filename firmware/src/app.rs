@@ -31,8 +31,8 @@ use tangent_core::protocol::{
 use crate::exposure::{self, Exposure};
 use crate::measure::{FramePair, Measurer, StreamMeasurer};
 use crate::ports::{
-    Board, CalibrationStore, Camera, CameraError, Clock, Devices, Laser, Link, RowSink, Strobe,
-    Trigger, Watchdog,
+    Board, CalibrationStore, Camera, CameraError, Clock, Devices, Geometry, Laser, Link, RowSink,
+    Strobe, Trigger, Watchdog,
 };
 use crate::stats::Welford;
 
@@ -545,8 +545,20 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
         let t0 = d.clock.now_us();
         let result = measurer.finish(self.mode);
         self.last_pipeline_us = d.clock.now_us().saturating_sub(t0);
+        let info = self.next_frame_set(g, exposure_us, timestamp_ms, mask);
+        Ok((info, result))
+    }
+
+    /// The next capture's number and what describes its frame pair.
+    fn next_frame_set(
+        &mut self,
+        g: Geometry,
+        exposure_us: u32,
+        timestamp_ms: u64,
+        laser_mask: u8,
+    ) -> FrameSetInfo {
         self.capture_no = self.capture_no.wrapping_add(1);
-        let info = FrameSetInfo {
+        FrameSetInfo {
             capture: self.capture_no,
             width: g.width,
             height: g.height,
@@ -554,10 +566,9 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
             bit_depth: 8,
             exposure_us,
             timestamp_ms,
-            laser_mask: mask,
+            laser_mask,
             calib_id: self.calibration.as_ref().map(|c| c.id),
-        };
-        Ok((info, result))
+        }
     }
 
     /// Lasers to light: one per calibrated plane that the board can drive (all the
@@ -593,18 +604,7 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
         expose(&mut d.camera, &mut d.laser, &d.clock, mask, exposure_us, on).await?;
         self.exposure
             .update(exposure::peak(on, g.width as usize, PEAK_ROW_STEP));
-        self.capture_no = self.capture_no.wrapping_add(1);
-        let info = FrameSetInfo {
-            capture: self.capture_no,
-            width: g.width,
-            height: g.height,
-            row_offset: g.row_offset,
-            bit_depth: 8,
-            exposure_us,
-            timestamp_ms,
-            laser_mask: mask,
-            calib_id: self.calibration.as_ref().map(|c| c.id),
-        };
+        let info = self.next_frame_set(g, exposure_us, timestamp_ms, mask);
         self.frames = Some(info);
         Ok(info)
     }
