@@ -14,6 +14,7 @@ pub mod laser;
 pub mod physics;
 pub mod reflectance;
 pub mod render;
+pub mod rig;
 pub mod road_corpus;
 pub mod scene;
 pub mod sensor;

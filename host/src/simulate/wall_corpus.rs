@@ -8,8 +8,8 @@ use rand::{RngExt, SeedableRng};
 use rand_pcg::Pcg64;
 use tangent_core::calibration::Calibration;
 
-use super::corpus::{lab_light, one_plane_calibration, two_plane_calibration};
 use super::render::Lighting;
+use super::rig::{lab_light, one_plane_calibration, two_plane_calibration};
 use super::{SimParams, SimSpec};
 use crate::capture::Mode;
 use crate::truth::{Cylinder, Object, Plane, Texture};
