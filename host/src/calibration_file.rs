@@ -192,7 +192,7 @@ pub struct CalibrationToml {
 
 /// `[road]`: the result of the piezo-stage height-scale calibration of a road head
 /// (`docs/road.md`, "Height-scale calibration").
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RoadToml {
     /// Factor every road height is multiplied by (`1 / gain` of the fit).
@@ -203,6 +203,12 @@ pub struct RoadToml {
     /// Steps the stage made.
     #[serde(default)]
     pub steps: usize,
+    /// The stage's known positions (metres), in the order measured.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub step_positions_m: Vec<f64>,
+    /// Residual of each position after the fitted line (metres).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub residuals_m: Vec<f64>,
 }
 
 /// Accepted range of `road.height_scale`: a head whose heights are off by more than 20 % is
@@ -231,6 +237,27 @@ pub fn parse_road(text: &str) -> Result<Option<RoadToml>, CalibrationFileError> 
 /// Reads the `[road]` table of a calibration file ([`parse_road`]); errors name the file.
 pub fn read_road(path: &Path) -> Result<Option<RoadToml>, CalibrationFileError> {
     parse_road(&read_text(path)?).map_err(in_file(path))
+}
+
+/// Writes `road` as the `[road]` table of an existing calibration file, every other key kept;
+/// errors name the file.
+pub fn write_road(path: &Path, road: &RoadToml) -> Result<(), CalibrationFileError> {
+    let text = read_text(path)?;
+    let mut file: CalibrationToml = toml::from_str(&text)
+        .map_err(|e| map_toml_error(&e, &text))
+        .map_err(in_file(path))?;
+    file.road = Some(road.clone());
+    // Re-parse what is written, so a file that would not read back is never left behind.
+    let out = toml::to_string(&file)
+        .map_err(|e| CalibrationFileError::Syntax {
+            message: e.to_string(),
+            line: None,
+        })
+        .map_err(in_file(path))?;
+    parse_road(&out).map_err(in_file(path))?;
+    std::fs::write(path, out)
+        .map_err(CalibrationFileError::Io)
+        .map_err(in_file(path))
 }
 
 /// A 3-vector that must have exactly three components: serde's fixed-size array impl reads

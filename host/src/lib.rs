@@ -14,6 +14,7 @@ pub mod calibration_file;
 pub mod capture;
 pub mod emulator;
 pub mod evaluate;
+pub mod evaluate_road;
 pub mod evaluate_sphere;
 pub mod fieldlog;
 pub mod link;

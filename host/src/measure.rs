@@ -12,11 +12,12 @@ use serde::Serialize;
 use tangent_core::calibration::Calibration;
 use tangent_core::curve::CurvePoint;
 use tangent_core::image::{Frame, Pixel};
+use tangent_core::instrument::road::RoadParams;
 use tangent_core::instrument::sphere::SphereMeasurement;
 use tangent_core::instrument::stem::StemMeasurement;
 use tangent_core::instrument::wall::WallMeasurement;
 use tangent_core::instrument::{
-    self, Instrument, Measured, Sphere, Stem, Wall, WallInstrumentParams,
+    self, Instrument, Measured, Road, Sphere, Stem, Wall, WallInstrumentParams,
 };
 use tangent_core::pipeline::{OwnedBuffers, PipelineConfig, PipelineError, Profile};
 use tangent_core::protocol::codes::{self, Failure};
@@ -27,6 +28,7 @@ use tangent_core::solvers::stem::CylinderParams;
 use crate::capture::{Capture, CaptureError, Mode};
 use crate::measure_wall::{self, WallReport};
 use crate::pgm::{Pgm, PgmSamples};
+use crate::road::{RoadOutcome, RoadReport};
 use crate::truth::Object;
 
 type Vec3d = nalgebra::Vector3<f64>;
@@ -39,7 +41,7 @@ pub enum MeasureError {
     #[error(transparent)]
     Capture(#[from] CaptureError),
     /// The capture is not of a mode this command measures.
-    #[error("capture mode {0:?} is not measured here (cylinder, sphere and wall captures are; road captures by `tangent measure`)")]
+    #[error("capture mode {0:?} is not measured here (cylinder, sphere and wall captures are; road captures by `measure_road`)")]
     UnsupportedMode(Mode),
     /// No frame lit every plane of the calibration.
     #[error("no laser-on frame lights all {0} planes of the calibration")]
@@ -120,7 +122,7 @@ pub struct Reading {
     pub truth_curve_unreadable: Option<String>,
     /// A road capture's reading (`docs/road.md`).
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub road: Option<crate::road::RoadReport>,
+    pub road: Option<RoadReport>,
     /// The wall instrument's readings (captures of mode `wall`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub wall: Option<WallReport>,
@@ -218,7 +220,7 @@ impl Reading {
     }
 
     /// The reading of a road capture: its report, or the sentence of its failure.
-    pub fn road(capture: &str, result: Result<crate::road::RoadReport, String>) -> Self {
+    pub fn road(capture: &str, result: Result<RoadReport, String>) -> Self {
         let (road, error) = match result {
             Ok(r) => (Some(r), None),
             Err(e) => (None, Some(e)),
@@ -546,6 +548,39 @@ pub fn measure_loaded(
         points,
         calibration,
     })
+}
+
+/// Measures a road capture with the core's [`Road`] instrument (the device's code), through
+/// the same frame pair and buffers as every instrument, and rebuilds its raw profile for
+/// plots and cross-checks. `calibration` overrides the capture's own; `params` carries the
+/// head's height-scale correction (`docs/road.md`).
+pub fn measure_road(
+    capture: &Capture,
+    calibration: Option<&Calibration>,
+    config: &PipelineConfig,
+    params: &RoadParams,
+) -> Result<RoadOutcome, MeasureError> {
+    let calibration = calibration
+        .cloned()
+        .unwrap_or_else(|| capture.calibration.clone());
+    let (result, (_, _, points)) = solve_capture::<Road>(capture, &calibration, config, params)?;
+    Ok(RoadOutcome::new(
+        capture,
+        result,
+        &points,
+        calibration,
+        params,
+    ))
+}
+
+/// Reads and measures a road capture directory ([`measure_road`]).
+pub fn measure_road_dir(
+    dir: &Path,
+    calibration: Option<&Calibration>,
+    config: &PipelineConfig,
+    params: &RoadParams,
+) -> Result<RoadOutcome, MeasureError> {
+    measure_road(&Capture::read(dir)?, calibration, config, params)
 }
 
 /// The wall instrument's settings for `calibration`'s camera, with the stem's noise model.

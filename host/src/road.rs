@@ -1,30 +1,25 @@
-//! The road instrument on the host (`docs/road.md`): measuring road captures with the core's
-//! [`Road`] instrument, the report people read, the simulator's truth (the true profile along
-//! the laser sheet, its MPD), and around them the furrow depth, the piezo height-scale
+//! The road instrument on the host (`docs/road.md`): the report people read of the core's
+//! road solution, the raw profile behind it, the simulator's truth (the true profile along
+//! the laser sheet, its MPD), and around them the furrow depth and the piezo height-scale
 //! calibration ([`height_scale`]), the ambulatory section ([`section`]), the cross-check
-//! against captif-slp ([`crosscheck`]), the plot ([`plot`]) and the evaluation
-//! ([`evaluate`]).
-
-use std::path::Path;
+//! against captif-slp ([`crosscheck`]) and the plot ([`plot`]). Captures are measured by
+//! `measure::measure_road` (the one way frames are loaded and run through the core); the
+//! evaluation is `evaluate_road`.
 
 use serde::Serialize;
 use tangent_core::calibration::Calibration;
-use tangent_core::image::{Frame, Pixel};
 use tangent_core::instrument::road::{RoadParams, RoadSolution, MAX_SEGMENTS};
-use tangent_core::instrument::{self, Road};
-use tangent_core::pipeline::{OwnedBuffers, PipelineConfig, PipelineError};
-use tangent_core::real::Vec2;
+use tangent_core::instrument::Measured;
+use tangent_core::pipeline::PipelineError;
+use tangent_core::real::{Vec2, Vec3};
 use tangent_core::solvers::mpd::{self, MeanProfileDepth, SegmentDepth};
 use tangent_core::solvers::road_profile::{self, RoadError};
 
 use crate::capture::Capture;
-use crate::measure::MeasureError;
-use crate::pgm::PgmSamples;
 use crate::simulate::scene::road_height;
 use crate::truth::Object;
 
 pub mod crosscheck;
-pub mod evaluate;
 pub mod height_scale;
 pub mod plot;
 pub mod section;
@@ -115,7 +110,8 @@ impl RoadReport {
     }
 }
 
-/// A road capture measured: the instrument's answer and the profile behind it.
+/// A road capture measured: the instrument's answer and the profile behind it
+/// (`measure::measure_road` builds it).
 #[derive(Debug, Clone)]
 pub struct RoadOutcome {
     /// The instrument's result.
@@ -128,87 +124,38 @@ pub struct RoadOutcome {
     pub truth_mpd: Option<f64>,
 }
 
-/// Measures a road capture with the core's [`Road`] instrument (the device's code) and
-/// rebuilds its raw profile for plots and cross-checks.
-pub fn measure_road(
-    capture: &Capture,
-    calibration: Option<&Calibration>,
-    config: &PipelineConfig,
-    params: &RoadParams,
-) -> Result<RoadOutcome, MeasureError> {
-    let calibration = calibration
-        .cloned()
-        .unwrap_or_else(|| capture.calibration.clone());
-    let off = capture.off_frame();
-    let on = capture
-        .on_frames()
-        .find(|(lit, _)| lit.contains(&0))
-        .map(|(_, f)| f)
-        .ok_or(MeasureError::NoFullFrame(1))?;
-    let (result, points) = match (&off.samples, &on.samples) {
-        (PgmSamples::U8(a), PgmSamples::U8(b)) => run(a, b, on, &calibration, config, params),
-        (PgmSamples::U16(a), PgmSamples::U16(b)) => run(a, b, on, &calibration, config, params),
-        _ => return Err(MeasureError::MixedDepth),
-    };
-    let profile = calibration
-        .planes
-        .first()
-        .and_then(|p| p.axis_crossing())
-        .and_then(|z_ref| raw_profile(&points, z_ref, params).ok())
-        .unwrap_or_default();
-    Ok(RoadOutcome {
-        result,
-        profile,
-        truth_mpd: true_mpd(capture, &calibration, params),
-        calibration,
-    })
-}
-
-/// Reads and measures a road capture directory.
-pub fn measure_road_dir(
-    dir: &Path,
-    calibration: Option<&Calibration>,
-    config: &PipelineConfig,
-    params: &RoadParams,
-) -> Result<RoadOutcome, MeasureError> {
-    measure_road(&Capture::read(dir)?, calibration, config, params)
-}
-
-type Points = Vec<tangent_core::real::Vec3>;
-
-fn run<P: Pixel>(
-    off: &[P],
-    on: &[P],
-    pgm: &crate::pgm::Pgm,
-    calibration: &Calibration,
-    config: &PipelineConfig,
-    params: &RoadParams,
-) -> (Result<RoadSolution, PipelineError>, Points) {
-    let mut hw = OwnedBuffers::<P>::for_frame(pgm.width, pgm.height, pgm.bit_depth(), 1);
-    let result = (|| {
-        let off =
-            Frame::new(off, pgm.width, pgm.height, pgm.width)?.with_bit_depth(pgm.bit_depth())?;
-        let on =
-            Frame::new(on, pgm.width, pgm.height, pgm.width)?.with_bit_depth(pgm.bit_depth())?;
-        instrument::measure_with::<Road, P>(
-            &off,
-            &on,
+impl RoadOutcome {
+    /// The outcome of the core's answer on `capture`: `points` are the pipeline's 3-D points,
+    /// from which plane 0's raw profile is rebuilt for plots and cross-checks.
+    pub fn new(
+        capture: &Capture,
+        result: Result<Measured<RoadSolution>, PipelineError>,
+        points: &[Vec3],
+        calibration: Calibration,
+        params: &RoadParams,
+    ) -> Self {
+        let plane_points = match &result {
+            Ok(m) => m.profile.points(points, 0),
+            Err(_) => points,
+        };
+        let profile = calibration
+            .planes
+            .first()
+            .and_then(|p| p.axis_crossing())
+            .and_then(|z_ref| raw_profile(plane_points, z_ref, params).ok())
+            .unwrap_or_default();
+        RoadOutcome {
+            result: result.map(|m| m.solution),
+            profile,
+            truth_mpd: true_mpd(capture, &calibration, params),
             calibration,
-            config,
-            params,
-            &mut hw.workspace(),
-        )
-    })();
-    let points = match &result {
-        Ok(m) => m.profile.points(hw.points(), 0).to_vec(),
-        Err(_) => hw.points().to_vec(),
-    };
-    (result.map(|m| m.solution), points)
+        }
+    }
 }
 
 /// The raw profile of plane 0's points ([`road_profile::road_profile`], drop-outs NaN).
 pub fn raw_profile(
-    points: &[tangent_core::real::Vec3],
+    points: &[Vec3],
     z_ref: f64,
     params: &RoadParams,
 ) -> Result<Vec<Vec2>, RoadError> {

@@ -9,10 +9,11 @@ use tangent_core::instrument::road::RoadParams;
 use tangent_core::pipeline::{PipelineConfig, PipelineError};
 use tangent_core::real::Vec2;
 use tangent_core::solvers::road_profile::RoadError;
+use tangent_host::evaluate_road::{detrended_rms, wet_mirror_patch};
+use tangent_host::measure::measure_road;
 use tangent_host::road::crosscheck::{captif_mpd, write_profile_csv};
-use tangent_host::road::evaluate::{detrended_rms, wet_mirror_patch};
 use tangent_host::road::height_scale::furrow_depth;
-use tangent_host::road::{measure_road, mpd_of_profile, true_profile};
+use tangent_host::road::{mpd_of_profile, true_profile};
 use tangent_host::simulate::road_corpus::{
     furrow_spec, piezo_spec, road_spec, Condition, Surface, FURROW_PITCH, FURROW_WIDTH,
 };
@@ -90,6 +91,11 @@ fn our_mpd_equals_captif_slp_on_identical_profiles() {
     let theirs = match captif_mpd(repo(), &files).unwrap() {
         Ok(m) => m,
         Err(reason) => {
+            // CI installs captif-slp (`.ci/run`): there the cross-check must run.
+            assert!(
+                std::env::var("CI").as_deref() != Ok("true"),
+                "CI=true but the captif-slp cross-check cannot run: {reason} (`.ci/run` installs captif-slp==0.22)"
+            );
             println!("skipped: {reason}");
             return;
         }
@@ -154,6 +160,95 @@ fn flat_target_and_furrow_meet_their_targets() {
         .unwrap()
         .depth_m;
     assert!((measured - truth).abs() <= 10e-6, "{measured} vs {truth}");
+}
+
+/// Fails today: the 630 µm furrow reads 663.5 µm against its truth 630.1 µm (+33 µm; the
+/// 146 µm one +8 µm): the pipeline's Savitzky–Golay curve smoothing (7 columns, negative end
+/// weights) overshoots the land beside a furrow's edge by ≈ 5 % of the step. Un-ignore when
+/// the road mode's curve smoothing is settled (`docs/accuracy.md`, road section).
+#[test]
+#[ignore = "630 µm furrow reads +33 µm (target ±15 µm): curve-smoothing overshoot at the edges, open"]
+fn the_630_um_furrow_meets_its_target() {
+    let params = RoadParams::default();
+    let spec = furrow_spec(630e-6, 77_012);
+    let (capture, _) = simulate(&spec).unwrap();
+    let o = measure_road(&capture, None, &PipelineConfig::default(), &params).unwrap();
+    let measured = furrow_depth(&o.profile, FURROW_PITCH, FURROW_WIDTH)
+        .unwrap()
+        .depth_m;
+    let truth = true_profile(&spec.objects, &spec.calibration, &params)
+        .and_then(|p| furrow_depth(&p, FURROW_PITCH, FURROW_WIDTH))
+        .unwrap()
+        .depth_m;
+    assert!((measured - truth).abs() <= 15e-6, "{measured} vs {truth}");
+}
+
+/// `tangent calibrate road` on a unit built with its laser 1 % farther than its calibration
+/// says: the `[road]` it writes (with one residual per step) makes `tangent measure --calib`
+/// read the stage's steps. Tolerance: a profile's mean height carries the column noise
+/// (≈ 20 µm, `docs/road.md`) over ≈ 670 columns, ≈ 1 µm; 5 µm is 5σ.
+#[test]
+fn calibrate_road_writes_the_height_scale_that_measure_applies() {
+    use std::process::Command;
+    use tangent_core::laser_plane::LaserPlane;
+    use tangent_host::calibration_file;
+    use tangent_host::simulate::road_corpus::calibration;
+
+    let dir = tempfile::tempdir().unwrap();
+    let believed = calibration();
+    let mut built = believed.clone();
+    let (e, tilt) = built.planes[0].baseline_tilt();
+    built.planes[0] = LaserPlane::from_baseline_tilt(e * 1.01, tilt).unwrap();
+    let steps_mm = [0.0, 0.3, 0.6, 1.0];
+    let mut captures = Vec::new();
+    for (k, s) in steps_mm.iter().enumerate() {
+        let mut spec = piezo_spec(s * 1e-3, 77_030 + k as u64);
+        spec.calibration = built.clone();
+        let (capture, _) = simulate(&spec).unwrap();
+        let path = dir.path().join(format!("step-{k}"));
+        capture.write(&path).unwrap();
+        captures.push(path);
+    }
+    let calib = dir.path().join("calib.toml");
+    calibration_file::write(&calib, &believed).unwrap();
+    let steps_arg = steps_mm.map(|s| s.to_string()).join(",");
+    let out = Command::new(env!("CARGO_BIN_EXE_tangent"))
+        .args(["calibrate", "road"])
+        .args(&captures)
+        .args(["--steps-mm", &steps_arg, "--calib"])
+        .arg(&calib)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let road = calibration_file::read_road(&calib).unwrap().unwrap();
+    assert_eq!(road.steps, 4);
+    assert_eq!(road.residuals_m.len(), 4);
+    assert_eq!(road.step_positions_m.len(), 4);
+    assert!(road.residual_rms_m < 5e-6, "{road:?}");
+    // The rest of the file is kept.
+    assert_eq!(calibration_file::read(&calib).unwrap(), believed);
+    let out = Command::new(env!("CARGO_BIN_EXE_tangent"))
+        .args(["measure", "--json", "--calib"])
+        .arg(&calib)
+        .args(&captures)
+        .output()
+        .unwrap();
+    let heights: Vec<f64> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| {
+            let v: serde_json::Value = serde_json::from_str(l).unwrap();
+            v["road"]["mean_height_mm"].as_f64().unwrap()
+        })
+        .collect();
+    assert_eq!(heights.len(), 4, "{}", String::from_utf8_lossy(&out.stdout));
+    for (h, s) in heights.iter().zip(steps_mm) {
+        let rise = (h - heights[0]) * 1e-3;
+        assert!((rise - s * 1e-3).abs() <= 5e-6, "step {s} mm read {rise} m");
+    }
 }
 
 #[test]

@@ -1,19 +1,28 @@
-//! `tangent calibrate camera IMAGES… --board 9x6 --square 25mm` and
-//! `tangent calibrate laser CAPTURES… --camera FILE`.
+//! `tangent calibrate camera IMAGES… --board 9x6 --square 25mm`,
+//! `tangent calibrate laser CAPTURES… --camera FILE` and
+//! `tangent calibrate road CAPTURES… --steps-mm 0,0.1,… --calib FILE`.
 //!
 //! The camera command writes a calibration file whose `[camera]` is the new calibration;
 //! if the output file already exists its id and laser planes are kept, otherwise it has no
 //! `[[planes]]` yet (a camera-only file, which `calibrate laser` completes). The laser
-//! command reads the camera from such a file and writes the complete calibration.
+//! command reads the camera from such a file and writes the complete calibration. The road
+//! command (a road head's piezo height-scale calibration, `docs/road.md`) fits the measured
+//! heights of a flat target against the stage's known steps and writes the result with its
+//! residuals into the file's `[road]` table.
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{bail, Context as _};
 use clap::Subcommand;
+use tangent_core::instrument::road::RoadParams;
+use tangent_core::pipeline::PipelineConfig;
+use tangent_core::protocol::codes::Failure;
 use tangent_host::calibrate::{corners, laser, refine, report, Board};
-use tangent_host::calibration_file::{self, CalibrationToml, CameraToml, DistortionToml};
+use tangent_host::calibration_file::{self, CalibrationToml, CameraToml, DistortionToml, RoadToml};
 use tangent_host::capture::Capture;
+use tangent_host::measure::measure_road_dir;
+use tangent_host::road::height_scale::fit_height_scale;
 
 /// Arguments of `tangent calibrate`.
 #[derive(clap::Args, Debug)]
@@ -67,6 +76,27 @@ enum Which {
         #[arg(long)]
         report: Option<PathBuf>,
     },
+    /// Road head: height scale from a flat target on a piezo stage raised in known steps
+    /// (`docs/road.md`, "Height-scale calibration"); writes `[road]` into the --calib file.
+    Road {
+        /// Capture directories of the flat target, one per stage position, in the order of
+        /// --steps-mm.
+        #[arg(required = true)]
+        captures: Vec<PathBuf>,
+        /// The stage's known positions in millimetres (towards the head), one per capture:
+        /// `0,0.1,0.2`.
+        #[arg(
+            long,
+            value_delimiter = ',',
+            required = true,
+            allow_negative_numbers = true
+        )]
+        steps_mm: Vec<f64>,
+        /// The head's calibration file: its camera and plane measure the captures, and its
+        /// `[road]` table is (re)written; every other key is kept.
+        #[arg(long)]
+        calib: PathBuf,
+    },
 }
 
 /// Runs `tangent calibrate`.
@@ -95,7 +125,73 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             out.as_deref(),
             report_dir.as_deref(),
         ),
+        Which::Road {
+            captures,
+            steps_mm,
+            calib,
+        } => road_cmd(&captures, &steps_mm, &calib),
     }
+}
+
+/// `tangent calibrate road`: each capture's mean profile height, measured with no height
+/// correction, fitted against the stage's steps ([`fit_height_scale`]); the table of
+/// residuals is printed and `[road]` written.
+fn road_cmd(captures: &[PathBuf], steps_mm: &[f64], calib: &Path) -> anyhow::Result<ExitCode> {
+    if captures.len() != steps_mm.len() {
+        bail!(
+            "{} captures but {} --steps-mm values: give one stage position per capture",
+            captures.len(),
+            steps_mm.len()
+        );
+    }
+    let calibration = calibration_file::read(calib)?;
+    let config = PipelineConfig::default();
+    // The stage is measured uncorrected: the fit is what the correction is made from.
+    let params = RoadParams::default();
+    let mut measured = Vec::with_capacity(captures.len());
+    for dir in captures {
+        let outcome = measure_road_dir(dir, Some(&calibration), &config, &params)
+            .with_context(|| format!("measuring {}", dir.display()))?;
+        let solution = outcome.result.map_err(|e| {
+            anyhow::anyhow!(
+                "{}: no profile of the flat target: {}",
+                dir.display(),
+                Failure::of(&e)
+            )
+        })?;
+        measured.push(solution.profile.mean_height);
+    }
+    let steps: Vec<f64> = steps_mm.iter().map(|s| s * 1e-3).collect();
+    let Some(fit) = fit_height_scale(&steps, &measured) else {
+        bail!("the stage's steps must take at least two distinct values and the measured heights must rise with them");
+    };
+    println!("step (mm)  measured (mm)  residual (µm)");
+    for ((s, m), r) in fit
+        .steps_m
+        .iter()
+        .zip(&fit.measured_m)
+        .zip(&fit.residuals_m)
+    {
+        println!("{:9.4}  {:13.4}  {:+13.2}", s * 1e3, m * 1e3, r * 1e6);
+    }
+    println!(
+        "gain {:.5}, offset {:+.4} mm, residual RMS {:.2} µm -> height_scale = {:.5}",
+        fit.gain,
+        fit.offset_m * 1e3,
+        fit.residual_rms_m * 1e6,
+        fit.height_scale
+    );
+    let road = RoadToml {
+        height_scale: fit.height_scale,
+        residual_rms_m: fit.residual_rms_m,
+        steps: fit.steps_m.len(),
+        step_positions_m: fit.steps_m.clone(),
+        residuals_m: fit.residuals_m.clone(),
+    };
+    // The file's own check refuses a scale outside its accepted range, naming the key.
+    calibration_file::write_road(calib, &road)?;
+    eprintln!("wrote [road] in {}", calib.display());
+    Ok(ExitCode::SUCCESS)
 }
 
 fn camera(

@@ -74,7 +74,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
              (deterministic; `docs/road.md`).\n\n{}",
             args.count,
             args.road_seed,
-            tangent_host::road::evaluate::report(args.road_seed, args.count, &repo, &scratch)?
+            tangent_host::evaluate_road::report(args.road_seed, args.count, &repo, &scratch)?
         );
         std::fs::remove_dir_all(&scratch).ok();
         match &args.out {

@@ -12,9 +12,9 @@ use tangent_core::instrument::road::{RoadParams, RoadSolution};
 use tangent_core::pipeline::PipelineConfig;
 use tangent_core::pipeline::PipelineError;
 use tangent_core::solvers::stem::CylinderParams;
-use tangent_host::measure::{measure_capture, MeasureError, Reading};
+use tangent_host::measure::{measure_capture, measure_road_dir, MeasureError, Reading};
 use tangent_host::road::section::Section;
-use tangent_host::road::{measure_road_dir, plot::road_png, RoadReport};
+use tangent_host::road::{plot::road_png, RoadReport};
 use tangent_host::{calibration_file, capture, plot};
 
 /// The long help of `tangent measure` (`main.rs` gives it to clap on the subcommand, where

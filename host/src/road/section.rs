@@ -102,6 +102,25 @@ impl Section {
         self.excluded.values().sum::<usize>() + self.failed.values().sum::<usize>()
     }
 
+    /// The counts behind the MPD: `14 profiles, 2 excluded (drop-outs 1, spikes 1), 1 failed
+    /// (head tilted 1)`.
+    pub fn tally(&self) -> String {
+        let list = |m: &BTreeMap<&'static str, usize>, what: &str| {
+            let n: usize = m.values().sum();
+            if n == 0 {
+                return format!("0 {what}");
+            }
+            let items: Vec<String> = m.iter().map(|(r, k)| format!("{r} {k}")).collect();
+            format!("{n} {what} ({})", items.join(", "))
+        };
+        format!(
+            "{} profiles, {}, {}",
+            self.profiles,
+            list(&self.excluded, "excluded"),
+            list(&self.failed, "failed")
+        )
+    }
+
     /// One line: label, MPD, ETD, counts.
     pub fn summary(&self) -> String {
         let mut s = match self.mpd() {
@@ -130,10 +149,12 @@ pub const SECTION_KIND: &str = "road_section";
 
 impl Section {
     /// Stores the section in the field log: a plot header named by its location label (if
-    /// the log's current plot is another), then one record of kind [`SECTION_KIND`] whose
-    /// size column holds the section's MPD (mm), its uncertainty column the MSD's standard
-    /// error (mm), its tree number the running count of valid segments and its note-like
-    /// species column `MPD`. Nothing is stored before the first valid segment.
+    /// the log's current plot is another), then one record of kind [`SECTION_KIND`] filed
+    /// under the label, whose size column holds the section's MPD (mm), its uncertainty
+    /// column the MSD's standard error (mm), its tree number the running count of valid
+    /// segments, its sequence number the profiles taken and its note-like species column
+    /// `MPD; ` and the [`Section::tally`] (the excluded and failed profiles by reason).
+    /// Nothing is stored before the first valid segment.
     pub fn log_to(
         &self,
         log: &mut crate::fieldlog::FieldLog,
@@ -155,7 +176,7 @@ impl Section {
         log.append(Record::Tree(TreeRecord {
             plot_id: self.label.clone(),
             tree_id: n as u32,
-            species: "MPD".into(),
+            species: format!("MPD; {}", self.tally()),
             diameter_mm: mpd * 1e3,
             uncertainty_mm: standard_error * 1e3,
             tilt_deg: 0.0,
@@ -226,10 +247,53 @@ mod tests {
         assert_eq!(s.add(&tilted), Added::Failed("head tilted"));
         assert!((s.mpd().unwrap() - 1.1e-3).abs() < 1e-12);
         assert_eq!((s.profiles, s.segments(), s.not_used()), (4, 2, 2));
+        assert_eq!(
+            s.tally(),
+            "4 profiles, 1 excluded (drop-outs 1), 1 failed (head tilted 1)"
+        );
         let line = s.summary();
         assert!(
             line.contains("MPD = 1.100 mm") && line.contains("1 excluded (drop-outs)"),
             "{line}"
+        );
+    }
+
+    #[test]
+    fn the_field_log_stores_the_section_under_its_label_with_its_exclusions() {
+        use crate::fieldlog::{FieldLog, Record};
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("road.log");
+        let mut s = Section::new("A7 km 12.4 left wheel path");
+        let mut log = FieldLog::open(&path).unwrap();
+        // Nothing before the first valid segment.
+        s.add(&Err(PipelineError::Road(RoadError::TooManySpikes {
+            fraction: 0.08,
+        })));
+        assert!(!s.log_to(&mut log, 12).unwrap());
+        s.add(&Ok(solution(0.8e-3)));
+        s.add(&Ok(solution(1.0e-3)));
+        assert!(s.log_to(&mut log, 12).unwrap());
+        drop(log);
+        let records = FieldLog::read(&path).unwrap();
+        let plot = records.iter().find_map(|r| match r {
+            Record::Plot(p) => Some(p),
+            _ => None,
+        });
+        assert_eq!(plot.unwrap().plot_id, "A7 km 12.4 left wheel path");
+        let row = records
+            .iter()
+            .find_map(|r| match r {
+                Record::Tree(t) => Some(t),
+                _ => None,
+            })
+            .unwrap();
+        assert_eq!(row.plot_id, "A7 km 12.4 left wheel path");
+        assert_eq!(row.kind, SECTION_KIND);
+        assert!((row.diameter_mm - 0.9).abs() < 1e-9, "{}", row.diameter_mm);
+        assert_eq!((row.tree_id, row.seq), (2, 3));
+        assert_eq!(
+            row.species,
+            "MPD; 3 profiles, 1 excluded (spikes 1), 0 failed"
         );
     }
 }

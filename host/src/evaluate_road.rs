@@ -15,9 +15,10 @@ use tangent_core::laser_plane::LaserPlane;
 use tangent_core::pipeline::PipelineConfig;
 use tangent_core::real::Vec2;
 
-use super::crosscheck::{captif_mpd, write_profile_csv};
-use super::height_scale::{fit_height_scale, furrow_depth};
-use super::{measure_road, true_profile, RoadOutcome};
+use crate::measure::measure_road;
+use crate::road::crosscheck::{captif_mpd, write_profile_csv};
+use crate::road::height_scale::{fit_height_scale, furrow_depth};
+use crate::road::{true_profile, RoadOutcome};
 use crate::simulate::road_corpus::{
     furrow_spec, piezo_spec, road_spec, tilted_spec, Condition, Surface, FURROW_PITCH, FURROW_WIDTH,
 };
