@@ -6,9 +6,9 @@ use std::path::Path;
 use tangent_core::noise::{displacement_per_pixel, NoiseModel};
 use tangent_core::pipeline::PipelineConfig;
 use tangent_core::real::Vec3;
+use tangent_core::solvers::stem::CylinderParams;
 use tangent_core::solvers::walls::WallParams;
 use tangent_host::capture::Capture;
-use tangent_core::solvers::stem::CylinderParams;
 use tangent_host::measure::{measure_capture, Reading};
 use tangent_host::measure_wall::{ValueSigma, WallReport};
 
@@ -75,10 +75,20 @@ fn walls_face_as_the_truth_says() {
         );
         // Pitch, the weak direction of two parallel lines (docs/building.md §1), with 3.5σ.
         within(name, a.pitch_deg, t.pitch_deg.unwrap(), 3.5, 0.0);
+        // The accelerometer's vertical: the plumb within 3σ (pitch's σ ⊕ gravity's, (B7)).
+        let plumb = w.plumb_deg.unwrap_or_else(|| panic!("{name}: no plumb"));
+        within(name, plumb, t.plumb_deg.unwrap(), 3.0, 0.0);
         // The quality index 1 − λ₃/λ₂ at least what the error model allows.
         let bound = quality_bound(name, a.lines.as_slice(), &t);
-        println!("{name}: quality {:.4}, error-model bound {bound:.4}", a.quality);
-        assert!(a.quality >= bound, "{name}: quality {} < {bound}", a.quality);
+        println!(
+            "{name}: quality {:.4}, error-model bound {bound:.4}",
+            a.quality
+        );
+        assert!(
+            a.quality >= bound,
+            "{name}: quality {} < {bound}",
+            a.quality
+        );
     }
 }
 
@@ -119,7 +129,11 @@ fn quality_bound(name: &str, lines: &[usize], t: &tangent_host::measure_wall::Wa
     }
     let w: f64 = lines_wy.iter().map(|l| l.0).sum();
     let mean = lines_wy.iter().map(|l| l.0 * l.1).sum::<f64>() / w;
-    let lambda2 = lines_wy.iter().map(|l| l.0 * (l.1 - mean).powi(2)).sum::<f64>() / w;
+    let lambda2 = lines_wy
+        .iter()
+        .map(|l| l.0 * (l.1 - mean).powi(2))
+        .sum::<f64>()
+        / w;
     let lambda3 = lines_wy.len() as f64 / w;
     1.0 - 4.0 * lambda3 / lambda2
 }

@@ -167,8 +167,13 @@ fn a_line_bias_predicts_the_tilt_it_causes() {
     let bias = 0.01;
     let shifted = |i: usize, p: Vec3| if i >= 100 { p + dxdv * bias } else { p };
     let clean = fit_plane(pts[..200].iter().map(|&p| (p, sigma))).unwrap();
-    let biased =
-        fit_plane(pts[..200].iter().enumerate().map(|(i, &p)| (shifted(i, p), sigma))).unwrap();
+    let biased = fit_plane(
+        pts[..200]
+            .iter()
+            .enumerate()
+            .map(|(i, &p)| (shifted(i, p), sigma)),
+    )
+    .unwrap();
     let tilt = (biased.normal - clean.normal).dot(&Vec3::y()).abs();
     // Line 0 is counted in the weights but not biased (line index beyond MAX_LINES).
     let mut fit = clean;

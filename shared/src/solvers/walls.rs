@@ -16,8 +16,8 @@ use crate::laser_plane::LaserPlane;
 use crate::noise::{displacement_per_pixel, DisplacementField};
 
 use super::plane_pca::{
-    add_line_bias, fit_plane, normal_angle, orientation, parallel_distance, plane_intersection, plumb_deviation,
-    Estimate, Orientation, PlaneFit,
+    add_line_bias, fit_plane, normal_angle, orientation, parallel_distance, plane_intersection,
+    plumb_deviation, Estimate, Orientation, PlaneFit,
 };
 use super::result::Flags;
 use super::SolveError;
@@ -697,7 +697,9 @@ fn segment(
         let corner_end = next.and_then(|r| {
             let other = &walls[r.wall? as usize].plane;
             let along = dir.dot(&other.normal);
-            if along.abs() < 1e-3 {
+            // A parallel wall beyond a jump (a niche's front wall seen past a jamb too thin
+            // to fit) meets the line nowhere near: that end is an edge, not a corner.
+            if along.abs() < params.parallel_max.sin() {
                 return None;
             }
             let t = (other.offset - other.normal.dot(&origin)) / along;
