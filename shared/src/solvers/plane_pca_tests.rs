@@ -187,7 +187,7 @@ fn a_line_bias_predicts_the_tilt_it_causes() {
     let predicted = sqrt(fit.normal_variance_along(Vec3::y()));
     assert!(tilt > 1e-4, "the bias tilts the plane: {tilt}");
     assert!(
-        (predicted - tilt).abs() <= 0.02 * tilt,
+        (predicted - tilt).abs() <= 0.02 * tilt + TOL / 10.0,
         "predicted {predicted} rad, refit moved {tilt} rad"
     );
     // The plane's move along its normal at the centroid.
