@@ -505,7 +505,8 @@ pub fn entries() -> Vec<CorpusEntry> {
         "plaster wall perpendicular to the optical axis at 1.5 m",
         two_plane_calibration(),
         vec![wall([0.0, 0.0, 1.5], [0.0, 0.0, -1.0])],
-        |_| {},
+        // The accelerometer draws from its own stream: the frames are as before it.
+        |p| p.accelerometer = Some(super::accelerometer::AccelerometerSim::reference()),
     );
     b.add(
         "wall-corner-z200",
@@ -516,7 +517,8 @@ pub fn entries() -> Vec<CorpusEntry> {
             wall([0.0, 0.0, 2.0], [1.0, 0.0, -1.0]),
             wall([0.0, 0.0, 2.0], [-1.0, 0.0, -1.0]),
         ],
-        |_| {},
+        // The accelerometer draws from its own stream: the frames are as before it.
+        |p| p.accelerometer = Some(super::accelerometer::AccelerometerSim::reference()),
     );
     // --- road ----------------------------------------------------------------------------------
     let road = |waves: Vec<Wave>| {
