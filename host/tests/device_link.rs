@@ -27,11 +27,22 @@ fn open(dev: &TestDevice) -> Link {
     Link::open(dev.path().to_str().unwrap(), cfg()).expect("open the test device")
 }
 
-/// Collects readings until `n` arrived (or `timeout`), checking order and content.
-fn collect(link: &mut Link, n: u32, timeout: Duration) -> Vec<u32> {
+/// Reads until `done` holds of what has arrived and the link's counters (at most
+/// `timeout`), checking each reading's content.
+fn read_until(
+    link: &mut Link,
+    seqs: &mut Vec<u32>,
+    what: &str,
+    timeout: Duration,
+    done: impl Fn(&[u32], &tangent_host::link::LinkCounters) -> bool,
+) {
     let end = Instant::now() + timeout;
-    let mut seqs = Vec::new();
-    while (seqs.len() as u32) < n && Instant::now() < end {
+    while !done(seqs, &link.counters()) {
+        assert!(
+            Instant::now() < end,
+            "{what}: got {seqs:?}, {:?}",
+            link.counters()
+        );
         if let Some(r) = link.next_reading(Duration::from_millis(100)).unwrap() {
             assert_eq!(
                 r.measurement.value(),
@@ -42,6 +53,13 @@ fn collect(link: &mut Link, n: u32, timeout: Duration) -> Vec<u32> {
             seqs.push(r.seq);
         }
     }
+}
+
+/// Collects readings until `n` arrived (at most `timeout`), checking order and content.
+fn collect(link: &mut Link, n: u32, timeout: Duration) -> Vec<u32> {
+    let mut seqs = Vec::new();
+    let what = format!("{n} readings");
+    read_until(link, &mut seqs, &what, timeout, |s, _| s.len() as u32 >= n);
     // Nothing more may come (a duplicate would show up here).
     let extra = link.next_reading(Duration::from_millis(700)).unwrap();
     assert_eq!(extra.map(|r| r.seq), None, "reading beyond the {n} issued");
@@ -95,32 +113,7 @@ fn dropped_and_corrupted_bytes_lose_and_duplicate_nothing() {
     eprintln!("faulty link: {c:?}");
 }
 
-/// Reads until `done` holds of what has arrived and the link's counters, checking each
-/// reading's content.
-fn read_until(
-    link: &mut Link,
-    seqs: &mut Vec<u32>,
-    what: &str,
-    done: impl Fn(&[u32], &tangent_host::link::LinkCounters) -> bool,
-) {
-    let end = Instant::now() + Duration::from_secs(60);
-    while !done(seqs, &link.counters()) {
-        assert!(
-            Instant::now() < end,
-            "{what}: got {seqs:?}, {:?}",
-            link.counters()
-        );
-        if let Some(r) = link.next_reading(Duration::from_millis(100)).unwrap() {
-            assert_eq!(
-                r.measurement.value(),
-                f64::from(diameter_of(r.seq)),
-                "content of reading {}",
-                r.seq
-            );
-            seqs.push(r.seq);
-        }
-    }
-}
+const MINUTE: Duration = Duration::from_secs(60);
 
 /// Two cable cuts, each while readings are still on their way and with ten more made while
 /// the cable is out; ordered by events (what arrived, the link's reconnects), not by time.
@@ -136,7 +129,7 @@ fn cut_and_restored_link_recovers_readings_made_meanwhile() {
         // Fifteen presses; the cable goes once ten of them have arrived.
         dev.press(15, Duration::from_millis(10));
         let arrived = seqs.len() + 10;
-        read_until(&mut link, &mut seqs, "ten readings", |s, _| {
+        read_until(&mut link, &mut seqs, "ten readings", MINUTE, |s, _| {
             s.len() >= arrived
         });
         dev.unplug();
@@ -144,7 +137,7 @@ fn cut_and_restored_link_recovers_readings_made_meanwhile() {
         dev.press(10, Duration::from_millis(5));
         dev.wait_presses(Duration::from_secs(30));
         dev.plug();
-        read_until(&mut link, &mut seqs, "the reconnect", |_, c| {
+        read_until(&mut link, &mut seqs, "the reconnect", MINUTE, |_, c| {
             c.reconnects >= cut
         });
     }
