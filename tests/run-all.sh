@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # Runs every test of Tangent from a fresh clone and prints one summary line:
-#   "tests: N passed, N failed"
+#   "tests: N passed, N failed, N skipped"
+# Each step's start (clock time) and duration are printed, and the durations again before the
+# summary (CI's budget: 20 min on 2 cores from a fresh clone).
 # It installs what the tests need first (the thumbv7em target through rustup, which reads
 # rust-toolchain.toml; qemu-system-arm through apt when running as root).
 set -uo pipefail
@@ -10,9 +12,17 @@ passed=0
 failed=0
 skipped=0
 failed_steps=()
+timings=()
 log_dir=$(mktemp -d)
+started=$SECONDS
 
-note() { printf '\n=== %s ===\n' "$*"; }
+note() { printf '\n=== %s [%s] ===\n' "$*" "$(date +%T)"; step_started=$SECONDS; }
+# timed NAME STATUS: the step's duration, printed and kept for the summary.
+timed() {
+  local took=$((SECONDS - step_started))
+  printf -- '--- %s: %d s (exit %s)\n' "$1" "$took" "$2"
+  timings+=("$(printf '%-16s %4d s' "$1" "$took")")
+}
 
 # --- prerequisites -----------------------------------------------------------------
 note "prerequisites"
@@ -28,6 +38,7 @@ if ! command -v qemu-system-arm >/dev/null 2>&1; then
   fi
 fi
 command -v qemu-system-arm >/dev/null 2>&1 && qemu-system-arm --version | head -1
+timed prerequisites 0
 
 # run_cargo_tests NAME CMD... : runs a cargo test command and adds its counts.
 run_cargo_tests() {
@@ -36,6 +47,7 @@ run_cargo_tests() {
   local out="$log_dir/$name.log"
   "$@" 2>&1 | tee "$out"
   local status=${PIPESTATUS[0]}
+  timed "$name" "$status"
   local p f
   read -r p f < <(awk '/^test result:/ { for (i = 1; i <= NF; i++) { if ($i ~ /^passed;?$/) p += $(i-1); if ($i ~ /^failed;?$/) f += $(i-1) } } END { print p + 0, f + 0 }' "$out")
   passed=$((passed + ${p:-0}))
@@ -54,6 +66,7 @@ run_step() {
   note "$name: $*"
   "$@"
   local status=$?
+  timed "$name" "$status"
   if [ "$status" -eq 0 ]; then passed=$((passed + 1))
   elif [ "$status" -eq 77 ]; then skipped=$((skipped + 1))
   else failed=$((failed + 1)); failed_steps+=("$name"); fi
@@ -85,6 +98,7 @@ run_node_tests() {
   local out="$log_dir/$name.log"
   "$@" 2>&1 | tee "$out"
   local status=${PIPESTATUS[0]}
+  timed "$name" "$status"
   if [ "$status" -eq 77 ]; then skipped=$((skipped + 1)); return; fi
   local p f
   p=$(awk '/^ℹ pass [0-9]+$/ { n = $3 } END { print n + 0 }' "$out")
@@ -100,6 +114,9 @@ run_node_tests field-app bash app/e2e/run.sh
 
 # --- summary -----------------------------------------------------------------------
 echo
+echo "time per step:"
+printf '  %s\n' "${timings[@]}"
+echo "  total            $((SECONDS - started)) s"
 if [ ${#failed_steps[@]} -gt 0 ]; then
   echo "failed steps: ${failed_steps[*]}"
 fi

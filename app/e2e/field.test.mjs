@@ -6,10 +6,17 @@
 // field log imported into a fresh browser; the page opened offline. The invariant checked
 // throughout: the stored readings are exactly the caliper's sequence numbers, each once.
 //
+// No test waits for time: the bridge's controls answer once the emulated caliper has done
+// what they asked (with the readings' sequence numbers), and the page says which readings it
+// holds (`li[data-seq]`) and up to which of the device's readings a history check found
+// nothing missing (`body[data-synced]`). Before each test the caliper is brought to rest
+// (`/control/idle`: nothing in flight, no stream) and the page to its last reading, so no
+// test sees another's readings.
+//
 // Run by app/e2e/run.sh (which builds what it needs); TANGENT_SCREENSHOTS=DIR also saves the
 // main screens at phone and tablet sizes, normal and sunlight mode.
 
-import { test, before, after } from "node:test";
+import { test, before, beforeEach, after } from "node:test";
 import assert from "node:assert/strict";
 import { spawn, execFileSync } from "node:child_process";
 import { mkdtempSync, readFileSync, rmSync, mkdirSync } from "node:fs";
@@ -42,9 +49,20 @@ async function startServer() {
   });
 }
 
+// A control of the emulated caliper; answers once done: {seqs (the readings it made, null
+// for a failed measurement), last_seq (the device's last reading)}.
 async function control(action) {
   const r = await fetch(new URL(`control/${action}`, base));
-  assert.equal(r.status, 200, `control/${action}: ${await r.text()}`);
+  const body = await r.text();
+  assert.equal(r.status, 200, `control/${action}: ${body}`);
+  return JSON.parse(body);
+}
+
+// The readings a control made, each a reading (no failed measurement).
+async function made(action) {
+  const { seqs } = await control(action);
+  assert.ok(seqs.every((s) => Number.isInteger(s)), `control/${action} measured: ${JSON.stringify(seqs)}`);
+  return seqs;
 }
 
 async function openPage() {
@@ -61,30 +79,30 @@ async function connect() {
 }
 
 const readings = () => page.evaluate(() => Number(document.body.dataset.readings || 0));
+const checks = () => page.evaluate(() => Number(document.body.dataset.checks || 0));
 
-async function waitReadings(n) {
+// Waits until `predicate(arg)` holds in the page; says what the page shows if it never does.
+async function waitUntil(what, predicate, arg) {
   try {
-    await page.waitForFunction((want) => Number(document.body.dataset.readings || 0) >= want, n, { timeout: WAIT });
+    await page.waitForFunction(predicate, arg, { timeout: WAIT });
   } catch (e) {
-    const seen = await page.evaluate(() => [document.body.dataset.readings, document.getElementById("status").textContent, document.getElementById("r-message").textContent]);
-    throw new Error(`waiting for ${n} readings: ${JSON.stringify(seen)}: ${e.message}`);
+    const seen = await page.evaluate(() => ({
+      ...document.body.dataset,
+      status: document.getElementById("status").textContent,
+      message: document.getElementById("r-message").textContent,
+    }));
+    throw new Error(`waiting for ${what}: the page shows ${JSON.stringify(seen)}: ${e.message}`);
   }
-  // Nothing beyond: a duplicate would show up here.
-  await page.waitForTimeout(300);
-  assert.equal(await readings(), n, "readings stored");
 }
 
-// Waits until no reading has arrived for 1.5 s (a stream's last readings come after the
-// trigger is released).
-async function settle() {
-  let last = -1;
-  for (let i = 0; i < 40; i++) {
-    const n = await readings();
-    if (n === last) return;
-    last = n;
-    await page.waitForTimeout(1500);
-  }
-}
+// Waits until the page has stored and shown the reading `seq`.
+const waitSeq = (seq) => waitUntil(`reading ${seq}`, (s) => document.querySelector(`#trees li[data-seq='${s}']`) !== null, seq);
+
+// Waits until a history check of the page found nothing missing up to the device's reading
+// `seq`: every reading up to it is stored, and any duplicate would have been stored by now.
+const waitSynced = (seq) => waitUntil(`the page synced to ${seq}`, (s) => Number(document.body.dataset.synced ?? -1) >= s, seq);
+
+const waitReadings = (n) => waitUntil(`${n} readings`, (want) => Number(document.body.dataset.readings || 0) >= want, n);
 
 // The sequence numbers of the stored readings, read from IndexedDB itself.
 function storedSeqs() {
@@ -123,6 +141,13 @@ before(async () => {
   await openPage();
 });
 
+// Each test starts with the caliper at rest and the page holding all it made.
+beforeEach(async () => {
+  const { last_seq: last } = await control("idle");
+  const connected = page && !page.isClosed() && await page.evaluate(() => document.body.dataset.link === "connected");
+  if (connected) await waitSynced(last);
+});
+
 after(async () => {
   if (context) await context.close();
   if (server) server.kill();
@@ -140,9 +165,14 @@ test("a plot of 20 trees measured, species by species, and a held trigger", asyn
   for (let tree = 1; tree <= 20; tree++) {
     if (tree % 5 === 1) await page.click(`[data-species='${species[(tree - 1) / 5]}']`);
     // The caliper's trigger, and now and then the page's Measure button.
-    if (tree % 4 === 0) await page.click("#measure");
-    else await control("trigger");
-    await waitReadings(tree);
+    if (tree % 4 === 0) {
+      await page.click("#measure");
+      await waitReadings(tree);
+    } else {
+      const [seq] = await made("trigger");
+      await waitSeq(seq);
+    }
+    assert.equal(await readings(), tree, "readings stored");
     assert.equal(await page.textContent("#r-tree"), `Tree ${tree}`);
     if (tree === 5) {
       // The elliptic stem (the emulated camera's fifth scene): its flags in words.
@@ -158,12 +188,14 @@ test("a plot of 20 trees measured, species by species, and a held trigger", asyn
   assert.equal(await page.evaluate(() => document.body.dataset.trees), "20");
   const rows = await page.$$eval("#tally tr", (trs) => trs.map((tr) => tr.firstChild.textContent));
   assert.deepEqual(rows, ["PIAB", "PISY", "FASY"]);
-  // The trigger held: readings stream under one tree with the running mean and spread.
-  await control("hold?ms=2500");
+  // The trigger held: readings stream under one tree with the running mean and spread,
+  // released once the page shows them.
+  await control("hold");
   await page.waitForSelector("#r-held:not([hidden])", { timeout: WAIT });
   assert.match(await page.textContent("#r-held"), /held: \d+ readings · mean \d+\.\d mm · spread \d+\.\d mm/);
-  await page.waitForTimeout(2500);
-  await settle();
+  const streamed = await made("release");
+  assert.ok(streamed.length >= 2, `readings streamed: ${streamed}`);
+  await waitSynced(streamed.at(-1));
   assert.equal(await page.textContent("#r-tree"), "Tree 21");
   assert.equal(await page.evaluate(() => document.body.dataset.trees), "21");
   await assertEachReadingOnce();
@@ -171,19 +203,24 @@ test("a plot of 20 trees measured, species by species, and a held trigger", asyn
 
 test("undo and re-measure", async () => {
   const before = await readings();
-  await control("trigger");
-  await waitReadings(before + 1);
+  const [undone] = await made("trigger");
+  await waitSeq(undone);
+  assert.equal(await readings(), before + 1);
   assert.equal(await page.textContent("#r-tree"), "Tree 22");
   await page.click("#undo");
-  await page.waitForFunction((n) => Number(document.body.dataset.readings) === n, before);
+  await waitUntil("the undo", (n) => Number(document.body.dataset.readings) === n, before);
   assert.equal(await page.textContent("#next-tree"), "22");
-  // Undo removed the reading from the plot, not from the caliper: it is not fetched again.
-  await page.waitForTimeout(2500);
+  // Undo removed the reading from the plot, not from the caliper: it is not fetched again
+  // (two history checks, so that one began after the undo).
+  const checked = await checks();
+  await waitUntil("two history checks", (n) => Number(document.body.dataset.checks || 0) >= n, checked + 2);
   assert.equal(await readings(), before);
   await page.click("#remeasure");
-  assert.match(await page.textContent("#remeasure-note"), /re-measures tree 21/);
-  await control("trigger");
-  await waitReadings(before + 1);
+  await page.waitForSelector("#remeasure-note:not([hidden])", { timeout: WAIT });
+  assert.match(await page.textContent("#remeasure-note"), /re-measures tree 21$/);
+  const [again] = await made("trigger");
+  await waitSeq(again);
+  assert.equal(await readings(), before + 1);
   assert.equal(await page.textContent("#r-tree"), "Tree 21");
   assert.equal(await page.textContent("#next-tree"), "22");
   assert.equal(await page.evaluate(() => document.body.dataset.trees), "21");
@@ -193,46 +230,44 @@ test("undo and re-measure", async () => {
 test("the cable pulled mid-plot: readings made meanwhile arrive, none lost or twice", async () => {
   const seqsBefore = await storedSeqs();
   const n = seqsBefore.length;
-  // A measurement in flight when the cable goes, then three while it is out.
-  await control("trigger");
-  await control("cut?ms=4000");
-  await page.waitForSelector("body[data-link='lost']", { timeout: WAIT });
-  await control("trigger?n=3");
-  await page.waitForSelector("body[data-link='connected']", { timeout: WAIT });
   // The undone reading (seq of tree 22) stays undone: the caliper's numbers have a hole there.
-  const seqs = await (async () => {
-    await page.waitForFunction((want) => Number(document.body.dataset.readings) >= want, n + 4, { timeout: WAIT });
-    await page.waitForTimeout(1500);
-    return storedSeqs();
-  })();
+  const top = Math.max(...seqsBefore);
+  // A measurement in flight when the cable goes, then three while it is out.
+  const inFlight = await made("cut?measuring=1");
+  await page.waitForSelector("body[data-link='lost']", { timeout: WAIT });
+  const meanwhile = await made("trigger?n=3");
+  assert.deepEqual([...inFlight, ...meanwhile], [top + 1, top + 2, top + 3, top + 4], "the caliper's numbers");
+  await control("plug");
+  await page.waitForSelector("body[data-link='connected']", { timeout: WAIT });
+  await waitSynced(top + 4);
+  const seqs = await storedSeqs();
   assert.equal(seqs.length, n + 4, "four readings made around and during the cut");
   assert.equal(new Set(seqs).size, seqs.length, "no reading twice");
-  const fresh = seqs.slice(n);
-  const top = Math.max(...seqsBefore);
-  assert.deepEqual(fresh, [top + 1, top + 2, top + 3, top + 4], "the readings after the cut, in order");
+  assert.deepEqual(seqs.slice(0, n), seqsBefore, "the readings before the cut, untouched");
+  assert.deepEqual(seqs.slice(n), [top + 1, top + 2, top + 3, top + 4], "the readings after the cut, in order");
   assert.equal(await page.textContent("#next-tree"), "26");
 });
 
 test("the tab closed mid-plot and reopened: nothing lost, readings made meanwhile fetched", async () => {
-  const n = (await storedSeqs()).length;
+  const before = await storedSeqs();
+  const n = before.length;
   const next = await page.textContent("#next-tree");
   await page.close();
-  await control("trigger?n=2");
-  await new Promise((r) => setTimeout(r, 2500));
+  const meanwhile = await made("trigger?n=2");
   await openPage();
   assert.equal(await page.textContent("#plot-id"), "P-017");
   assert.equal(await page.textContent("#next-tree"), next);
   assert.equal(await readings(), n, "every stored reading is back");
   await connect();
-  await waitReadings(n + 2);
-  const seqs = await storedSeqs();
-  assert.equal(new Set(seqs).size, seqs.length, "no reading twice");
-  // And a reload with nothing new brings nothing new.
+  await waitSynced(meanwhile.at(-1));
+  assert.deepEqual(await storedSeqs(), [...before, ...meanwhile], "every reading once, the two made meanwhile fetched");
+  // And a reload with nothing new brings nothing new (its first history check is done).
   await page.reload();
   await page.waitForSelector("body[data-ready='1']", { timeout: WAIT });
   await connect();
-  await page.waitForTimeout(2500);
+  await waitSynced(meanwhile.at(-1));
   assert.equal(await readings(), n + 2);
+  assert.deepEqual(await storedSeqs(), [...before, ...meanwhile]);
 });
 
 test("exports are byte for byte what `tangent log export` writes; the log imports", async () => {
@@ -269,8 +304,8 @@ test("exports are byte for byte what `tangent log export` writes; the log import
 test("screens at phone and tablet sizes, normal and sunlight", async () => {
   const dir = process.env.TANGENT_SCREENSHOTS || join(work, "screens");
   mkdirSync(dir, { recursive: true });
-  await control("trigger");
-  await page.waitForTimeout(2000);
+  const [seq] = await made("trigger");
+  await waitSeq(seq);
   for (const [name, viewport] of [["phone", { width: 412, height: 915 }], ["tablet", { width: 1280, height: 800 }]]) {
     await page.setViewportSize(viewport);
     for (const sun of [false, true]) {

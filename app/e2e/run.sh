@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The field app's browser tests (docs/field-app.md): installs what they need when missing —
 # Debian's chromium (apt, as root) and playwright-core (npm ci) — builds the app, the
-# `tangent` binary and the emulated firmware, then runs app/e2e/*.test.mjs with node's test
+# `tangent` binary (as the workspace's tests do) and the emulated firmware, then runs app/e2e/*.test.mjs with node's test
 # runner. Exit 77 (skipped, with the reason printed) when chromium, node/npm or QEMU
 # cannot be had here.
 #   bash app/e2e/run.sh            TANGENT_SCREENSHOTS=docs/field-app bash app/e2e/run.sh
@@ -33,7 +33,10 @@ fi
 
 set -e
 bash app/build.sh
-cargo build --release -p tangent-host --bin tangent
+# The `tangent` binary exactly as the workspace's tests build it (same command, so the same
+# features — dev-dependencies change some — and profile): in CI, after `cargo test
+# --workspace --release`, nothing is compiled again.
+cargo test --workspace --release --no-run
 cargo firmware-qemu
 cd "$here"
 exec node --test --test-concurrency=1 --test-reporter=spec

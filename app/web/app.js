@@ -92,6 +92,12 @@ async function connect() {
     onState,
     onFailure: (text) => { message(text); beep(false); },
     onLost: (from, to) => message(`readings ${from}–${to} were made while disconnected and are no longer on the caliper`),
+    // For tests and tools: the page holds every reading up to `data-synced` (the device's
+    // last, at its last history check); `data-checks` counts those checks.
+    onSynced: (lastSeq) => {
+      document.body.dataset.synced = String(lastSeq);
+      document.body.dataset.checks = String(Number(document.body.dataset.checks || 0) + 1);
+    },
     resumeFrom: async (id) => {
       const last = await state.store.get(`device:${id.device_id}`, null);
       // Same boot of the caliper (its clock and numbers are past ours): carry on after it.

@@ -75,7 +75,9 @@ export class WebSerialTransport {
 
 export class Link {
   // handlers: onReading(r) → Promise (store, then show), onState(state, text),
-  // onFailure(text), onLost(from, to), resumeFrom(identity) → stored last seq or null.
+  // onFailure(text), onLost(from, to), resumeFrom(identity) → stored last seq or null,
+  // onSynced(lastSeq) (optional: a history check found nothing missing up to the device's
+  // last reading).
   constructor(core, transport, handlers) {
     this.core = core;
     this.transport = transport;
@@ -249,6 +251,9 @@ export class Link {
       this.h.onLost(from, to);
     }
     this.drain();
+    // Everything up to the device's last reading is now filed (or reported lost).
+    await this.drainChain;
+    if (this.h.onSynced) this.h.onSynced(end.last_seq);
   }
 
   tick() {

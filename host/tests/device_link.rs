@@ -27,11 +27,22 @@ fn open(dev: &TestDevice) -> Link {
     Link::open(dev.path().to_str().unwrap(), cfg()).expect("open the test device")
 }
 
-/// Collects readings until `n` arrived (or `timeout`), checking order and content.
-fn collect(link: &mut Link, n: u32, timeout: Duration) -> Vec<u32> {
+/// Reads until `done` holds of what has arrived and the link's counters (at most
+/// `timeout`), checking each reading's content.
+fn read_until(
+    link: &mut Link,
+    seqs: &mut Vec<u32>,
+    what: &str,
+    timeout: Duration,
+    done: impl Fn(&[u32], &tangent_host::link::LinkCounters) -> bool,
+) {
     let end = Instant::now() + timeout;
-    let mut seqs = Vec::new();
-    while (seqs.len() as u32) < n && Instant::now() < end {
+    while !done(seqs, &link.counters()) {
+        assert!(
+            Instant::now() < end,
+            "{what}: got {seqs:?}, {:?}",
+            link.counters()
+        );
         if let Some(r) = link.next_reading(Duration::from_millis(100)).unwrap() {
             assert_eq!(
                 r.measurement.value(),
@@ -42,6 +53,13 @@ fn collect(link: &mut Link, n: u32, timeout: Duration) -> Vec<u32> {
             seqs.push(r.seq);
         }
     }
+}
+
+/// Collects readings until `n` arrived (at most `timeout`), checking order and content.
+fn collect(link: &mut Link, n: u32, timeout: Duration) -> Vec<u32> {
+    let mut seqs = Vec::new();
+    let what = format!("{n} readings");
+    read_until(link, &mut seqs, &what, timeout, |s, _| s.len() as u32 >= n);
     // Nothing more may come (a duplicate would show up here).
     let extra = link.next_reading(Duration::from_millis(700)).unwrap();
     assert_eq!(extra.map(|r| r.seq), None, "reading beyond the {n} issued");
@@ -95,6 +113,10 @@ fn dropped_and_corrupted_bytes_lose_and_duplicate_nothing() {
     eprintln!("faulty link: {c:?}");
 }
 
+const MINUTE: Duration = Duration::from_secs(60);
+
+/// Two cable cuts, each while readings are still on their way and with ten more made while
+/// the cable is out; ordered by events (what arrived, the link's reconnects), not by time.
 #[test]
 fn cut_and_restored_link_recovers_readings_made_meanwhile() {
     let dev = TestDevice::start();
@@ -102,17 +124,22 @@ fn cut_and_restored_link_recovers_readings_made_meanwhile() {
     let events = Arc::new(Mutex::new(Vec::new()));
     let e = events.clone();
     link.on_event(move |ev| e.lock().unwrap().push(ev.clone()));
-    dev.press(50, Duration::from_millis(10));
     let mut seqs = Vec::new();
-    // Two cuts of 400 ms while the device keeps measuring.
-    for target in [10, 20] {
-        while seqs.len() < target {
-            if let Some(r) = link.next_reading(Duration::from_millis(100)).unwrap() {
-                seqs.push(r.seq);
-            }
-        }
-        dev.cut(Duration::from_millis(400));
-        std::thread::sleep(Duration::from_millis(100));
+    for cut in 1..=2u64 {
+        // Fifteen presses; the cable goes once ten of them have arrived.
+        dev.press(15, Duration::from_millis(10));
+        let arrived = seqs.len() + 10;
+        read_until(&mut link, &mut seqs, "ten readings", MINUTE, |s, _| {
+            s.len() >= arrived
+        });
+        dev.unplug();
+        dev.wait_presses(Duration::from_secs(30));
+        dev.press(10, Duration::from_millis(5));
+        dev.wait_presses(Duration::from_secs(30));
+        dev.plug();
+        read_until(&mut link, &mut seqs, "the reconnect", MINUTE, |_, c| {
+            c.reconnects >= cut
+        });
     }
     seqs.extend(collect(
         &mut link,
@@ -120,8 +147,9 @@ fn cut_and_restored_link_recovers_readings_made_meanwhile() {
         Duration::from_secs(30),
     ));
     assert_eq!(seqs, one_to(50));
+    assert_eq!(dev.issued(), 50);
     let c = link.counters();
-    assert!(c.reconnects >= 2, "{c:?}");
+    assert_eq!(c.reconnects, 2, "{c:?}");
     assert_eq!(c.lost, 0);
     let ev = events.lock().unwrap();
     assert!(ev.iter().any(|e| matches!(e, LinkEvent::Lost(_))), "{ev:?}");

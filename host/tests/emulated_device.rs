@@ -13,6 +13,7 @@ use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
 use tangent_core::calibration::Calibration;
+use tangent_core::measurement::{Measurement, Mode};
 use tangent_core::protocol::codes::Failure;
 use tangent_core::protocol::{
     self, calibration_record, DeviceError, ErrorCode, FrameSel, FromDevice, Request, Response,
@@ -428,7 +429,6 @@ fn measure_without_calibration_is_a_clear_error() {
 #[test]
 fn the_mode_is_set_from_the_host_and_read_back() {
     use tangent_core::instrument;
-    use tangent_core::measurement::Mode;
 
     let Some(elf) = firmware_elf() else { return };
     let dir = tempfile::tempdir().unwrap();
@@ -494,85 +494,93 @@ fn the_mode_is_set_from_the_host_and_read_back() {
 /// The sphere issue's CI check: in sphere mode the emulated firmware (f32) gives the host's
 /// sphere (f64) on the same frames — same method, diameters within 1e-4 relative (the
 /// argument of `on_device_measurements_equal_the_hosts`), same flags — or the same refusal.
-#[test]
-fn on_device_spheres_equal_the_hosts() {
-    use tangent_core::instrument::{measure_with, Sphere};
-    use tangent_core::measurement::{Measurement, Mode};
-    use tangent_core::pipeline::{OwnedBuffers, PipelineConfig};
-    use tangent_core::solvers::sphere::SphereParams;
-    use tangent_host::simulate::{simulate, sphere_corpus};
+/// Whether [`device_equals_host`] sets the instrument's mode before measuring.
+#[derive(Clone, Copy, PartialEq)]
+enum SetMode {
+    /// `Request::SetMode` first.
+    Yes,
+    /// The device's boot mode.
+    AtBoot,
+}
 
-    let Some(elf) = firmware_elf() else { return };
-    let wanted = [
-        "sphere-d100-z080-matt-2p",
-        "sphere-d150-z100-offcentre-2p",
-        "sphere-d250-z150-shiny-offcentre-2p",
-        "sphere-d400-z200-matt-2p",
-        "notsphere-wall-z120-2p",
-    ];
+/// One instrument's CI check: the emulated firmware, running the shared pipeline in `f32` on
+/// the Cortex-M7, and the host (`f64`) measure the same frames of the `wanted` corpus
+/// entries in `mode`. Each capture's on frame lights all its planes; a reading on both sides
+/// is of the same kind and `same(name, host, device)` holds; where the host refuses, the
+/// device refuses with the same sentence. Returns how many readings were compared (`None`
+/// when QEMU is missing).
+fn device_equals_host(
+    corpus: Vec<tangent_host::simulate::corpus::CorpusEntry>,
+    wanted: &[&str],
+    mode: Mode,
+    set_mode: SetMode,
+    same: impl Fn(&str, &Measurement, &Measurement),
+) -> Option<usize> {
+    use tangent_core::instrument::{measure, InstrumentParams};
+    use tangent_core::pipeline::{OwnedBuffers, PipelineConfig};
+    use tangent_host::simulate::simulate;
+
+    let elf = firmware_elf()?;
     let dir = tempfile::tempdir().unwrap();
-    let mut pairs = Vec::new();
-    let mut cases = Vec::new();
-    for entry in sphere_corpus::entries()
+    let (mut pairs, mut cases) = (Vec::new(), Vec::new());
+    for entry in corpus
         .into_iter()
         .filter(|e| wanted.contains(&e.name.as_str()))
     {
-        let (capture, _) = simulate(&entry.spec).expect("simulate the sphere capture");
+        let name = entry.name;
+        let (capture, _) = simulate(&entry.spec).expect("simulate the corpus capture");
         let off_pgm = capture.off_frame();
-        let (_, on_pgm) = capture.on_frames().next().expect("an on frame");
+        let (lit, on_pgm) = capture.on_frames().next().expect("an on frame");
+        let planes = capture.calibration.planes.len();
+        assert_eq!(lit.len(), planes, "{name}: all planes lit in one frame");
         let (w, h) = (off_pgm.width, off_pgm.height);
         let (off, on) = (to_u8(off_pgm), to_u8(on_pgm));
-        let off_path = dir.path().join(format!("{}-off.pgm", entry.name));
-        let on_path = dir.path().join(format!("{}-on.pgm", entry.name));
+        let off_path = dir.path().join(format!("{name}-off.pgm"));
+        let on_path = dir.path().join(format!("{name}-on.pgm"));
         write_pgm(&off_path, w, h, &off);
         write_pgm(&on_path, w, h, &on);
         pairs.push((off_path, on_path));
         let off_f = tangent_core::image::Frame::new(&off, w, h, w).unwrap();
         let on_f = tangent_core::image::Frame::new(&on, w, h, w).unwrap();
-        let mut ws = OwnedBuffers::<u8>::for_frame(w, h, 8, capture.calibration.planes.len());
-        let host = measure_with::<Sphere, u8>(
+        let mut ws = OwnedBuffers::<u8>::for_frame(w, h, 8, planes);
+        let host = measure(
+            mode,
             &off_f,
             &on_f,
             &capture.calibration,
             &PipelineConfig::default(),
-            &SphereParams::default(),
+            &InstrumentParams::default(),
             &mut ws.workspace(),
         );
-        cases.push((entry.name.clone(), capture.calibration.clone(), host));
+        cases.push((name, capture.calibration.clone(), host));
     }
-    assert_eq!(cases.len(), wanted.len(), "sphere corpus entries missing");
+    assert_eq!(
+        cases.len(),
+        wanted.len(),
+        "{mode:?}: corpus entries missing"
+    );
 
     let mut dev = Device::boot(&elf, &pairs, None);
-    dev.request(Request::SetMode(Mode::Sphere), |r| {
-        assert_eq!(r, Response::Ack)
-    });
+    if set_mode == SetMode::Yes {
+        dev.request(Request::SetMode(mode), |r| assert_eq!(r, Response::Ack));
+    }
     let mut compared = 0;
     for (name, cal, host) in &cases {
+        // Each Measure consumes the next frame pair; each capture has its own calibration.
         dev.request(Request::WriteCalibration(WireCalibration::from(cal)), |r| {
             assert_eq!(r, Response::Ack, "{name}")
         });
         dev.request(Request::Measure, |r| match (host, r) {
             (Ok(h), Response::Reading(reading)) => {
-                let hs = &h.solution;
-                let Measurement::Sphere(d) = reading.measurement else {
-                    panic!("{name}: a sphere reading in sphere mode, got {reading:?}")
-                };
-                let rel = (d.diameter - hs.diameter).abs() / hs.diameter;
-                eprintln!(
-                    "{name}: host {:.4} mm {:?}, device {:.4} mm {:?}, relative difference {rel:.2e}",
-                    hs.diameter * 1e3,
-                    hs.method,
-                    d.diameter * 1e3,
-                    d.method
-                );
-                assert_eq!(d.method, hs.method, "{name}: method");
-                assert!(rel <= 1e-4, "{name}: device {} m vs host {} m", d.diameter, hs.diameter);
-                assert_eq!(d.flags, hs.flags, "{name}: flags");
+                let d = &reading.measurement;
+                assert_eq!(d.kind(), h.kind(), "{name}: kind");
+                same(name, h, d);
                 compared += 1;
             }
             (Err(e), Response::Error(DeviceError { code, detail })) => {
                 eprintln!("{name}: host and device both refuse ({e})");
                 assert_eq!(code, ErrorCode::MeasurementFailed, "{name}");
+                // The forester reads the same sentence from the caliper as from the file.
                 assert_eq!(
                     Failure::from_detail(detail).to_string(),
                     Failure::of(e).to_string(),
@@ -582,10 +590,7 @@ fn on_device_spheres_equal_the_hosts() {
             (h, r) => panic!("{name}: host {h:?}, device {r:?}"),
         });
     }
-    assert!(
-        compared >= 3,
-        "only {compared} balls measured on both sides"
-    );
+    Some(compared)
 }
 
 /// 8-bit version of a capture frame: 8-bit data as is, deeper data reduced to its top 8
@@ -599,6 +604,47 @@ fn to_u8(pgm: &tangent_host::pgm::Pgm) -> Vec<u8> {
         .collect()
 }
 
+#[test]
+fn on_device_spheres_equal_the_hosts() {
+    let wanted = [
+        "sphere-d100-z080-matt-2p",
+        "sphere-d150-z100-offcentre-2p",
+        "sphere-d250-z150-shiny-offcentre-2p",
+        "sphere-d400-z200-matt-2p",
+        "notsphere-wall-z120-2p",
+    ];
+    let entries = tangent_host::simulate::sphere_corpus::entries();
+    let same = |name: &str, h: &Measurement, d: &Measurement| {
+        let (Measurement::Sphere(h), Measurement::Sphere(d)) = (h, d) else {
+            panic!("{name}: sphere readings, got host {h:?}, device {d:?}")
+        };
+        let rel = (d.diameter - h.diameter).abs() / h.diameter;
+        eprintln!(
+            "{name}: host {:.4} mm {:?}, device {:.4} mm {:?}, relative difference {rel:.2e}",
+            h.diameter * 1e3,
+            h.method,
+            d.diameter * 1e3,
+            d.method
+        );
+        assert_eq!(d.method, h.method, "{name}: method");
+        assert!(
+            rel <= 1e-4,
+            "{name}: device {} m vs host {} m",
+            d.diameter,
+            h.diameter
+        );
+        assert_eq!(d.flags, h.flags, "{name}: flags");
+    };
+    let Some(compared) = device_equals_host(entries, &wanted, Mode::Sphere, SetMode::Yes, same)
+    else {
+        return;
+    };
+    assert!(
+        compared >= 3,
+        "only {compared} balls measured on both sides"
+    );
+}
+
 /// The firmware issue's CI check: the emulated firmware, running the shared pipeline in
 /// `f32` on the Cortex-M7, gives the host's results (pipeline in `f64`) on the same frames:
 /// same method, diameters within 1e-4 relative, or a failure where the host fails.
@@ -610,12 +656,6 @@ fn to_u8(pgm: &tangent_host::pgm::Pgm) -> Vec<u8> {
 /// decision (outlier rejection, method choice) flips, which the method comparison catches.
 #[test]
 fn on_device_measurements_equal_the_hosts() {
-    use tangent_core::instrument::{measure_with, Stem};
-    use tangent_core::pipeline::{OwnedBuffers, PipelineConfig};
-    use tangent_core::solvers::stem::CylinderParams;
-    use tangent_host::simulate::{corpus, simulate};
-
-    let Some(elf) = firmware_elf() else { return };
     let wanted = [
         "cyl-d050-z050-shade",
         "cyl-d300-z150-shade",
@@ -627,83 +667,35 @@ fn on_device_measurements_equal_the_hosts() {
         "cyl-d500-z200-tilt15-diagonal-2p",
         "nothing-in-range",
     ];
-    let dir = tempfile::tempdir().unwrap();
-    let mut pairs = Vec::new();
-    let mut cases = Vec::new();
-    for entry in corpus::entries()
-        .into_iter()
-        .filter(|e| wanted.contains(&e.name.as_str()))
-    {
-        let (capture, _) = simulate(&entry.spec).expect("simulate the corpus capture");
-        let off_pgm = capture.off_frame();
-        let (lit, on_pgm) = capture.on_frames().next().expect("an on frame");
-        assert_eq!(
-            lit.len(),
-            capture.calibration.planes.len(),
-            "{}: all planes lit in one frame",
-            entry.name
+    let same = |name: &str, h: &Measurement, d: &Measurement| {
+        let rel = (d.value() - h.value()).abs() / h.value();
+        eprintln!(
+            "{name}: host {:.4} mm {:?}, device {:.4} mm {:?}, relative difference {rel:.2e}",
+            h.value() * 1e3,
+            h.method(),
+            d.value() * 1e3,
+            d.method()
         );
-        let (w, h) = (off_pgm.width, off_pgm.height);
-        let (off, on) = (to_u8(off_pgm), to_u8(on_pgm));
-        let off_path = dir.path().join(format!("{}-off.pgm", entry.name));
-        let on_path = dir.path().join(format!("{}-on.pgm", entry.name));
-        write_pgm(&off_path, w, h, &off);
-        write_pgm(&on_path, w, h, &on);
-        pairs.push((off_path, on_path));
-
-        let off_f = tangent_core::image::Frame::new(&off, w, h, w).unwrap();
-        let on_f = tangent_core::image::Frame::new(&on, w, h, w).unwrap();
-        let mut ws = OwnedBuffers::<u8>::for_frame(w, h, 8, capture.calibration.planes.len());
-        let host = measure_with::<Stem, u8>(
-            &off_f,
-            &on_f,
-            &capture.calibration,
-            &PipelineConfig::default(),
-            &CylinderParams::default(),
-            &mut ws.workspace(),
+        assert_eq!(d.kind(), "stem", "{name}: kind");
+        assert_eq!(d.method(), h.method(), "{name}: method");
+        assert!(
+            rel <= 1e-4,
+            "{name}: device {} m vs host {} m",
+            d.value(),
+            h.value()
         );
-        cases.push((entry.name.clone(), capture.calibration.clone(), host));
-    }
-    assert_eq!(cases.len(), wanted.len(), "corpus entries missing");
-
-    let mut dev = Device::boot(&elf, &pairs, None);
-    let mut compared = 0;
-    for (name, cal, host) in &cases {
-        // Each Measure consumes the next frame pair; each capture has its own calibration.
-        dev.request(Request::WriteCalibration(WireCalibration::from(cal)), |r| {
-            assert_eq!(r, Response::Ack, "{name}")
-        });
-        dev.request(Request::Measure, |r| match (host, r) {
-            (Ok(h), Response::Reading(reading)) => {
-                let hs = &h.solution;
-                let d = reading.measurement;
-                let rel = (d.value() - hs.diameter).abs() / hs.diameter;
-                eprintln!(
-                    "{name}: host {:.4} mm {:?}, device {:.4} mm {:?}, relative difference {rel:.2e}",
-                    hs.diameter * 1e3,
-                    hs.method,
-                    d.value() * 1e3,
-                    d.method()
-                );
-                assert_eq!(d.kind(), "stem", "{name}: kind");
-                assert_eq!(d.method(), hs.method, "{name}: method");
-                assert!(rel <= 1e-4, "{name}: device {} m vs host {} m", d.value(), hs.diameter);
-                assert_eq!(d.flags(), hs.flags, "{name}: flags");
-                compared += 1;
-            }
-            (Err(e), Response::Error(DeviceError { code, detail })) => {
-                eprintln!("{name}: host and device both fail ({e})");
-                assert_eq!(code, ErrorCode::MeasurementFailed, "{name}");
-                // The forester reads the same sentence from the caliper as from the file.
-                assert_eq!(
-                    Failure::from_detail(detail).to_string(),
-                    Failure::of(e).to_string(),
-                    "{name}"
-                );
-            }
-            (h, r) => panic!("{name}: host {h:?}, device {r:?}"),
-        });
-    }
+        assert_eq!(d.flags(), h.flags(), "{name}: flags");
+    };
+    // The stem is the caliper's instrument at boot: no mode is set.
+    let Some(compared) = device_equals_host(
+        tangent_host::simulate::corpus::entries(),
+        &wanted,
+        Mode::Cylinder,
+        SetMode::AtBoot,
+        same,
+    ) else {
+        return;
+    };
     assert!(
         compared >= 5,
         "only {compared} captures measured on both sides"
@@ -716,75 +708,26 @@ fn on_device_measurements_equal_the_hosts() {
 /// same sentence.
 #[test]
 fn road_profiles_on_the_device_equal_the_hosts() {
-    use tangent_core::instrument::{measure, InstrumentParams};
-    use tangent_core::measurement::{Measurement, Mode};
-    use tangent_core::pipeline::{OwnedBuffers, PipelineConfig};
-    use tangent_host::simulate::{corpus, simulate};
-
-    let Some(elf) = firmware_elf() else { return };
     let wanted = ["road-head-stone-mastic", "road-head-tilted-10deg"];
-    let dir = tempfile::tempdir().unwrap();
-    let (mut pairs, mut cases) = (Vec::new(), Vec::new());
-    for entry in corpus::entries()
-        .into_iter()
-        .filter(|e| wanted.contains(&e.name.as_str()))
-    {
-        let (capture, _) = simulate(&entry.spec).expect("simulate the road capture");
-        let (off_pgm, (_, on_pgm)) = (capture.off_frame(), capture.on_frames().next().unwrap());
-        let (w, h) = (off_pgm.width, off_pgm.height);
-        let (off, on) = (to_u8(off_pgm), to_u8(on_pgm));
-        let off_path = dir.path().join(format!("{}-off.pgm", entry.name));
-        let on_path = dir.path().join(format!("{}-on.pgm", entry.name));
-        write_pgm(&off_path, w, h, &off);
-        write_pgm(&on_path, w, h, &on);
-        pairs.push((off_path, on_path));
-        let off_f = tangent_core::image::Frame::new(&off, w, h, w).unwrap();
-        let on_f = tangent_core::image::Frame::new(&on, w, h, w).unwrap();
-        let mut ws = OwnedBuffers::<u8>::for_frame(w, h, 8, 1);
-        let host = measure(
-            Mode::Road,
-            &off_f,
-            &on_f,
-            &capture.calibration,
-            &PipelineConfig::default(),
-            &InstrumentParams::default(),
-            &mut ws.workspace(),
+    let same = |name: &str, h: &Measurement, d: &Measurement| {
+        let (Measurement::Road(h), Measurement::Road(d)) = (h, d) else {
+            panic!("{name}: road readings, got host {h:?}, device {d:?}")
+        };
+        eprintln!(
+            "{name}: host MPD {:.4} mm, device {:.4} mm",
+            h.mpd * 1e3,
+            d.mpd * 1e3
         );
-        cases.push((entry.name.clone(), capture.calibration.clone(), host));
-    }
-    assert_eq!(cases.len(), wanted.len(), "road corpus entries missing");
-    let mut dev = Device::boot(&elf, &pairs, None);
-    dev.request(Request::SetMode(Mode::Road), |r| {
-        assert_eq!(r, Response::Ack)
-    });
-    for (name, cal, host) in &cases {
-        dev.request(Request::WriteCalibration(WireCalibration::from(cal)), |r| {
-            assert_eq!(r, Response::Ack, "{name}")
-        });
-        dev.request(Request::Measure, |r| match (host, r) {
-            (Ok(Measurement::Road(h)), Response::Reading(reading)) => {
-                let Measurement::Road(d) = reading.measurement else {
-                    panic!("{name}: {:?}", reading.measurement)
-                };
-                eprintln!(
-                    "{name}: host MPD {:.4} mm, device {:.4} mm",
-                    h.mpd * 1e3,
-                    d.mpd * 1e3
-                );
-                assert!((d.mpd - h.mpd).abs() <= 1e-6, "{name}: {d:?} vs {h:?}");
-                assert_eq!(d.segments, h.segments, "{name}");
-            }
-            (Err(e), Response::Error(DeviceError { code, detail })) => {
-                assert_eq!(code, ErrorCode::MeasurementFailed, "{name}");
-                assert_eq!(
-                    Failure::from_detail(detail).to_string(),
-                    Failure::of(e).to_string(),
-                    "{name}"
-                );
-            }
-            (h, r) => panic!("{name}: host {h:?}, device {r:?}"),
-        });
-    }
+        assert!((d.mpd - h.mpd).abs() <= 1e-6, "{name}: {d:?} vs {h:?}");
+        assert_eq!(d.segments, h.segments, "{name}");
+    };
+    device_equals_host(
+        tangent_host::simulate::corpus::entries(),
+        &wanted,
+        Mode::Road,
+        SetMode::Yes,
+        same,
+    );
 }
 
 /// The wall instrument on the device: set to `Mode::Wall` from the host, the emulated
@@ -793,90 +736,39 @@ fn road_profiles_on_the_device_equal_the_hosts() {
 /// (`docs/building.md`).
 #[test]
 fn on_device_wall_readings_equal_the_hosts() {
-    use tangent_core::instrument::{measure_with, Wall, WallInstrumentParams};
-    use tangent_core::measurement::{Measurement, Mode};
-    use tangent_core::pipeline::{OwnedBuffers, PipelineConfig};
-    use tangent_host::simulate::{corpus, simulate};
-
-    let Some(elf) = firmware_elf() else { return };
     let wanted = [
         "wall-z150-frontal",
         "wall-corner-z200",
         "wall-corner-z150-a100-brick",
         "wall-z200-one-line",
     ];
-    let dir = tempfile::tempdir().unwrap();
-    let (mut pairs, mut cases) = (Vec::new(), Vec::new());
-    for entry in corpus::entries()
-        .into_iter()
-        .filter(|e| wanted.contains(&e.name.as_str()))
-    {
-        let (capture, _) = simulate(&entry.spec).expect("simulate the corpus capture");
-        let off_pgm = capture.off_frame();
-        let (_, on_pgm) = capture.on_frames().next().expect("an on frame");
-        let (w, h) = (off_pgm.width, off_pgm.height);
-        let (off, on) = (to_u8(off_pgm), to_u8(on_pgm));
-        let off_path = dir.path().join(format!("{}-off.pgm", entry.name));
-        let on_path = dir.path().join(format!("{}-on.pgm", entry.name));
-        write_pgm(&off_path, w, h, &off);
-        write_pgm(&on_path, w, h, &on);
-        pairs.push((off_path, on_path));
-        let off_f = tangent_core::image::Frame::new(&off, w, h, w).unwrap();
-        let on_f = tangent_core::image::Frame::new(&on, w, h, w).unwrap();
-        let mut ws = OwnedBuffers::<u8>::for_frame(w, h, 8, capture.calibration.planes.len());
-        let host = measure_with::<Wall, u8>(
-            &off_f,
-            &on_f,
-            &capture.calibration,
-            &PipelineConfig::default(),
-            &WallInstrumentParams::default(),
-            &mut ws.workspace(),
-        )
-        .map(|m| Measurement::from(&m.solution));
-        cases.push((entry.name.clone(), capture.calibration.clone(), host));
-    }
-    assert_eq!(cases.len(), wanted.len(), "corpus entries missing");
-
-    let mut dev = Device::boot(&elf, &pairs, None);
-    dev.request(Request::SetMode(Mode::Wall), |r| {
-        assert_eq!(r, Response::Ack)
-    });
-    let mut compared = 0;
-    for (name, cal, host) in &cases {
-        dev.request(Request::WriteCalibration(WireCalibration::from(cal)), |r| {
-            assert_eq!(r, Response::Ack, "{name}")
-        });
-        dev.request(Request::Measure, |r| match (host, r) {
-            (Ok(Measurement::Wall(h)), Response::Reading(reading)) => {
-                let Measurement::Wall(d) = reading.measurement else {
-                    panic!("{name}: not a wall reading: {:?}", reading.measurement)
-                };
-                eprintln!("{name}: host {h:?}\n{name}: device {d:?}");
-                assert_eq!(d.walls, h.walls, "{name}: walls");
-                assert!(
-                    (d.distance - h.distance).abs() <= 1e-4 * h.distance,
-                    "{name}"
-                );
-                let deg = 0.01f64.to_radians() as tangent_core::real::Real;
-                assert!((d.yaw.value - h.yaw.value).abs() <= deg, "{name}: yaw");
-                match (d.corner, h.corner) {
-                    (Some(a), Some(b)) => assert!((a.value - b.value).abs() <= deg, "{name}"),
-                    (None, None) => {}
-                    other => panic!("{name}: corners {other:?}"),
-                }
-                compared += 1;
-            }
-            (Err(e), Response::Error(DeviceError { code, detail })) => {
-                assert_eq!(code, ErrorCode::MeasurementFailed, "{name}");
-                assert_eq!(
-                    Failure::from_detail(detail).to_string(),
-                    Failure::of(e).to_string(),
-                    "{name}"
-                );
-            }
-            (h, r) => panic!("{name}: host {h:?}, device {r:?}"),
-        });
-    }
+    let same = |name: &str, h: &Measurement, d: &Measurement| {
+        let (Measurement::Wall(h), Measurement::Wall(d)) = (h, d) else {
+            panic!("{name}: wall readings, got host {h:?}, device {d:?}")
+        };
+        eprintln!("{name}: host {h:?}\n{name}: device {d:?}");
+        assert_eq!(d.walls, h.walls, "{name}: walls");
+        assert!(
+            (d.distance - h.distance).abs() <= 1e-4 * h.distance,
+            "{name}"
+        );
+        let deg = 0.01f64.to_radians() as tangent_core::real::Real;
+        assert!((d.yaw.value - h.yaw.value).abs() <= deg, "{name}: yaw");
+        match (d.corner, h.corner) {
+            (Some(a), Some(b)) => assert!((a.value - b.value).abs() <= deg, "{name}"),
+            (None, None) => {}
+            other => panic!("{name}: corners {other:?}"),
+        }
+    };
+    let Some(compared) = device_equals_host(
+        tangent_host::simulate::corpus::entries(),
+        &wanted,
+        Mode::Wall,
+        SetMode::Yes,
+        same,
+    ) else {
+        return;
+    };
     assert!(
         compared >= 3,
         "only {compared} wall captures measured on both sides"

@@ -299,7 +299,11 @@ fn reframe<T: serde::Serialize>(message: &T, version: u8) -> Vec<u8> {
 impl Link for PtyLink {
     async fn read(&mut self, buf: &mut [u8]) -> Result<usize, LinkError> {
         poll_fn(|_| {
-            if let Some(until) = self.control.lock().unwrap().cut_until.take() {
+            let (cut, plugged) = {
+                let mut c = self.control.lock().unwrap();
+                (c.cut_until.take(), std::mem::take(&mut c.plug))
+            };
+            if let Some(until) = cut {
                 // Cable out: the host's port hangs up and the path disappears; the firmware
                 // sees the disconnect once, then waits for the cable, measuring meanwhile.
                 self.pty = None;
@@ -310,7 +314,7 @@ impl Link for PtyLink {
                 return Poll::Ready(Err(LinkError::Disconnected));
             }
             if let Some(until) = self.down_until {
-                if Instant::now() < until {
+                if Instant::now() < until && !plugged {
                     return Poll::Pending;
                 }
                 self.down_until = None;

@@ -110,6 +110,8 @@ struct Control {
     next_press: Option<Instant>,
     faults: Faults,
     cut_until: Option<Instant>,
+    /// Ends the cut in force now ([`TestDevice::plug`]).
+    plug: bool,
     reboot: bool,
     /// Boots so far (the first one included).
     boots: u32,
@@ -185,6 +187,21 @@ impl TestDevice {
     /// Cuts the link for `d` (then it comes back behind the same path).
     pub fn cut(&self, d: Duration) {
         self.control.lock().unwrap().cut_until = Some(Instant::now() + d);
+    }
+
+    /// Pulls the cable until [`TestDevice::plug`]: what the device does meanwhile depends on
+    /// no clock.
+    pub fn unplug(&self) {
+        let mut c = self.control.lock().unwrap();
+        c.cut_until = Some(Instant::now() + Duration::from_secs(3600));
+        c.plug = false;
+    }
+
+    /// Plugs the cable back in (it comes back behind the same path).
+    pub fn plug(&self) {
+        let mut c = self.control.lock().unwrap();
+        c.cut_until = None;
+        c.plug = true;
     }
 
     /// Reboots the device and waits until it is up again (the firmware starts afresh:
