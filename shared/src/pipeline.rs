@@ -38,14 +38,16 @@ use crate::solvers::SolveError;
 pub mod buffers;
 mod planes;
 pub mod profile;
+pub mod readout_fits;
 pub mod stream;
 pub mod workspace;
 
 #[cfg(any(test, feature = "alloc"))]
 pub use buffers::OwnedBuffers;
 pub use buffers::{Buffers, Objects, RunBuffers, SmallBuffers, NO_OBJECTS};
-pub use profile::{extract_profile, extract_profile_probed, point_sigmas, Profile, Stage};
-pub use stream::{ProfileStream, BLOCK_ROWS};
+pub use profile::{point_sigmas, Profile, Stage};
+pub use readout_fits::ReadoutBuffers;
+pub use stream::{extract_profile, extract_profile_probed, ProfileStream, BLOCK_ROWS};
 pub use workspace::{Workspace, WorkspaceSizes};
 
 /// Tunable parameters of the image part of the chain. [`Default`] suits the reference hardware
