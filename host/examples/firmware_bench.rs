@@ -18,11 +18,11 @@
 
 use std::path::{Path, PathBuf};
 
+use tangent_core::pipeline::BLOCK_ROWS;
 use tangent_core::protocol::codes::Failure;
 use tangent_core::protocol::{calibration_record, WireCalibration};
 use tangent_firmware::board::h743;
 use tangent_firmware::exposure::DEFAULT_EXPOSURE_US;
-use tangent_core::pipeline::BLOCK_ROWS;
 use tangent_firmware::mt9v034::{HBLANK, VBLANK, WIDTH};
 use tangent_host::simulate::{corpus, simulate};
 

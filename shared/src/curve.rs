@@ -383,7 +383,10 @@ fn locate<P: Pixel>(
         brightest = brightest.max(v);
         *s = v as Real;
     }
-    (locate_profile(buf, x, row - lo, hw, lo, params, saturation), brightest)
+    (
+        locate_profile(buf, x, row - lo, hw, lo, params, saturation),
+        brightest,
+    )
 }
 
 /// [`locate`] on the column's profile `buf` (rows from `lo`), the seed at `buf[seed]`.

@@ -139,15 +139,16 @@ pub(super) struct ReadoutFits {
 }
 
 impl ReadoutFits {
-    /// Starts a frame `width` columns wide: clears the tracks of its columns.
+    /// Starts a frame of `width × height`: clears the tracks of its columns. Rows are kept as
+    /// `u16` with one past the last, so a frame of 65,535 rows or more is not tracked.
     pub(super) fn begin(
         columns: &mut [ColumnTrack],
         fits: &[ReadoutFit],
-        width: usize,
+        (width, height): (usize, usize),
         params: ExtractParams,
         floors: Floors,
     ) -> Self {
-        let enabled = columns.len() >= width && !fits.is_empty();
+        let enabled = columns.len() >= width && !fits.is_empty() && height < u16::MAX as usize;
         if enabled {
             columns[..width].fill(ColumnTrack::EMPTY);
         }
@@ -252,11 +253,11 @@ impl ReadoutFits {
         y: usize,
     ) {
         let seed = track.best_row as usize;
-        let complete = (seed + self.params.half_window as usize).min(diff.height() - 1) <= y;
+        let last_row = diff.height().saturating_sub(1);
+        let complete = (seed + self.params.half_window as usize).min(last_row) <= y;
         let worth = track.best_value as u32 > self.floor();
         track.end = 0;
-        if !complete || !worth || self.budget == 0 || self.used >= fits.len().min(NO_FIT as usize)
-        {
+        if !complete || !worth || self.budget == 0 || self.used >= fits.len().min(NO_FIT as usize) {
             return;
         }
         self.budget -= 1;
@@ -345,9 +346,16 @@ mod tests {
         }
         let profile = extract_profile(&off_f, &on_f, &cal, &PipelineConfig::default(), &mut ws)
             .expect("a profile");
-        let n: usize = profile.plane_points[..planes].iter().map(|(s, e)| e - s).sum();
+        let n: usize = profile.plane_points[..planes]
+            .iter()
+            .map(|(s, e)| e - s)
+            .sum();
         let located = ws.readout_fits.iter().filter(|f| f.found).count();
-        (profile, ws.curve[..n].to_vec(), if early { located } else { 0 })
+        (
+            profile,
+            ws.curve[..n].to_vec(),
+            if early { located } else { 0 },
+        )
     }
 
     /// Points located during the read-out are exactly the points located after the frame,
@@ -398,13 +406,17 @@ mod tests {
         let mut early = ReadoutFits::begin(
             &mut columns,
             &fits,
-            W,
+            (W, 480),
             ExtractParams::default(),
             Floors::default(),
         );
         // The brightest pixel so far is 200: the floor is 8 % of it = 16 > the specks' 10.
         early.brightest = 200;
-        let diff: Vec<u8> = on.iter().zip(&off).map(|(a, b)| a.saturating_sub(*b)).collect();
+        let diff: Vec<u8> = on
+            .iter()
+            .zip(&off)
+            .map(|(a, b)| a.saturating_sub(*b))
+            .collect();
         let frame = Frame::new(&diff[..], W, 480, W).unwrap();
         let specks: Vec<(usize, usize)> = (0..W).step_by(3).map(|x| (x, x + 1)).collect();
         early.row((&mut columns, &mut fits), &frame, 2, specks.iter().copied());

@@ -5,9 +5,11 @@
 //! ```text
 //! laser-off frame ──► Workspace::diff (stored whole)
 //! laser-on rows ──► push_rows: diff = max(on − off, 0) in place, histogram,
-//!                   candidate runs above the provisional threshold
+//!                   candidate runs above the provisional threshold, the curve points of
+//!                   the columns whose rows are in (`readout_fits`)
 //! last row ──► finish: threshold, runs above it (from the candidates), union–find over
-//!              runs, selection, subpixel curve, smoothing, triangulation
+//!              runs, selection, subpixel curve (the points located during the read-out
+//!              looked up, the rest located), smoothing, triangulation
 //! ```
 //!
 //! The provisional threshold is the floor every threshold the pipeline can choose is raised
@@ -113,7 +115,7 @@ impl ProfileStream {
         let readout = ReadoutFits::begin(
             ws.column_tracks,
             ws.readout_fits,
-            width,
+            (width, height),
             config.extract,
             config.floors,
         );
@@ -204,7 +206,10 @@ impl ProfileStream {
             needed: pixels,
             actual: diff.len(),
         })?;
-        Ok(Frame::new(data, self.width, self.height, self.width)?.with_bit_depth(self.bit_depth)?)
+        Ok(
+            Frame::new(data, self.width, self.height, self.width)?
+                .with_bit_depth(self.bit_depth)?,
+        )
     }
 
     /// The profile of the pair, once every row is in: [`ProfileStream::finish_probed`] without
