@@ -300,7 +300,8 @@ impl ReadoutFits {
         let mut i = columns.get(x)?.first_fit;
         while let Some(fit) = fits.get(i as usize).filter(|_| (i as usize) < self.used) {
             if fit.seed_row == row {
-                if !((fit.brightest as Real) < saturation) {
+                // A NaN level keeps nothing: only a sample surely below it is unclipped.
+                if (fit.brightest as Real) >= saturation || saturation.is_nan() {
                     return None;
                 }
                 return Some(fit.found.then_some(CurvePoint {
