@@ -592,10 +592,11 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
         // The buffers are invalid from here until both frames are in.
         self.frames = None;
         let len = g.frame_len();
+        // A board that streams the laser-on frame (the H743) has no memory for a stored pair.
         let (Some(off), Some(on)) = (self.off.get_mut(..len), self.on.get_mut(..len)) else {
             return Err(DeviceError {
                 code: ErrorCode::CameraFailure,
-                detail: CameraError::BufferSize.code(),
+                detail: CameraError::NoFrameStore.code(),
             });
         };
         let d = &mut self.dev;

@@ -1,6 +1,6 @@
 //! The firmware's static buffers: stored frames, the protocol's receive buffer and the
 //! pipeline's working memory (the laser-off frame that becomes the difference frame, the run
-//! tables, the per-point buffers, the object features), declared for every board by one
+//! tables, the per-point buffers, the object features, the read-out extraction's tables), declared for every board by one
 //! macro, [`board_buffers!`], in the RAM regions the board chooses.
 
 /// A frame buffer, aligned for DMA (32 bytes: a word for the DCMI's word transfers, a cache
@@ -27,6 +27,7 @@ pub struct FrameBuffer<const N: usize>(pub [u8; N]);
 ///     #[link_section = ".sram123"] runs;
 ///     #[link_section = ".sram123"] small;
 ///     objects;
+///     #[link_section = ".sram4"] readout;
 /// }
 /// ```
 #[cfg_attr(
@@ -43,6 +44,7 @@ macro_rules! board_buffers {
         $(#[$runs:meta])* runs;
         $(#[$small:meta])* small;
         $(#[$objects:meta])* objects;
+        $(#[$readout:meta])* readout;
     ) => {
         /// The board's buffers, once: the application's frames and receive buffer, and the
         /// pipeline's workspace for frames of `pixels` pixels (at most the board's frame).
@@ -57,7 +59,7 @@ macro_rules! board_buffers {
             use tangent_core::protocol::MAX_FRAME_LEN;
             use $crate::buffers::FrameBuffer;
             use tangent_core::pipeline::{
-                Objects, RunBuffers, SmallBuffers, Workspace, NO_OBJECTS,
+                Objects, ReadoutBuffers, RunBuffers, SmallBuffers, Workspace, NO_OBJECTS,
             };
 
             const OFF_BYTES: usize = $off_bytes;
@@ -76,6 +78,8 @@ macro_rules! board_buffers {
             static mut SMALL: SmallBuffers<{ $points }> = SmallBuffers::new();
             $(#[$objects])*
             static mut OBJECTS: Objects = NO_OBJECTS;
+            $(#[$readout])*
+            static mut READOUT: ReadoutBuffers = ReadoutBuffers::new();
             static mut RX: [u8; MAX_FRAME_LEN] = [0; MAX_FRAME_LEN];
 
             if TAKEN.swap(true, Ordering::AcqRel) {
@@ -93,6 +97,7 @@ macro_rules! board_buffers {
                 write_bytes(addr_of_mut!(RUNS), 0, 1);
                 write_bytes(addr_of_mut!(SMALL), 0, 1);
                 write_bytes(addr_of_mut!(OBJECTS), 0, 1);
+                write_bytes(addr_of_mut!(READOUT), 0, 1);
                 let buffers = $crate::app::Buffers {
                     off: &mut (*addr_of_mut!(OFF)).0,
                     on: &mut (*addr_of_mut!(ON)).0,
@@ -104,6 +109,7 @@ macro_rules! board_buffers {
                     &mut *addr_of_mut!(OBJECTS),
                     &mut *addr_of_mut!(RUNS),
                     &mut *addr_of_mut!(SMALL),
+                    &mut *addr_of_mut!(READOUT),
                 );
                 Some((buffers, workspace))
             }
@@ -127,6 +133,7 @@ mod tests {
             runs;
             small;
             objects;
+            readout;
         }
     }
 

@@ -99,6 +99,8 @@ pub struct StageTimes {
     /// Work on the laser-on rows as they arrive (subtraction, histogram, candidate runs):
     /// the sum over the row blocks, 0 for a stored pair.
     pub readout_us: u64,
+    /// The longest of those blocks (µs): the read-out's worst case against the pixel clock.
+    pub readout_block_max_us: u64,
     /// After the last pixel: statistics and darkness tests, threshold, segmentation,
     /// selection, curve extraction, triangulation (for a stored pair the first includes the
     /// whole subtraction).
@@ -213,7 +215,9 @@ impl RowSink for PipelineMeasurer<'_> {
                 *error = Some(e);
             }
         }
-        self.last_stages.readout_us += self.now().saturating_sub(t);
+        let spent = self.now().saturating_sub(t);
+        self.last_stages.readout_us += spent;
+        self.last_stages.readout_block_max_us = self.last_stages.readout_block_max_us.max(spent);
     }
 }
 

@@ -87,6 +87,9 @@ pub enum CameraError {
     Source,
     /// The buffer does not match the frame size.
     BufferSize,
+    /// The board has no memory for a stored frame pair (it streams the laser-on frame through
+    /// the measurement): raw captures cannot be served.
+    NoFrameStore,
 }
 
 impl CameraError {
@@ -98,6 +101,7 @@ impl CameraError {
             CameraError::Bus => 3,
             CameraError::Source => 4,
             CameraError::BufferSize => 5,
+            CameraError::NoFrameStore => tangent_core::protocol::codes::CAMERA_NO_FRAME_STORE,
         }
     }
 }

@@ -18,6 +18,7 @@
 
 use std::path::{Path, PathBuf};
 
+use tangent_core::pipeline::BLOCK_ROWS;
 use tangent_core::protocol::codes::Failure;
 use tangent_core::protocol::{calibration_record, WireCalibration};
 use tangent_firmware::board::h743;
@@ -56,11 +57,16 @@ fn main() {
         eprintln!("{} missing: run `cargo firmware-qemu` first", elf.display());
         std::process::exit(2);
     }
+    // Stems up to 1 m across over the working range (the stripe high and low in the frame,
+    // short and 559 columns long), and a refusal.
     let names = [
         "cyl-d300-z150-shade",
         "cyl-d050-z050-shade",
         "cyl-d1000-z100-shade",
         "cyl-d300-z150-sun",
+        "cyl-d300-z050-shade",
+        "cyl-d600-z150-shade",
+        "cyl-d1000-z300-shade",
     ];
     let temp = tempfile::tempdir().expect("temp dir");
     let kept = std::env::var_os("FIRMWARE_BENCH_DIR").map(PathBuf::from);
@@ -132,9 +138,9 @@ fn main() {
         let text = String::from_utf8_lossy(&out.stderr).into_owned();
         println!("## {label}\n\n{text}");
         println!(
-            "| capture | pixels | during read-out | per pixel | after the last pixel | at 480 MHz, 1 IPC | trigger → reading | result |"
+            "| capture | pixels | during read-out | per pixel | worst block, per pixel | after the last pixel | at 480 MHz, 1 IPC | trigger → reading | result |"
         );
-        println!("|---|---|---|---|---|---|---|---|");
+        println!("|---|---|---|---|---|---|---|---|---|");
         let mut stage_rows = Vec::new();
         for line in text.lines().filter(|l| l.starts_with("bench scene=")) {
             let field = |k: &str| {
@@ -145,6 +151,8 @@ fn main() {
             let i: usize = field("scene=").parse().unwrap_or(0);
             let us: f64 = field("pipeline_us=").parse().unwrap_or(0.0);
             let readout: f64 = field("readout_us=").parse::<f64>().unwrap_or(0.0) * 1000.0;
+            let worst_block: f64 =
+                field("readout_block_max_us=").parse::<f64>().unwrap_or(0.0) * 1000.0;
             let (name, pixels) = &sizes[i.min(sizes.len() - 1)];
             let instr = us * 1000.0;
             // Snapshot mode: exposure, read-out, exposure, read-out, then the work after the
@@ -161,10 +169,11 @@ fn main() {
                 },
             };
             println!(
-                "| {name} | {pixels} | {:.2} M | {:.2} (budget {:.1}) | {:.2} M | {:.2} ms | {latency_ms:.1} ms | {result} |",
+                "| {name} | {pixels} | {:.2} M | {:.2} (budget {:.1}) | {:.1} | {:.2} M | {:.2} ms | {latency_ms:.1} ms | {result} |",
                 readout / 1e6,
                 readout / *pixels as f64,
                 CORE_HZ / PIXCLK_HZ,
+                worst_block / (BLOCK_ROWS * WIDTH as usize) as f64,
                 instr / 1e6,
                 instr / CORE_HZ * 1e3
             );

@@ -241,9 +241,10 @@ pub fn extract_window<P: Pixel>(
         }
         for (k, slot) in best.iter().enumerate().take(selected.len()) {
             let Some((row, _)) = *slot else { continue };
-            let Some(point) = locate(diff, x, row, k, hw, params, saturation) else {
+            let (Some(mut point), _) = locate(diff, x, row, hw, params, saturation) else {
                 continue;
             };
+            point.curve = k as u8;
             let Some(slot) = out.get_mut(n) else {
                 return Err(CurveError::OutputFull {
                     capacity: out.len(),
@@ -276,6 +277,23 @@ pub fn extract_seeded<P: Pixel>(
     params: &ExtractParams,
     out: &mut [CurvePoint],
 ) -> Result<usize, CurveError> {
+    extract_seeded_with(diff, seeds, curves, columns, params, out, |_, _, _| None)
+}
+
+/// [`extract_seeded`] with points located earlier: `known(x, row, saturation)` returns the
+/// outcome of [`locate_seeded`] at column `x` and seed `row` when the caller has it for this
+/// saturation level (`Some(None)`: the estimator failed there), or `None` to have it located
+/// now. The pipeline locates most points during the read-out (`pipeline::readout_fits`);
+/// with correct earlier outcomes the points are exactly [`extract_seeded`]'s.
+pub fn extract_seeded_with<P: Pixel>(
+    diff: &Frame<P, impl AsRef<[P]>>,
+    seeds: &[u16],
+    curves: usize,
+    columns: core::ops::Range<usize>,
+    params: &ExtractParams,
+    out: &mut [CurvePoint],
+    mut known: impl FnMut(usize, u16, Real) -> Option<Option<CurvePoint>>,
+) -> Result<usize, CurveError> {
     if curves > MAX_CURVES {
         return Err(CurveError::TooManyCurves { selected: curves });
     }
@@ -292,10 +310,14 @@ pub fn extract_seeded<P: Pixel>(
                 if row == NO_SEED || row as usize >= diff.height() {
                     continue;
                 }
-                let Some(point) = locate(diff, x, row as usize, k, hw as usize, params, saturation)
-                else {
+                let located = match known(x, row, saturation) {
+                    Some(point) => point,
+                    None => locate(diff, x, row as usize, hw as usize, params, saturation).0,
+                };
+                let Some(mut point) = located else {
                     continue;
                 };
+                point.curve = k as u8;
                 let Some(slot) = out.get_mut(n) else {
                     return Err(CurveError::OutputFull {
                         capacity: out.len(),
@@ -313,32 +335,74 @@ pub fn extract_seeded<P: Pixel>(
     }
 }
 
+/// The point [`extract_seeded`] locates in column `x` from the seed `row` (its `curve` set to
+/// 0) with the samples at or above `saturation` treated as clipped, or `None` where the
+/// estimator fails; and the brightest difference-frame sample it read. The outcome is the
+/// same for every saturation level above that sample, so a caller that does not know the
+/// level yet locates with [`Real::INFINITY`] and keeps the outcome while the sample stays
+/// below the level (`docs/pipeline.md`, "Streaming"). The rows `row ± half_window` (clamped
+/// to the frame) are the only ones read.
+pub fn locate_seeded<P: Pixel>(
+    diff: &Frame<P, impl AsRef<[P]>>,
+    x: usize,
+    row: usize,
+    params: &ExtractParams,
+    saturation: Real,
+) -> (Option<CurvePoint>, u32) {
+    let hw = params.half_window.clamp(1, MAX_HALF_WINDOW);
+    locate(diff, x, row, hw as usize, params, saturation)
+}
+
 /// The point of curve `k` in column `x` whose brightest labelled pixel is at `row`: the
 /// difference profile of `±hw` rows around it (clamped to the frame), climbed to its local
-/// maximum and located by the estimator; `None` where the estimator fails.
+/// maximum and located by the estimator (`curve` 0); `None` where the estimator fails. Also
+/// returns the brightest sample read.
 fn locate<P: Pixel>(
     diff: &Frame<P, impl AsRef<[P]>>,
     x: usize,
     row: usize,
-    k: usize,
     hw: usize,
     params: &ExtractParams,
     saturation: Real,
-) -> Option<CurvePoint> {
+) -> (Option<CurvePoint>, u32) {
     let mut profile = [0.0 as Real; PROFILE_CAP];
     let lo = row.saturating_sub(hw);
-    let hi = (row + hw).min(diff.height().checked_sub(1)?);
-    let len = (hi + 1).checked_sub(lo)?;
-    let buf = profile.get_mut(..len)?;
+    let Some(last) = diff.height().checked_sub(1) else {
+        return (None, 0);
+    };
+    let hi = (row + hw).min(last);
+    let Some(buf) = (hi + 1)
+        .checked_sub(lo)
+        .and_then(|len| profile.get_mut(..len))
+    else {
+        return (None, 0);
+    };
+    let mut brightest = 0u32;
     for (j, s) in buf.iter_mut().enumerate() {
-        *s = diff
-            .get(x, lo + j)
-            .map_or(0.0, |p| Into::<u32>::into(p) as Real);
+        let v: u32 = diff.get(x, lo + j).map_or(0, Into::into);
+        brightest = brightest.max(v);
+        *s = v as Real;
     }
+    (
+        locate_profile(buf, x, row - lo, hw, lo, params, saturation),
+        brightest,
+    )
+}
+
+/// [`locate`] on the column's profile `buf` (rows from `lo`), the seed at `buf[seed]`.
+fn locate_profile(
+    buf: &[Real],
+    x: usize,
+    seed: usize,
+    hw: usize,
+    lo: usize,
+    params: &ExtractParams,
+    saturation: Real,
+) -> Option<CurvePoint> {
     // The labelled maximum may sit on a shoulder of a brighter unlabelled neighbour
     // (a speckle filter or a multi-level threshold can leave that); climb to the
     // local maximum of the profile, at most `hw` steps.
-    let mut peak = row - lo;
+    let mut peak = seed;
     for _ in 0..hw {
         let here = buf.get(peak).copied().unwrap_or(0.0);
         let up = buf.get(peak + 1).copied().unwrap_or(Real::NEG_INFINITY);
@@ -362,7 +426,7 @@ fn locate<P: Pixel>(
         column: x.min(u16::MAX as usize) as u16,
         row: lo as Real + p.position,
         amplitude: p.amplitude,
-        curve: k as u8,
+        curve: 0,
         saturated: p.saturated,
         width: p.sigma.unwrap_or(0.0),
     })

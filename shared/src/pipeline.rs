@@ -4,15 +4,17 @@
 //!
 //! ```text
 //! off (stored), on (rows as they arrive) ─► subtract in place + histogram + candidate runs
+//!   + curve points of the columns whose rows are in
 //!   ─► threshold ─► runs ─► label (union–find over runs) ─► select ─► assign to planes
 //!   ─► subpixel curve per column ─► smooth ─► undistort + triangulate ─► 3-D points
 //! ```
 //!
 //! * [`stream`]: the streaming front end, [`ProfileStream`] (`push_rows` as the camera
-//!   delivers the laser-on frame, `finish` after its last row);
-//! * [`profile`]: the stages after the segmentation, the orchestrator of a stored pair,
-//!   [`extract_profile`] (which feeds it through the stream), and the image summary
-//!   [`Profile`] with its quality flags;
+//!   delivers the laser-on frame, `finish` after its last row), and the front end of a stored
+//!   pair, [`extract_profile`] (which feeds it through the stream);
+//! * [`readout_fits`]: the curve points located during the read-out, as their rows arrive;
+//! * [`profile`]: the stages after the segmentation and the image summary [`Profile`] with its
+//!   quality flags;
 //! * `planes`: which object is which plane's curve;
 //! * [`workspace`] and [`buffers`]: the caller-owned working memory.
 //!
@@ -38,14 +40,16 @@ use crate::solvers::SolveError;
 pub mod buffers;
 mod planes;
 pub mod profile;
+pub mod readout_fits;
 pub mod stream;
 pub mod workspace;
 
 #[cfg(any(test, feature = "alloc"))]
 pub use buffers::OwnedBuffers;
 pub use buffers::{Buffers, Objects, RunBuffers, SmallBuffers, NO_OBJECTS};
-pub use profile::{extract_profile, extract_profile_probed, point_sigmas, Profile, Stage};
-pub use stream::{ProfileStream, BLOCK_ROWS};
+pub use profile::{point_sigmas, Profile, Stage};
+pub use readout_fits::ReadoutBuffers;
+pub use stream::{extract_profile, extract_profile_probed, ProfileStream, BLOCK_ROWS};
 pub use workspace::{Workspace, WorkspaceSizes};
 
 /// Tunable parameters of the image part of the chain. [`Default`] suits the reference hardware

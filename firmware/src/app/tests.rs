@@ -147,6 +147,30 @@ fn a_camera_that_fails_mid_exposure_leaves_the_lasers_off() {
     assert_eq!(last, 0, "a laser is still on");
 }
 
+/// A board without frame buffers (the H743 streams the laser-on frame) answers a raw capture
+/// with the specific "no frame store" failure, without lighting a laser, and the host's
+/// sentence says why.
+#[test]
+fn a_board_without_frame_buffers_refuses_raw_captures_clearly() {
+    let mut rig = Rig::new();
+    rig.off.clear();
+    rig.on.clear();
+    let switches = rig.switches.clone();
+    let result = {
+        let mut app = rig.app(CameraBehaviour::Works, false);
+        poll_bounded(app.capture_pair(), POLLS).expect("bounded")
+    };
+    let error = result.expect_err("no memory for a pair");
+    assert_eq!(error.code, ErrorCode::CameraFailure);
+    assert_eq!(error.detail, CameraError::NoFrameStore.code());
+    let sentence = std::format!("{error}");
+    assert!(
+        sentence.contains("cannot store a raw frame pair"),
+        "{sentence}"
+    );
+    assert!(switches.borrow().iter().all(|&(_, m)| m == 0));
+}
+
 #[test]
 fn a_dead_camera_times_out_without_lighting_and_without_feeding_the_watchdog() {
     let mut rig = Rig::new();

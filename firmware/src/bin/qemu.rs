@@ -63,9 +63,10 @@ fn bench(app: &mut App<'_, Qemu<'static>, PipelineMeasurer<'_>>, scenes: usize) 
                 Ok(r) => {
                     let m = r.measurement;
                     qemu::log(format_args!(
-                        "bench scene={} readout_us={} pipeline_us={} stages_us={:?} solver_us={} diameter_m={} uncertainty_m={} method={:?} flags={:#x}",
+                        "bench scene={} readout_us={} readout_block_max_us={} pipeline_us={} stages_us={:?} solver_us={} diameter_m={} uncertainty_m={} method={:?} flags={:#x}",
                         i,
                         app.measurer().last_stages.readout_us,
+                        app.measurer().last_stages.readout_block_max_us,
                         app.last_pipeline_us,
                         app.measurer().last_stages.image_us,
                         app.measurer().last_stages.solver_us,
@@ -78,9 +79,10 @@ fn bench(app: &mut App<'_, Qemu<'static>, PipelineMeasurer<'_>>, scenes: usize) 
                 Err(e) => {
                     ok = false;
                     qemu::log(format_args!(
-                        "bench scene={} readout_us={} pipeline_us={} error={:?} detail={}",
+                        "bench scene={} readout_us={} readout_block_max_us={} pipeline_us={} error={:?} detail={}",
                         i,
                         app.measurer().last_stages.readout_us,
+                        app.measurer().last_stages.readout_block_max_us,
                         app.last_pipeline_us,
                         e.code,
                         e.detail

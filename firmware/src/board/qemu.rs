@@ -53,6 +53,7 @@ crate::buffers::board_buffers! {
     runs;
     small;
     objects;
+    readout;
 }
 
 /// Bytes of the block the emulated camera hands over at a time ([`ports::BLOCK_ROWS`] rows

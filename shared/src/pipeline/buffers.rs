@@ -11,6 +11,7 @@ use crate::image::segment::{ObjectFeatures, Run};
 use crate::image::Pixel;
 use crate::real::{Real, Vec2, Vec3};
 
+use super::readout_fits::ReadoutBuffers;
 use super::Workspace;
 
 /// Entries of each run table ([`super::WorkspaceSizes::new`]): 64 KB each. A laser image has
@@ -95,12 +96,20 @@ impl<const POINTS: usize, const BINS: usize> Default for SmallBuffers<POINTS, BI
 
 impl<'a, P: Pixel> Workspace<'a, P> {
     /// A workspace over buffers placed apart: the laser-off / difference frame
-    /// (`width × height`), the object features, the [`RunBuffers`] and the [`SmallBuffers`].
-    pub fn from_parts<const POINTS: usize, const BINS: usize, const SEEDS: usize>(
+    /// (`width × height`), the object features, the [`RunBuffers`], the [`SmallBuffers`] and
+    /// the [`ReadoutBuffers`].
+    pub fn from_parts<
+        const POINTS: usize,
+        const BINS: usize,
+        const SEEDS: usize,
+        const COLUMNS: usize,
+        const FITS: usize,
+    >(
         diff: &'a mut [P],
         objects: &'a mut [ObjectFeatures],
         runs: &'a mut RunBuffers<SEEDS>,
         small: &'a mut SmallBuffers<POINTS, BINS>,
+        readout: &'a mut ReadoutBuffers<COLUMNS, FITS>,
     ) -> Self {
         Workspace {
             diff,
@@ -109,6 +118,8 @@ impl<'a, P: Pixel> Workspace<'a, P> {
             runs: &mut runs.runs,
             seeds: &mut runs.seeds,
             objects,
+            column_tracks: &mut readout.columns,
+            readout_fits: &mut readout.fits,
             curve: &mut small.curve,
             points: &mut small.points,
             sigmas: &mut small.sigmas,
@@ -145,6 +156,7 @@ pub struct Buffers<
     objects: Objects,
     runs: RunBuffers<SEEDS>,
     small: SmallBuffers<POINTS, BINS>,
+    readout: ReadoutBuffers,
 }
 
 impl<P: Pixel, const PIXELS: usize, const POINTS: usize, const BINS: usize, const SEEDS: usize>
@@ -157,6 +169,7 @@ impl<P: Pixel, const PIXELS: usize, const POINTS: usize, const BINS: usize, cons
             objects: NO_OBJECTS,
             runs: RunBuffers::new(),
             small: SmallBuffers::new(),
+            readout: ReadoutBuffers::new(),
         }
     }
 
@@ -167,6 +180,7 @@ impl<P: Pixel, const PIXELS: usize, const POINTS: usize, const BINS: usize, cons
             &mut self.objects,
             &mut self.runs,
             &mut self.small,
+            &mut self.readout,
         )
     }
 }
@@ -188,6 +202,7 @@ mod owned {
     use alloc::vec;
     use alloc::vec::Vec;
 
+    use super::super::readout_fits::{ColumnTrack, ReadoutFit};
     use super::super::{Workspace, WorkspaceSizes};
     use crate::curve::CurvePoint;
     use crate::image::segment::{ObjectFeatures, Run};
@@ -211,6 +226,8 @@ mod owned {
         runs: Vec<Run>,
         seeds: Vec<u16>,
         objects: Vec<ObjectFeatures>,
+        column_tracks: Vec<ColumnTrack>,
+        readout_fits: Vec<ReadoutFit>,
         curve: Vec<CurvePoint>,
         points: Vec<Vec3>,
         sigmas: Vec<Real>,
@@ -228,6 +245,8 @@ mod owned {
                 runs: vec![Run::ZERO; sizes.runs],
                 seeds: vec![0; sizes.seeds],
                 objects: vec![ObjectFeatures::ZERO; sizes.objects],
+                column_tracks: vec![ColumnTrack::EMPTY; sizes.columns],
+                readout_fits: vec![ReadoutFit::ZERO; sizes.readout_fits],
                 curve: vec![CurvePoint::ZERO; sizes.points],
                 points: vec![Vec3::zeros(); sizes.points],
                 sigmas: vec![0.0; sizes.points],
@@ -250,6 +269,8 @@ mod owned {
                 runs: &mut self.runs,
                 seeds: &mut self.seeds,
                 objects: &mut self.objects,
+                column_tracks: &mut self.column_tracks,
+                readout_fits: &mut self.readout_fits,
                 curve: &mut self.curve,
                 points: &mut self.points,
                 sigmas: &mut self.sigmas,

@@ -12,7 +12,7 @@ use crate::real::{Real, Vec2, Vec3};
 use crate::solvers::result::Flags;
 
 use super::planes::{self, UsedCurves};
-use super::stream::{ProfileStream, BLOCK_ROWS};
+use super::readout_fits::ReadoutFits;
 use super::workspace::need;
 use super::{PipelineConfig, PipelineError, Workspace};
 
@@ -141,76 +141,6 @@ pub enum Stage {
     Triangulated,
 }
 
-/// Runs the image part of the chain and triangulates the curves: `off` and `on` are the
-/// laser-off and laser-on frames (all of the calibration's planes lit in `on`).
-///
-/// On success the workspace holds the difference frame, the labels, the curve points and the
-/// 3-D points; the returned [`Profile`] says where each plane's points are.
-pub fn extract_profile<P: Pixel>(
-    off: &Frame<P, impl AsRef<[P]>>,
-    on: &Frame<P, impl AsRef<[P]>>,
-    calibration: &Calibration,
-    config: &PipelineConfig,
-    ws: &mut Workspace<'_, P>,
-) -> Result<Profile, PipelineError> {
-    extract_profile_probed(off, on, calibration, config, ws, |_| {})
-}
-
-/// [`extract_profile`] that calls `probe` as each [`Stage`] completes (the firmware's
-/// instruction-count benchmark time-stamps them; `docs/performance.md`). With an empty
-/// closure it compiles to [`extract_profile`].
-///
-/// The pair goes through the device's streaming front end ([`ProfileStream`]): `off` is
-/// copied into the workspace (where the device's DMA puts it) and `on` is fed in blocks of
-/// [`BLOCK_ROWS`] rows, as the camera delivers it.
-pub fn extract_profile_probed<P: Pixel>(
-    off: &Frame<P, impl AsRef<[P]>>,
-    on: &Frame<P, impl AsRef<[P]>>,
-    calibration: &Calibration,
-    config: &PipelineConfig,
-    ws: &mut Workspace<'_, P>,
-    probe: impl FnMut(Stage),
-) -> Result<Profile, PipelineError> {
-    let (width, height) = check_inputs(off, on, calibration, ws)?;
-    for (y, stored) in ws.diff[..width * height]
-        .chunks_exact_mut(width)
-        .enumerate()
-    {
-        stored.copy_from_slice(off.row(y));
-    }
-    let mut stream = ProfileStream::begin(ws, calibration, config, on.bit_depth())?;
-    for block in (0..height).step_by(BLOCK_ROWS) {
-        for y in block..(block + BLOCK_ROWS).min(height) {
-            stream.push_rows(ws, on.row(y))?;
-        }
-    }
-    stream.finish_probed(ws, calibration, config, probe)
-}
-
-/// A valid calibration whose camera has the frames' size, and room for them in the
-/// workspace. Returns `(width, height)`.
-fn check_inputs<P: Pixel>(
-    off: &Frame<P, impl AsRef<[P]>>,
-    on: &Frame<P, impl AsRef<[P]>>,
-    calibration: &Calibration,
-    ws: &Workspace<'_, P>,
-) -> Result<(usize, usize), PipelineError> {
-    calibration
-        .validate()
-        .map_err(|_| PipelineError::Calibration)?;
-    let cam = &calibration.camera;
-    let (width, height) = (on.width(), on.height());
-    if (cam.width as usize, cam.height as usize) != (width, height) {
-        return Err(PipelineError::FrameSizeMismatch {
-            calibrated: (cam.width, cam.height),
-            actual: (width, height),
-        });
-    }
-    on.check_same_size(off)?;
-    need("diff", width * height, ws.diff.len())?;
-    Ok((width, height))
-}
-
 /// What the streamed front end hands the rest of the chain ([`after_segmentation`]): the
 /// difference frame's layout (in `Workspace::diff`), the subtraction's statistics, the
 /// threshold, and the objects and labelled runs of the segmentation (in `Workspace::objects`
@@ -226,6 +156,8 @@ pub(super) struct Segmented {
     pub(super) noise: Real,
     pub(super) objects: usize,
     pub(super) runs: usize,
+    /// The points located during the read-out (in `Workspace::readout_fits`).
+    pub(super) readout: ReadoutFits,
 }
 
 /// The chain after the segmentation: selection and plane assignment, subpixel curve,
@@ -256,6 +188,15 @@ pub(super) fn after_segmentation<P: Pixel>(
         config,
         ws.seeds,
         ws.curve,
+        |params, x, row, saturation| {
+            seg.readout.lookup(
+                (&*ws.column_tracks, &*ws.readout_fits),
+                params,
+                x,
+                row,
+                saturation,
+            )
+        },
     )?;
     need("points", n, ws.points.len())?;
     probe(Stage::Extracted);
@@ -295,7 +236,8 @@ pub(super) fn after_segmentation<P: Pixel>(
 /// Each column's brightest pixel of each used object (the seed the estimator starts from) is
 /// found from the objects' runs, in raster order so that the first of equally bright pixels
 /// from the top wins, over the union of the used objects' column ranges only
-/// (`docs/pipeline.md`, "Streaming").
+/// (`docs/pipeline.md`, "Streaming"). The points located during the read-out are taken from
+/// `known(params, x, row, saturation)` ([`curve::extract_seeded_with`]).
 #[allow(clippy::too_many_arguments)]
 fn extract_curves<P: Pixel>(
     diff: &Frame<P, &[P]>,
@@ -306,6 +248,7 @@ fn extract_curves<P: Pixel>(
     config: &PipelineConfig,
     seeds: &mut [u16],
     out: &mut [CurvePoint],
+    known: impl Fn(&curve::ExtractParams, usize, u16, Real) -> Option<Option<CurvePoint>>,
 ) -> Result<usize, PipelineError> {
     let mut params = config.extract;
     if params.saturation.is_none() {
@@ -356,13 +299,14 @@ fn extract_curves<P: Pixel>(
             }
         }
     }
-    Ok(curve::extract_seeded(
+    Ok(curve::extract_seeded_with(
         diff,
         seeds,
         curves,
         x0..x1,
         &params,
         out,
+        |x, row, saturation| known(&params, x, row, saturation),
     )?)
 }
 

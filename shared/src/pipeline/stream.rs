@@ -5,9 +5,11 @@
 //! ```text
 //! laser-off frame ──► Workspace::diff (stored whole)
 //! laser-on rows ──► push_rows: diff = max(on − off, 0) in place, histogram,
-//!                   candidate runs above the provisional threshold
+//!                   candidate runs above the provisional threshold, the curve points of
+//!                   the columns whose rows are in (`readout_fits`)
 //! last row ──► finish: threshold, runs above it (from the candidates), union–find over
-//!              runs, selection, subpixel curve, smoothing, triangulation
+//!              runs, selection, subpixel curve (the points located during the read-out
+//!              looked up, the rest located), smoothing, triangulation
 //! ```
 //!
 //! The provisional threshold is the floor every threshold the pipeline can choose is raised
@@ -28,6 +30,7 @@ use crate::image::{Frame, FrameError, Pixel};
 use crate::real::Real;
 
 use super::profile::{self, Profile, Stage};
+use super::readout_fits::ReadoutFits;
 use super::workspace::need;
 use super::{PipelineConfig, PipelineError, Workspace};
 
@@ -68,6 +71,8 @@ pub struct ProfileStream {
     candidates: usize,
     /// The candidate table filled up: `finish` rescans the difference frame.
     overflow: bool,
+    /// The curve points located as their rows arrive (`pipeline::readout_fits`).
+    readout: ReadoutFits,
 }
 
 impl ProfileStream {
@@ -107,6 +112,13 @@ impl ProfileStream {
                 ThresholdError::Frame(e) => PipelineError::Frame(e),
                 e => PipelineError::Threshold(e),
             })?;
+        let readout = ReadoutFits::begin(
+            ws.column_tracks,
+            ws.readout_fits,
+            (width, height),
+            config.extract,
+            config.floors,
+        );
         Ok(ProfileStream {
             width,
             height,
@@ -116,6 +128,7 @@ impl ProfileStream {
             provisional: config.floors.min_threshold,
             candidates: 0,
             overflow: false,
+            readout,
         })
     }
 
@@ -151,6 +164,7 @@ impl ProfileStream {
             };
             self.difference.row(on, off_diff, ws.histogram);
             if !self.overflow {
+                let first = self.candidates;
                 let found = segment::row_runs(
                     off_diff,
                     y as u16,
@@ -159,12 +173,43 @@ impl ProfileStream {
                     ws.candidate_runs,
                     &mut self.candidates,
                 );
-                // A full table leaves this row's runs incomplete: `finish` rescans.
+                // A full table leaves this row's runs incomplete: `finish` rescans (and the
+                // read-out extraction stops: the points are then located after the frame).
                 self.overflow = found.is_err();
+                if !self.overflow {
+                    let diff = self.diff_frame(ws.diff)?;
+                    let runs = ws.candidate_runs.get(first..self.candidates).unwrap_or(&[]);
+                    self.readout.row(
+                        (ws.column_tracks, ws.readout_fits),
+                        &diff,
+                        y,
+                        runs.iter().map(|r| (r.start as usize, r.end as usize)),
+                    );
+                }
             }
             self.next_row += 1;
+            if self.next_row.is_multiple_of(BLOCK_ROWS) && self.next_row < self.height {
+                let diff = self.diff_frame(ws.diff)?;
+                self.readout
+                    .block_done((ws.column_tracks, ws.readout_fits), &diff, y);
+            }
         }
         Ok(())
+    }
+
+    /// The difference frame as far as it is: rows `..next_row` subtracted, the rest still the
+    /// laser-off frame.
+    fn diff_frame<'d, P: Pixel>(&self, diff: &'d [P]) -> Result<Frame<P, &'d [P]>, PipelineError> {
+        let pixels = self.width * self.height;
+        let data = diff.get(..pixels).ok_or(PipelineError::WorkspaceTooSmall {
+            buffer: "diff",
+            needed: pixels,
+            actual: diff.len(),
+        })?;
+        Ok(
+            Frame::new(data, self.width, self.height, self.width)?
+                .with_bit_depth(self.bit_depth)?,
+        )
     }
 
     /// The profile of the pair, once every row is in: [`ProfileStream::finish_probed`] without
@@ -198,6 +243,7 @@ impl ProfileStream {
             provisional,
             candidates,
             overflow,
+            readout,
         } = self;
         let cam = &calibration.camera;
         if (cam.width as usize, cam.height as usize) != (width, height) {
@@ -263,12 +309,83 @@ impl ProfileStream {
                 noise,
                 objects: segmentation.objects,
                 runs: n,
+                readout,
             },
             calibration,
             config,
             probe,
         )
     }
+}
+
+/// Runs the image part of the chain and triangulates the curves: `off` and `on` are the
+/// laser-off and laser-on frames (all of the calibration's planes lit in `on`).
+///
+/// On success the workspace holds the difference frame, the labels, the curve points and the
+/// 3-D points; the returned [`Profile`] says where each plane's points are.
+pub fn extract_profile<P: Pixel>(
+    off: &Frame<P, impl AsRef<[P]>>,
+    on: &Frame<P, impl AsRef<[P]>>,
+    calibration: &Calibration,
+    config: &PipelineConfig,
+    ws: &mut Workspace<'_, P>,
+) -> Result<Profile, PipelineError> {
+    extract_profile_probed(off, on, calibration, config, ws, |_| {})
+}
+
+/// [`extract_profile`] that calls `probe` as each [`Stage`] completes (the firmware's
+/// instruction-count benchmark time-stamps them; `docs/performance.md`). With an empty
+/// closure it compiles to [`extract_profile`].
+///
+/// The pair goes through the device's streaming front end ([`ProfileStream`]): `off` is
+/// copied into the workspace (where the device's DMA puts it) and `on` is fed in blocks of
+/// [`BLOCK_ROWS`] rows, as the camera delivers it.
+pub fn extract_profile_probed<P: Pixel>(
+    off: &Frame<P, impl AsRef<[P]>>,
+    on: &Frame<P, impl AsRef<[P]>>,
+    calibration: &Calibration,
+    config: &PipelineConfig,
+    ws: &mut Workspace<'_, P>,
+    probe: impl FnMut(Stage),
+) -> Result<Profile, PipelineError> {
+    let (width, height) = check_inputs(off, on, calibration, ws)?;
+    for (y, stored) in ws.diff[..width * height]
+        .chunks_exact_mut(width)
+        .enumerate()
+    {
+        stored.copy_from_slice(off.row(y));
+    }
+    let mut stream = ProfileStream::begin(ws, calibration, config, on.bit_depth())?;
+    for block in (0..height).step_by(BLOCK_ROWS) {
+        for y in block..(block + BLOCK_ROWS).min(height) {
+            stream.push_rows(ws, on.row(y))?;
+        }
+    }
+    stream.finish_probed(ws, calibration, config, probe)
+}
+
+/// A valid calibration whose camera has the frames' size, and room for them in the
+/// workspace. Returns `(width, height)`.
+fn check_inputs<P: Pixel>(
+    off: &Frame<P, impl AsRef<[P]>>,
+    on: &Frame<P, impl AsRef<[P]>>,
+    calibration: &Calibration,
+    ws: &Workspace<'_, P>,
+) -> Result<(usize, usize), PipelineError> {
+    calibration
+        .validate()
+        .map_err(|_| PipelineError::Calibration)?;
+    let cam = &calibration.camera;
+    let (width, height) = (on.width(), on.height());
+    if (cam.width as usize, cam.height as usize) != (width, height) {
+        return Err(PipelineError::FrameSizeMismatch {
+            calibrated: (cam.width, cam.height),
+            actual: (width, height),
+        });
+    }
+    on.check_same_size(off)?;
+    need("diff", width * height, ws.diff.len())?;
+    Ok((width, height))
 }
 
 /// The two "is there anything to see?" tests: enough laser light above the noise, and an

@@ -7,6 +7,7 @@ use crate::image::Pixel;
 use crate::real::{Real, Vec2, Vec3};
 
 use super::buffers::{MAX_OBJECTS, MAX_RUNS};
+use super::readout_fits::{ColumnTrack, ReadoutFit, MAX_READOUT_FITS};
 use super::PipelineError;
 
 /// Caller-owned working memory of the pipeline: borrowed from a [`Buffers`](super::Buffers) (static),
@@ -27,6 +28,11 @@ pub struct Workspace<'a, P: Pixel> {
     pub seeds: &'a mut [u16],
     /// Features of the objects found.
     pub objects: &'a mut [ObjectFeatures],
+    /// Each column's candidate segment and points during the read-out (`width` entries; a
+    /// shorter table turns the read-out extraction off: same points, all after the frame).
+    pub column_tracks: &'a mut [ColumnTrack],
+    /// Curve points located during the read-out (`pipeline::readout_fits`).
+    pub readout_fits: &'a mut [ReadoutFit],
     /// Curve points, all planes (about `width × planes`).
     pub curve: &'a mut [CurvePoint],
     /// 3-D points, grouped by plane in [`Profile::plane_points`](super::Profile::plane_points) order (same length as `curve`).
@@ -53,6 +59,10 @@ pub struct WorkspaceSizes {
     pub seeds: usize,
     /// Object-feature entries.
     pub objects: usize,
+    /// Column tracks of the read-out extraction (`width`).
+    pub columns: usize,
+    /// Points located during the read-out.
+    pub readout_fits: usize,
     /// Curve, 3-D point, point-σ and solver-scratch entries.
     pub points: usize,
 }
@@ -79,6 +89,8 @@ impl WorkspaceSizes {
             runs: MAX_RUNS,
             seeds: width * MAX_CURVES,
             objects: MAX_OBJECTS,
+            columns: width,
+            readout_fits: MAX_READOUT_FITS,
             points: width * planes * 2,
         }
     }

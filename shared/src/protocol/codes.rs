@@ -28,6 +28,12 @@ pub const USB_VID: u16 = 0x1209;
 /// USB product id of the Tangent, allocated under [`USB_VID`] by pid.codes.
 pub const USB_PID: u16 = 0x7A6E;
 
+/// Detail of [`ErrorCode::CameraFailure`] when a board has no memory for a stored frame pair
+/// (the H743 streams the laser-on frame through the measurement and keeps only the laser-off
+/// frame, which becomes the difference frame: `docs/hardware.md`, "Memory map"), so
+/// [`Request::CaptureFrames`](super::Request::CaptureFrames) cannot be served.
+pub const CAMERA_NO_FRAME_STORE: u32 = 6;
+
 /// Readings the device keeps for [`Request::History`](super::Request::History): a host that
 /// lost the link recovers the readings made meanwhile, up to this many.
 pub const HISTORY_LEN: usize = 64;
@@ -462,6 +468,10 @@ impl fmt::Display for DeviceError {
             },
             ErrorCode::StorageFailure => write!(f, "its calibration storage failed (code {d})"),
             ErrorCode::CameraTimeout => write!(f, "the camera delivered no frame in time"),
+            ErrorCode::CameraFailure if d == CAMERA_NO_FRAME_STORE => write!(
+                f,
+                "it cannot store a raw frame pair: it streams the laser-on frame through the measurement and has memory for one frame only (raw captures need a board with two frame buffers, such as the emulated one)"
+            ),
             ErrorCode::CameraFailure => write!(f, "the camera failed (driver code {d})"),
             ErrorCode::LaserTimeout => {
                 write!(f, "a laser stayed on too long and was forced off")

@@ -1,0 +1,437 @@
+//! Curve points located during the read-out (`docs/pipeline.md`, "Streaming"): the subpixel
+//! extraction of a column's stripe needs only the difference frame's rows around the
+//! stripe, so it is done as soon as those rows are in, not after the last pixel.
+//!
+//! Which pixel seeds a curve's point in a column (its brightest pixel of the curve's object)
+//! is only known after the frame — the threshold, the objects and the planes are. But every
+//! object pixel is a candidate pixel (above the provisional threshold, which every threshold
+//! is raised to), so each column's *candidate segments* (vertical runs of candidate pixels)
+//! are tracked as the rows arrive, and the point is located at each segment's brightest
+//! pixel once the rows `± half_window` around it are in. After the frame the extraction
+//! looks each seed up here by `(column, row)` and locates only the seeds it does not find
+//! (a segment split by the final threshold into two objects, a fit left over when the
+//! block's budget ran out, a stripe at the frame's bottom). The outcome of the estimator is
+//! a function of the column's samples alone, except for the saturation level, which depends
+//! on the laser-off mean known after the frame: a point is located with no saturation level
+//! and kept only while its brightest sample is below the final level
+//! ([`crate::curve::locate_seeded`]). So the points are exactly those of the extraction after
+//! the frame, and a lookup that misses costs only the time it would have cost anyway.
+//!
+//! The work is bounded per block of [`super::BLOCK_ROWS`] rows ([`FITS_PER_BLOCK`]) so that
+//! the read-out stays within the pixel clock's budget, and segments whose brightest pixel is
+//! below every threshold the frame can still get (the floors with the largest difference seen
+//! so far) are not located at all.
+
+use crate::curve::{self, CurvePoint, ExtractParams};
+use crate::image::threshold::Floors;
+use crate::image::{Frame, Pixel};
+use crate::real::Real;
+
+/// Most points located during one frame's read-out (the table [`ReadoutBuffers`] holds): two
+/// planes' curves across the 752 columns, and room for specks.
+pub const MAX_READOUT_FITS: usize = 2048;
+
+/// Most points located per block of [`super::BLOCK_ROWS`] rows. Measured on the emulated
+/// Cortex-M7 (`docs/performance.md`): a block costs ≈ 6.5 instructions per pixel of
+/// subtraction, histogram and candidate runs, the tracking of a stripe's candidate pixels up
+/// to ≈ 4 more, and a point ≈ 2,500 instructions (the column's samples and the Gaussian
+/// fit); 32 points keep the worst block near 14 instructions per pixel, inside the 18 cycles
+/// per pixel the 26.66 MHz pixel clock leaves at 480 MHz.
+pub const FITS_PER_BLOCK: usize = 32;
+
+/// End of a column's fit list.
+const NO_FIT: u16 = u16::MAX;
+
+/// One column's state during the read-out: its open candidate segment (if any) and the
+/// points located in it so far (a list through [`ReadoutFit::next`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ColumnTrack {
+    /// One past the last row of the segment not yet located (0: none).
+    end: u16,
+    /// Row of the segment's brightest pixel (the first from the top among equals).
+    best_row: u16,
+    /// Its difference value.
+    best_value: u16,
+    /// First point of the column in the fit table, or `NO_FIT`.
+    first_fit: u16,
+}
+
+impl ColumnTrack {
+    /// No segment and no point (usable in `const`/`static`).
+    pub const EMPTY: ColumnTrack = ColumnTrack {
+        end: 0,
+        best_row: 0,
+        best_value: 0,
+        first_fit: NO_FIT,
+    };
+}
+
+/// A point located during the read-out at a column's seed row.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReadoutFit {
+    /// Subpixel row, amplitude and stripe width of the point ([`CurvePoint`]).
+    row: Real,
+    amplitude: Real,
+    width: Real,
+    /// The seed row it was located from.
+    seed_row: u16,
+    /// Brightest difference sample the estimator read (the point holds below this
+    /// saturation level and above).
+    brightest: u16,
+    /// Next point of the same column, or `NO_FIT`.
+    next: u16,
+    /// The estimator found a point (else: it failed there, which is kept too).
+    found: bool,
+}
+
+impl ReadoutFit {
+    /// An all-zero entry (usable in `const`/`static`).
+    pub const ZERO: ReadoutFit = ReadoutFit {
+        row: 0.0,
+        amplitude: 0.0,
+        width: 0.0,
+        seed_row: 0,
+        brightest: 0,
+        next: NO_FIT,
+        found: false,
+    };
+}
+
+/// The read-out extraction's tables for frames up to `COLUMNS` wide: a [`ColumnTrack`] per
+/// column and `FITS` located points. Const-constructible, so a board places it in a static
+/// (the H743: SRAM4, `docs/hardware.md`).
+#[derive(Debug)]
+pub struct ReadoutBuffers<const COLUMNS: usize = 752, const FITS: usize = MAX_READOUT_FITS> {
+    pub(super) columns: [ColumnTrack; COLUMNS],
+    pub(super) fits: [ReadoutFit; FITS],
+}
+
+impl<const COLUMNS: usize, const FITS: usize> ReadoutBuffers<COLUMNS, FITS> {
+    /// Empty tables.
+    pub const fn new() -> Self {
+        ReadoutBuffers {
+            columns: [ColumnTrack::EMPTY; COLUMNS],
+            fits: [ReadoutFit::ZERO; FITS],
+        }
+    }
+}
+
+impl<const COLUMNS: usize, const FITS: usize> Default for ReadoutBuffers<COLUMNS, FITS> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// The read-out extraction of one frame: its parameters and how much of the tables it used.
+/// Lives in [`super::ProfileStream`]; the tables are the workspace's.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct ReadoutFits {
+    /// The tables are large enough for the frame's width (else nothing is located early).
+    enabled: bool,
+    params: ExtractParams,
+    floors: Floors,
+    /// Points in the table.
+    used: usize,
+    /// Points this block may still locate.
+    budget: usize,
+    /// Largest candidate difference so far: a lower bound of the frame's largest difference.
+    brightest: u32,
+}
+
+impl ReadoutFits {
+    /// Starts a frame of `width × height`: clears the tracks of its columns. Rows are kept as
+    /// `u16` with one past the last, so a frame of 65,535 rows or more is not tracked.
+    pub(super) fn begin(
+        columns: &mut [ColumnTrack],
+        fits: &[ReadoutFit],
+        (width, height): (usize, usize),
+        params: ExtractParams,
+        floors: Floors,
+    ) -> Self {
+        let enabled = columns.len() >= width && !fits.is_empty() && height < u16::MAX as usize;
+        if enabled {
+            columns[..width].fill(ColumnTrack::EMPTY);
+        }
+        ReadoutFits {
+            enabled,
+            params: ExtractParams {
+                saturation: None,
+                ..params
+            },
+            floors,
+            used: 0,
+            budget: FITS_PER_BLOCK,
+            brightest: 0,
+        }
+    }
+
+    /// Lowest threshold the frame can still get: pixels at or below it are in no object.
+    fn floor(&self) -> u32 {
+        self.floors.apply(0, self.brightest, 0.0)
+    }
+
+    /// The candidate runs `runs` (`start..end` columns) of row `y`, which is in `diff`
+    /// (`width` columns, `height` rows, rows `..=y` subtracted): extends or opens each
+    /// column's segment; a column's segment that a new one replaces is located first when
+    /// its rows are in (else it is left to the extraction after the frame).
+    pub(super) fn row<P: Pixel>(
+        &mut self,
+        tables: (&mut [ColumnTrack], &mut [ReadoutFit]),
+        diff: &Frame<P, &[P]>,
+        y: usize,
+        runs: impl Iterator<Item = (usize, usize)>,
+    ) {
+        if !self.enabled {
+            return;
+        }
+        let (columns, fits) = tables;
+        let row = diff.row(y);
+        let y16 = y as u16;
+        for (start, end) in runs {
+            let (Some(values), Some(tracks)) = (row.get(start..end), columns.get_mut(start..end))
+            else {
+                continue;
+            };
+            for (x, (track, &v)) in (start..).zip(tracks.iter_mut().zip(values)) {
+                let v: u32 = v.into();
+                self.brightest = self.brightest.max(v);
+                let v = v.min(u16::MAX as u32) as u16;
+                if track.end == y16 && y16 != 0 {
+                    // The segment goes on; `>` keeps the first brightest from the top.
+                    if v > track.best_value {
+                        track.best_row = y16;
+                        track.best_value = v;
+                    }
+                    track.end = y16 + 1;
+                    continue;
+                }
+                if track.end != 0 {
+                    // A new segment in this column: the previous one now, or never.
+                    self.locate(track, fits, diff, x, y);
+                }
+                track.end = y16 + 1;
+                track.best_row = y16;
+                track.best_value = v;
+            }
+        }
+    }
+
+    /// After row `y`, at the end of a block: locates the segments closed before row `y`
+    /// whose rows `± half_window` are in, within the block's budget, and renews the budget
+    /// for the next block.
+    pub(super) fn block_done<P: Pixel>(
+        &mut self,
+        tables: (&mut [ColumnTrack], &mut [ReadoutFit]),
+        diff: &Frame<P, &[P]>,
+        y: usize,
+    ) {
+        if !self.enabled {
+            return;
+        }
+        let (columns, fits) = tables;
+        let hw = self.params.half_window as usize;
+        for (x, track) in columns.iter_mut().take(diff.width()).enumerate() {
+            if self.budget == 0 {
+                break;
+            }
+            let end = track.end as usize;
+            if end != 0 && end <= y && track.best_row as usize + hw <= y {
+                self.locate(track, fits, diff, x, y);
+            }
+        }
+        self.budget = FITS_PER_BLOCK;
+    }
+
+    /// Locates `track`'s segment in column `x` if rows `..=y` hold its window, it can still
+    /// be in an object and the budget and table allow; closes the segment either way.
+    fn locate<P: Pixel>(
+        &mut self,
+        track: &mut ColumnTrack,
+        fits: &mut [ReadoutFit],
+        diff: &Frame<P, &[P]>,
+        x: usize,
+        y: usize,
+    ) {
+        let seed = track.best_row as usize;
+        let last_row = diff.height().saturating_sub(1);
+        let complete = (seed + self.params.half_window as usize).min(last_row) <= y;
+        let worth = track.best_value as u32 > self.floor();
+        track.end = 0;
+        if !complete || !worth || self.budget == 0 || self.used >= fits.len().min(NO_FIT as usize) {
+            return;
+        }
+        self.budget -= 1;
+        let (point, brightest) = curve::locate_seeded(diff, x, seed, &self.params, Real::INFINITY);
+        let Some(slot) = fits.get_mut(self.used) else {
+            return;
+        };
+        *slot = ReadoutFit {
+            row: point.map_or(0.0, |p| p.row),
+            amplitude: point.map_or(0.0, |p| p.amplitude),
+            width: point.map_or(0.0, |p| p.width),
+            seed_row: track.best_row,
+            brightest: brightest.min(u16::MAX as u32) as u16,
+            next: track.first_fit,
+            found: point.is_some(),
+        };
+        track.first_fit = self.used as u16;
+        self.used += 1;
+    }
+
+    /// The point located during the read-out at column `x` from seed `row`, if there is one
+    /// that holds at `saturation` and was located with `params`' estimator and window:
+    /// `Some(None)` when the estimator failed there. For
+    /// [`crate::curve::extract_seeded_with`].
+    pub(super) fn lookup(
+        &self,
+        tables: (&[ColumnTrack], &[ReadoutFit]),
+        params: &ExtractParams,
+        x: usize,
+        row: u16,
+        saturation: Real,
+    ) -> Option<Option<CurvePoint>> {
+        if !self.enabled
+            || params.estimator != self.params.estimator
+            || params.half_window != self.params.half_window
+        {
+            return None;
+        }
+        let (columns, fits) = tables;
+        let mut i = columns.get(x)?.first_fit;
+        while let Some(fit) = fits.get(i as usize).filter(|_| (i as usize) < self.used) {
+            if fit.seed_row == row {
+                // A NaN level keeps nothing: only a sample surely below it is unclipped.
+                if (fit.brightest as Real) >= saturation || saturation.is_nan() {
+                    return None;
+                }
+                return Some(fit.found.then_some(CurvePoint {
+                    column: x.min(u16::MAX as usize) as u16,
+                    row: fit.row,
+                    amplitude: fit.amplitude,
+                    curve: 0,
+                    saturated: false,
+                    width: fit.width,
+                }));
+            }
+            i = fit.next;
+        }
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use super::super::tests::{buffers, calibration, frames, render};
+    use super::super::{extract_profile, PipelineConfig};
+    use super::*;
+    use std::vec::Vec;
+
+    const W: usize = 752;
+
+    /// The profile, curve points and 3-D points of a pair, with the read-out extraction
+    /// (`early`) or with every point located after the frame; and how many points the
+    /// read-out located.
+    fn run(
+        off: &[u8],
+        on: &[u8],
+        planes: usize,
+        early: bool,
+    ) -> (super::super::Profile, Vec<CurvePoint>, usize) {
+        let cal = calibration(planes);
+        let (off_f, on_f) = frames(off, on);
+        let mut b = buffers(planes);
+        let mut ws = b.workspace();
+        if !early {
+            ws.column_tracks = &mut [];
+        }
+        let profile = extract_profile(&off_f, &on_f, &cal, &PipelineConfig::default(), &mut ws)
+            .expect("a profile");
+        let n: usize = profile.plane_points[..planes]
+            .iter()
+            .map(|(s, e)| e - s)
+            .sum();
+        let located = ws.readout_fits.iter().filter(|f| f.found).count();
+        (
+            profile,
+            ws.curve[..n].to_vec(),
+            if early { located } else { 0 },
+        )
+    }
+
+    /// Points located during the read-out are exactly the points located after the frame,
+    /// for two planes (two segments per column), specks above the provisional threshold, and
+    /// a stripe bright enough to saturate (whose points the saturation level, known only
+    /// after the frame, changes: they are located again).
+    #[test]
+    fn points_located_during_the_readout_are_those_after_the_frame() {
+        for (amplitude, planes) in [(130.0, 2), (60.0, 1), (900.0, 1)] {
+            let cal = calibration(planes);
+            let plane_list: Vec<usize> = (0..planes).collect();
+            let (off, mut on) = render(&cal, &plane_list, 0.9, 120..640, amplitude, 9);
+            for k in 0..300 {
+                let i = (k * 7919 + 13) % on.len();
+                on[i] = on[i].saturating_add(9 + (k % 5) as u8);
+            }
+            let (early, early_points, located) = run(&off, &on, planes, true);
+            let (late, late_points, _) = run(&off, &on, planes, false);
+            assert_eq!(early, late, "amplitude {amplitude}");
+            assert_eq!(early_points, late_points, "amplitude {amplitude}");
+            // A wall's stripe is level: every column's window completes in the same block,
+            // and the per-block budget spreads the points over the blocks below it (stripes
+            // at rows ≈ 284 and 340: ≥ 8 blocks × FITS_PER_BLOCK).
+            assert!(
+                located >= 8 * FITS_PER_BLOCK,
+                "amplitude {amplitude}: {located} located"
+            );
+            if amplitude > 255.0 {
+                assert!(early.saturated_points > 0, "the stripe saturates");
+            }
+        }
+    }
+
+    /// A segment whose brightest pixel is below every threshold the frame can still get is
+    /// not located, and the budget bounds the points of one block.
+    #[test]
+    fn faint_segments_are_skipped_and_blocks_are_bounded() {
+        let cal = calibration(1);
+        let (off, mut on) = render(&cal, &[0], 0.9, 120..640, 200.0, 9);
+        // Faint specks (10 DN above the ambient) in the first rows, before the stripe.
+        for x in (0..W).step_by(3) {
+            on[2 * W + x] = on[2 * W + x].saturating_add(10);
+        }
+        let (_, _, located) = run(&off, &on, 1, true);
+        assert!(located <= MAX_READOUT_FITS);
+        let mut columns = [ColumnTrack::EMPTY; W];
+        let mut fits = [ReadoutFit::ZERO; 64];
+        let mut early = ReadoutFits::begin(
+            &mut columns,
+            &fits,
+            (W, 480),
+            ExtractParams::default(),
+            Floors::default(),
+        );
+        // The brightest pixel so far is 200: the floor is 8 % of it = 16 > the specks' 10.
+        early.brightest = 200;
+        let diff: Vec<u8> = on
+            .iter()
+            .zip(&off)
+            .map(|(a, b)| a.saturating_sub(*b))
+            .collect();
+        let frame = Frame::new(&diff[..], W, 480, W).unwrap();
+        let specks: Vec<(usize, usize)> = (0..W).step_by(3).map(|x| (x, x + 1)).collect();
+        early.row((&mut columns, &mut fits), &frame, 2, specks.iter().copied());
+        early.block_done((&mut columns, &mut fits), &frame, 40);
+        assert_eq!(early.used, 0, "specks below the floor are not located");
+        assert!(columns.iter().all(|c| c.end == 0));
+        // Bright segments in every column: one block locates at most FITS_PER_BLOCK.
+        let mut bright = diff.clone();
+        for x in 0..W {
+            bright[3 * W + x] = 120;
+        }
+        let frame = Frame::new(&bright[..], W, 480, W).unwrap();
+        early.row((&mut columns, &mut fits), &frame, 3, [(0, W)].into_iter());
+        early.block_done((&mut columns, &mut fits), &frame, 40);
+        assert_eq!(early.used, FITS_PER_BLOCK.min(fits.len()));
+    }
+}
