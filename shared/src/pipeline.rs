@@ -36,6 +36,7 @@ use crate::solvers::road_profile::RoadError;
 use crate::solvers::SolveError;
 
 pub mod buffers;
+pub mod faint;
 mod planes;
 pub mod profile;
 pub mod stream;
@@ -43,6 +44,7 @@ pub mod workspace;
 
 #[cfg(any(test, feature = "alloc"))]
 pub use buffers::OwnedBuffers;
+pub use faint::FaintParams;
 pub use buffers::{Buffers, Objects, RunBuffers, SmallBuffers, NO_OBJECTS};
 pub use profile::{extract_profile, extract_profile_probed, point_sigmas, Profile, Stage};
 pub use stream::{ProfileStream, BLOCK_ROWS};
@@ -74,6 +76,9 @@ pub struct PipelineConfig {
     /// A curve whose extreme column is this close to the frame's left or right edge is cut by
     /// the field of view.
     pub edge_margin: u16,
+    /// The faint-stripe search that takes over when the thresholded chain finds no stripe
+    /// ([`faint`]); `None` disables it.
+    pub faint: Option<FaintParams>,
 }
 
 impl Default for PipelineConfig {
@@ -89,6 +94,7 @@ impl Default for PipelineConfig {
             smooth: SmoothParams::default(),
             min_points: 12,
             edge_margin: 2,
+            faint: Some(FaintParams::default()),
         }
     }
 }

@@ -27,6 +27,7 @@ use crate::image::threshold::{self, ThresholdError};
 use crate::image::{Frame, FrameError, Pixel};
 use crate::real::Real;
 
+use super::faint;
 use super::profile::{self, Profile, Stage};
 use super::workspace::need;
 use super::{PipelineConfig, PipelineError, Workspace};
@@ -219,6 +220,10 @@ impl ProfileStream {
         let histogram_len = (full_scale as usize + 1).min(ws.histogram.len());
         let histogram = &ws.histogram[..histogram_len];
         let noise = threshold::difference_noise(histogram);
+        // The thresholded chain; where it finds no stripe, the faint search may
+        // (`faint::or_search`).
+        let read = (|| {
+        let histogram = &ws.histogram[..histogram_len];
         darkness_tests(&stats, noise, full_scale, config)?;
         probe(Stage::Subtracted);
 
@@ -268,6 +273,15 @@ impl ProfileStream {
             config,
             probe,
         )
+        })();
+        let pair = faint::Subtracted {
+            width,
+            height,
+            bit_depth,
+            stats,
+            noise,
+        };
+        faint::or_search(read, ws, pair, calibration, config)
     }
 }
 
