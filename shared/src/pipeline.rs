@@ -44,8 +44,8 @@ pub mod workspace;
 
 #[cfg(any(test, feature = "alloc"))]
 pub use buffers::OwnedBuffers;
-pub use faint::FaintParams;
 pub use buffers::{Buffers, Objects, RunBuffers, SmallBuffers, NO_OBJECTS};
+pub use faint::FaintParams;
 pub use profile::{extract_profile, extract_profile_probed, point_sigmas, Profile, Stage};
 pub use stream::{ProfileStream, BLOCK_ROWS};
 pub use workspace::{Workspace, WorkspaceSizes};

@@ -23,6 +23,9 @@
 //! the fit's σ then counts each independent stretch of 2m + 1 columns once
 //! (`docs/error-model.md`, "Detection at low SNR").
 
+// `!(x > 0.0)` is deliberate throughout: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use core::ops::Range;
 
 use crate::calibration::{Calibration, MAX_PLANES};
@@ -110,6 +113,10 @@ pub(super) struct Subtracted {
 const MAX_KERNEL: usize = 15;
 /// Rows of the zero ring on each side of the kernel's Gaussian core.
 const RING: usize = 3;
+/// Rows added on each side of the rows a plane can light within the depth range (the
+/// stripe's half-width at 2σ and the sampling's slack): a stripe from beyond the range stays
+/// outside.
+const BAND_MARGIN_PX: Real = 4.0;
 /// Rows excluded on each side of a found track when searching the next plane's.
 const EXCLUDE_PX: usize = 8;
 
@@ -124,13 +131,16 @@ pub(super) fn or_search<P: Pixel>(
     config: &PipelineConfig,
 ) -> Result<Profile, PipelineError> {
     match read {
-        Err(e) if takes_over(&e, config) => search(ws, pair, calibration, config).ok_or(e)?,
+        Err(e) if takes_over(&e, config) => match search(ws, pair, calibration, config) {
+            Some(Ok(profile)) => Ok(profile),
+            _ => Err(e),
+        },
         r => r,
     }
 }
 
-/// The faint search: `None` when no stripe reaches the score, else the profile (or why its
-/// points could not be triangulated).
+/// The faint search: `None` when no stripe reaches the score (or a track reaches the frame's
+/// edge), else the profile (or why its points could not be triangulated).
 fn search<P: Pixel>(
     ws: &mut Workspace<'_, P>,
     pair: Subtracted,
@@ -150,7 +160,9 @@ fn search<P: Pixel>(
     let (taps, len) = kernel(params.profile_sigma_px);
     let taps = &taps[..len];
     // Scratch: column sums and responses of one block (height + kernel each).
-    let (sums, rest) = ws.scratch_values.split_at_mut_checked(height + MAX_KERNEL)?;
+    let (sums, rest) = ws
+        .scratch_values
+        .split_at_mut_checked(height + MAX_KERNEL)?;
     let responses = rest.get_mut(..height)?;
     // Track rows per block, one track per plane, in the seed buffer.
     let tracks = ws.seeds.get_mut(..blocks * n_planes)?;
@@ -158,23 +170,25 @@ fn search<P: Pixel>(
 
     // The responses' noise σ from their mean absolute value over every searched cell
     // (Gaussian: σ = √(π/2)·mean|r|; the stripe's few cells barely move it).
-    let (mut abs_sum, mut count) = (0.0 as Real, 0usize);
+    // The responses are integers (below 2²⁴, exact in `f32`): summed as integers, the device
+    // and the host find the same σ.
+    let (mut abs_sum, mut count) = (0u64, 0u64);
     for blk in 0..blocks {
         let rows = band(blk);
         block_responses(&diff, blk * b, b, &rows, taps, sums, responses);
         for r in &responses[rows] {
-            abs_sum += r.abs();
+            abs_sum += r.abs() as u64;
             count += 1;
         }
     }
-    if count == 0 || !(abs_sum > 0.0) {
+    if count == 0 || abs_sum == 0 {
         return None;
     }
-    let sigma = Float::sqrt(crate::real::PI / 2.0) * abs_sum / count as Real;
+    let sigma = Float::sqrt(crate::real::PI / 2.0) * (abs_sum as f64 / count as f64) as Real;
 
     let mut found = [Track::NONE; MAX_PLANES];
     let mut n_found = 0;
-    for k in 0..n_planes {
+    for (k, slot) in found.iter_mut().enumerate().take(n_planes) {
         let (done, rest) = tracks.split_at_mut(k * blocks);
         let track = &mut rest[..blocks];
         let excluded = |blk: usize, v: usize| {
@@ -188,10 +202,18 @@ fn search<P: Pixel>(
         ) else {
             break;
         };
-        found[k] = t;
+        *slot = t;
         n_found += 1;
     }
-    if n_found == 0 {
+    // A track that reaches the frame's left or right edge is not answered for: the
+    // measurement would be refused as cut by the frame anyway, and in a scene that moved
+    // between the two frames such a track is the motion's residue along the horizon, not a
+    // stripe — the thresholded chain's refusal names that cause.
+    if n_found == 0
+        || found[..n_found]
+            .iter()
+            .any(|t| t.first == 0 || t.last + 1 >= blocks)
+    {
         return None;
     }
     Some(extract_and_triangulate(
@@ -289,8 +311,7 @@ fn find_track<P: Pixel>(
     // Best-scoring stretch (Kadane over q − β).
     let (mut run, mut run_start) = (0.0 as Real, 0usize);
     let (mut kept, mut first, mut last) = (Real::NEG_INFINITY, 0usize, 0usize);
-    for blk in 0..blocks {
-        let v = track[blk];
+    for (blk, &v) in track.iter().enumerate() {
         if v == NO_ROW {
             run = 0.0;
             continue;
@@ -385,12 +406,18 @@ fn extract_and_triangulate<P: Pixel>(
                 let Some(point) = read_column(&diff, x, row, m, params, pair.noise) else {
                     continue;
                 };
-                let slot = ws.curve.get_mut(n).ok_or(PipelineError::WorkspaceTooSmall {
-                    buffer: "curve",
-                    needed: n + 1,
-                    actual: n,
-                })?;
-                *slot = CurvePoint { curve: t as u8, ..point };
+                let slot = ws
+                    .curve
+                    .get_mut(n)
+                    .ok_or(PipelineError::WorkspaceTooSmall {
+                        buffer: "curve",
+                        needed: n + 1,
+                        actual: n,
+                    })?;
+                *slot = CurvePoint {
+                    curve: t as u8,
+                    ..point
+                };
                 n += 1;
             }
         }
@@ -516,7 +543,12 @@ fn read_column<P: Pixel>(
 
 /// The rows any plane can light in columns `x0..x1` at the search's depths, widened by the
 /// kernel's reach and the sampling's slack (all rows when the geometry says nothing).
-fn band_rows(calibration: &Calibration, params: &FaintParams, x0: usize, x1: usize) -> Range<usize> {
+fn band_rows(
+    calibration: &Calibration,
+    params: &FaintParams,
+    x0: usize,
+    x1: usize,
+) -> Range<usize> {
     let cam = &calibration.camera;
     let height = cam.height as usize;
     let (near, far) = params.depth_range_m;
@@ -541,7 +573,7 @@ fn band_rows(calibration: &Calibration, params: &FaintParams, x0: usize, x1: usi
     if !(lo.is_finite() && hi.is_finite()) {
         return 0..height;
     }
-    let margin = (2 * MAX_KERNEL) as Real;
+    let margin = BAND_MARGIN_PX;
     let lo = (lo - margin).max(0.0) as usize;
     let hi = ((hi + margin).max(0.0) as usize).min(height);
     lo.min(hi)..hi
@@ -597,7 +629,10 @@ fn block_responses<P: Pixel>(
     for (i, y) in (lo..hi).enumerate() {
         if let Some(s) = sums.get_mut(i) {
             let row = diff.row(y);
-            *s = row[x0..x1].iter().map(|&p| Into::<u32>::into(p) as Real).sum();
+            *s = row[x0..x1]
+                .iter()
+                .map(|&p| Into::<u32>::into(p) as Real)
+                .sum();
         }
     }
     let ring = taps.iter().take_while(|&&w| w == taps[0]).count().min(RING);

@@ -7,7 +7,6 @@ use super::*;
 use crate::pipeline::extract_profile;
 use std::vec::Vec;
 
-
 /// A reproducible Gaussian noise source (xorshift, Box–Muller).
 struct Noise(u64);
 
@@ -73,7 +72,11 @@ fn a_stripe_below_the_darkness_test_is_found() {
     let mean_sigma_px: Real = ws.curve[s..e]
         .iter()
         .map(|c| {
-            crate::noise::NoiseModel::reference().stripe_centre_px(c.amplitude, c.width, profile.noise)
+            crate::noise::NoiseModel::reference().stripe_centre_px(
+                c.amplitude,
+                c.width,
+                profile.noise,
+            )
         })
         .sum::<Real>()
         / (e - s) as Real;
@@ -169,4 +172,3 @@ fn kernel_is_zero_sum_and_peaks_at_its_centre() {
         assert_eq!(w[..len].iter().max(), Some(&w[len / 2]));
     }
 }
-
