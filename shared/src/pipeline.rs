@@ -14,6 +14,9 @@
 //!   [`extract_profile`] (which feeds it through the stream), and the image summary
 //!   [`Profile`] with its quality flags;
 //! * `planes`: which object is which plane's curve;
+//! * [`faint`]: the faint-stripe search (matched filter across the stripe, a track along it)
+//!   that takes over when the thresholded chain finds no stripe — too faint for the darkness
+//!   test, or broken into clutter (`docs/error-model.md` §7);
 //! * [`workspace`] and [`buffers`]: the caller-owned working memory.
 //!
 //! Every buffer lives in a caller-owned [`Workspace`]; after a call the workspace still holds
