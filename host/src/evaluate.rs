@@ -104,6 +104,21 @@ pub fn run(first_seed: u64, count: u64, tilt_max_deg: f64) -> anyhow::Result<Vec
         .collect()
 }
 
+/// One sample as a JSON object (`tangent evaluate --samples`): the seed, its physics model,
+/// the truth, Tangent's reading and the baseline's diameter or error.
+pub fn sample_json(s: &Sample) -> serde_json::Value {
+    serde_json::json!({
+        "seed": s.seed,
+        "physics": s.physics.name(),
+        "truth_m": s.truth_m,
+        "distance_m": s.distance_m,
+        "tilt_deg": s.tilt_deg,
+        "baseline_m": s.baseline.as_ref().ok(),
+        "baseline_error": s.baseline.as_ref().err(),
+        "reading": &s.reading,
+    })
+}
+
 /// Distance (from the camera to the stem's surface: axis distance minus radius) and lean from
 /// vertical (degrees) of the scene's first cylinder.
 fn stem_geometry(objects: &[Object]) -> (f64, f64) {

@@ -16,6 +16,9 @@
 //! * [`profile`]: the stages after the segmentation and the image summary [`Profile`] with its
 //!   quality flags;
 //! * `planes`: which object is which plane's curve;
+//! * [`faint`]: the faint-stripe search (matched filter across the stripe, a track along it)
+//!   that takes over when the thresholded chain finds no stripe — too faint for the darkness
+//!   test, or broken into clutter (`docs/error-model.md` §7);
 //! * [`workspace`] and [`buffers`]: the caller-owned working memory.
 //!
 //! Every buffer lives in a caller-owned [`Workspace`]; after a call the workspace still holds
@@ -38,6 +41,7 @@ use crate::solvers::road_profile::RoadError;
 use crate::solvers::SolveError;
 
 pub mod buffers;
+pub mod faint;
 mod planes;
 pub mod profile;
 pub mod readout_fits;
@@ -47,6 +51,7 @@ pub mod workspace;
 #[cfg(any(test, feature = "alloc"))]
 pub use buffers::OwnedBuffers;
 pub use buffers::{Buffers, Objects, RunBuffers, SmallBuffers, NO_OBJECTS};
+pub use faint::FaintParams;
 pub use profile::{point_sigmas, Profile, Stage};
 pub use readout_fits::ReadoutBuffers;
 pub use stream::{extract_profile, extract_profile_probed, ProfileStream, BLOCK_ROWS};
@@ -78,6 +83,9 @@ pub struct PipelineConfig {
     /// A curve whose extreme column is this close to the frame's left or right edge is cut by
     /// the field of view.
     pub edge_margin: u16,
+    /// The faint-stripe search that takes over when the thresholded chain finds no stripe
+    /// ([`faint`]); `None` disables it.
+    pub faint: Option<FaintParams>,
 }
 
 impl Default for PipelineConfig {
@@ -93,6 +101,7 @@ impl Default for PipelineConfig {
             smooth: SmoothParams::default(),
             min_points: 12,
             edge_margin: 2,
+            faint: Some(FaintParams::default()),
         }
     }
 }

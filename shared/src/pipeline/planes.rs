@@ -217,7 +217,7 @@ fn assign_planes(cands: &mut [Candidate], calibration: &Calibration, config: &Pi
 /// The planes sorted by the image row at which each is seen on the central column, at the
 /// depth where plane 0 sees a curve at row `row` (the order is the same at every depth for
 /// parallel planes), and those rows by plane.
-fn planes_by_row(
+pub(super) fn planes_by_row(
     calibration: &Calibration,
     row: Real,
 ) -> ([usize; MAX_PLANES], [Real; MAX_PLANES]) {

@@ -338,7 +338,7 @@ fn group_by_plane(
 /// Per plane: checks the curve's length, smooths it, notes whether it reaches the frame's
 /// left or right edge, and triangulates it into `out` (same indices). Returns the number of
 /// saturated points and whether some curve touches the edge.
-fn smooth_and_triangulate(
+pub(super) fn smooth_and_triangulate(
     curve: &mut [CurvePoint],
     plane_points: &[(usize, usize); MAX_PLANES],
     calibration: &Calibration,

@@ -29,6 +29,7 @@ use crate::image::threshold::{self, ThresholdError};
 use crate::image::{Frame, FrameError, Pixel};
 use crate::real::Real;
 
+use super::faint;
 use super::profile::{self, Profile, Stage};
 use super::readout_fits::ReadoutFits;
 use super::workspace::need;
@@ -265,56 +266,69 @@ impl ProfileStream {
         let histogram_len = (full_scale as usize + 1).min(ws.histogram.len());
         let histogram = &ws.histogram[..histogram_len];
         let noise = threshold::difference_noise(histogram);
-        darkness_tests(&stats, noise, full_scale, config)?;
-        probe(Stage::Subtracted);
+        // The thresholded chain; where it finds no stripe, the faint search may
+        // (`faint::or_search`).
+        let read = (|| {
+            let histogram = &ws.histogram[..histogram_len];
+            darkness_tests(&stats, noise, full_scale, config)?;
+            probe(Stage::Subtracted);
 
-        let automatic = config.threshold.threshold(histogram)?;
-        let t = config.floors.apply(automatic, stats.max_difference, noise);
-        probe(Stage::Thresholded);
+            let automatic = config.threshold.threshold(histogram)?;
+            let t = config.floors.apply(automatic, stats.max_difference, noise);
+            probe(Stage::Thresholded);
 
-        // Runs above `t`: inside the candidates (t ≥ the provisional threshold), or, when the
-        // candidate table overflowed, from the whole difference frame.
-        let diff =
-            Frame::new(&ws.diff[..pixels], width, height, width)?.with_bit_depth(bit_depth)?;
-        let mut n = 0usize;
-        if overflow || t < provisional {
-            for y in 0..height {
-                segment::row_runs(diff.row(y), y as u16, 0, t, ws.runs, &mut n)?;
+            // Runs above `t`: inside the candidates (t ≥ the provisional threshold), or, when the
+            // candidate table overflowed, from the whole difference frame.
+            let diff =
+                Frame::new(&ws.diff[..pixels], width, height, width)?.with_bit_depth(bit_depth)?;
+            let mut n = 0usize;
+            if overflow || t < provisional {
+                for y in 0..height {
+                    segment::row_runs(diff.row(y), y as u16, 0, t, ws.runs, &mut n)?;
+                }
+            } else {
+                for c in ws.candidate_runs.iter().take(candidates) {
+                    let (x0, x1) = (c.start as usize, c.end as usize);
+                    let values =
+                        diff.row(c.row as usize)
+                            .get(x0..x1)
+                            .ok_or(PipelineError::Frame(FrameError::BufferTooSmall {
+                                needed: x1,
+                                actual: width,
+                            }))?;
+                    segment::row_runs(values, c.row, x0, t, ws.runs, &mut n)?;
+                }
             }
-        } else {
-            for c in ws.candidate_runs.iter().take(candidates) {
-                let (x0, x1) = (c.start as usize, c.end as usize);
-                let values = diff
-                    .row(c.row as usize)
-                    .get(x0..x1)
-                    .ok_or(PipelineError::Frame(FrameError::BufferTooSmall {
-                        needed: x1,
-                        actual: width,
-                    }))?;
-                segment::row_runs(values, c.row, x0, t, ws.runs, &mut n)?;
-            }
-        }
-        let runs = &mut ws.runs[..n];
-        let segmentation = segment::label_runs(&diff, runs, ws.objects, Connectivity::Eight)?;
-        probe(Stage::Segmented);
+            let runs = &mut ws.runs[..n];
+            let segmentation = segment::label_runs(&diff, runs, ws.objects, Connectivity::Eight)?;
+            probe(Stage::Segmented);
 
-        profile::after_segmentation(
-            ws,
-            profile::Segmented {
-                width,
-                height,
-                bit_depth,
-                stats,
-                threshold: t,
-                noise,
-                objects: segmentation.objects,
-                runs: n,
-                readout,
-            },
-            calibration,
-            config,
-            probe,
-        )
+            profile::after_segmentation(
+                ws,
+                profile::Segmented {
+                    width,
+                    height,
+                    bit_depth,
+                    stats,
+                    threshold: t,
+                    noise,
+                    objects: segmentation.objects,
+                    runs: n,
+                    readout,
+                },
+                calibration,
+                config,
+                probe,
+            )
+        })();
+        let pair = faint::Subtracted {
+            width,
+            height,
+            bit_depth,
+            stats,
+            noise,
+        };
+        faint::or_search(read, ws, pair, calibration, config)
     }
 }
 
