@@ -6,6 +6,7 @@
 //!   protocol commands);
 //! * [`measure`] — the seam to the shared pipeline;
 //! * [`mt9v034`] — the image sensor's set-up over any `embedded-hal-async` I²C bus;
+//! * [`adxl355`] — the accelerometer (the wall instrument's vertical reference) over I²C;
 //! * [`exposure`], [`stats`], [`pgm`] — small pure pieces;
 //! * [`board`] — the boards: `board::h743` (drivers with feature `h743`) and `board::qemu`
 //!   (feature `qemu`), each with its clocks, pins and buffers (one `board_buffers!` per
@@ -22,6 +23,7 @@
 /// The firmware's version (`DeviceInfo::fw_version`).
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");
 
+pub mod adxl355;
 pub mod app;
 pub mod board;
 mod buffers;

@@ -149,6 +149,58 @@ pub trait Camera {
     }
 }
 
+/// Why an accelerometer read failed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AccelError {
+    /// An I²C transaction failed (no acknowledge, bus error).
+    Bus,
+    /// The identity registers do not name the expected part.
+    WrongPart,
+    /// No new sample came within the sensor's polling budget.
+    Timeout,
+}
+
+impl AccelError {
+    /// Detail code of the failure (board-specific numbering, as [`CameraError::code`]).
+    pub fn code(self) -> u32 {
+        match self {
+            AccelError::Bus => 1,
+            AccelError::WrongPart => 2,
+            AccelError::Timeout => 3,
+        }
+    }
+}
+
+/// One accelerometer sample: the specific force along the sensor's own axes (m/s²; at rest
+/// it points up, opposite gravity, with magnitude g). The sensor-to-camera rotation and the
+/// bias are the calibration's (`docs/building.md` §6), not the port's.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Acceleration {
+    /// x, y, z (m/s²).
+    pub m_s2: [f32; 3],
+}
+
+/// The 3-axis accelerometer: the vertical reference of the wall instrument.
+pub trait Accelerometer {
+    /// The next sample.
+    async fn sample(&mut self) -> Result<Acceleration, AccelError>;
+
+    /// The mean of `n` (≥ 1) consecutive samples: at rest the noise falls as `1/√n`.
+    async fn mean(&mut self, n: u16) -> Result<Acceleration, AccelError> {
+        let n = n.max(1);
+        let mut sum = [0.0f32; 3];
+        for _ in 0..n {
+            let s = self.sample().await?;
+            for (acc, v) in sum.iter_mut().zip(s.m_s2) {
+                *acc += v;
+            }
+        }
+        Ok(Acceleration {
+            m_s2: sum.map(|v| v / n as f32),
+        })
+    }
+}
+
 /// Where the calibration lives between power cycles.
 pub trait CalibrationStore {
     /// The stored calibration, if a valid one is stored.

@@ -320,23 +320,7 @@ impl CalibrationToml {
         if self.planes.len() > MAX_PLANES {
             return Err(CalibrationFileError::TooManyPlanes(self.planes.len()));
         }
-        let c = &self.camera;
-        let d = c.distortion;
-        let camera = Camera {
-            width: c.width_px,
-            height: c.height_px,
-            fx: c.fx_px as Real,
-            fy: c.fy_px as Real,
-            cx: c.cx_px as Real,
-            cy: c.cy_px as Real,
-            distortion: Distortion {
-                k1: d.k1 as Real,
-                k2: d.k2 as Real,
-                k3: d.k3 as Real,
-                p1: d.p1 as Real,
-                p2: d.p2 as Real,
-            },
-        };
+        let camera = self.camera.unchecked_camera();
         let mut planes = Vec::with_capacity(self.planes.len());
         for (index, p) in self.planes.iter().enumerate() {
             let plane = LaserPlane::new(v3(p.normal), p.offset_m as Real, v3(p.source_m)).map_err(
@@ -359,11 +343,11 @@ impl CalibrationToml {
 }
 
 impl CameraToml {
-    /// The core camera, validated (`Camera::validate`: positive focal lengths, distortion
-    /// one-to-one over the image).
-    pub fn to_camera(&self) -> Result<Camera, CalibrationFileError> {
+    /// The core camera as written, not yet validated (the caller validates it, in the order
+    /// its own errors are reported).
+    fn unchecked_camera(&self) -> Camera {
         let d = self.distortion;
-        let camera = Camera {
+        Camera {
             width: self.width_px,
             height: self.height_px,
             fx: self.fx_px as Real,
@@ -377,7 +361,13 @@ impl CameraToml {
                 p1: d.p1 as Real,
                 p2: d.p2 as Real,
             },
-        };
+        }
+    }
+
+    /// The core camera, validated (`Camera::validate`: positive focal lengths, distortion
+    /// one-to-one over the image).
+    pub fn to_camera(&self) -> Result<Camera, CalibrationFileError> {
+        let camera = self.unchecked_camera();
         camera
             .validate()
             .map_err(|e| CalibrationFileError::Invalid(CalibrationError::Camera(e)))?;

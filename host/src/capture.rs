@@ -64,6 +64,10 @@ pub struct Truth {
     /// Absent: the reference model if the capture has a `[simulation]` table, else unknown.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub physics_model: Option<PhysicsModel>,
+    /// The true direction of gravity in the camera frame (unit, pointing down), when the
+    /// capture simulates an accelerometer.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gravity: Option<[f64; 3]>,
 }
 
 /// `capture.toml`, as written on disk.
@@ -103,7 +107,82 @@ pub struct CaptureMeta {
     /// are not the simulator ignore it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub simulation: Option<toml::Value>,
+    /// The accelerometer's mean reading over the capture and the calibration it is taken
+    /// with (`docs/building.md` §6); absent in captures of a device without one (and in
+    /// every capture older than it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub accelerometer: Option<AccelerometerRecord>,
 }
+
+/// The `[accelerometer]` table: what the device records of gravity with each capture
+/// (`docs/building.md` §6, `docs/formats.md`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AccelerometerRecord {
+    /// Mean specific force over the capture along the sensor's axes (m/s²; at rest it
+    /// points up).
+    pub mean_m_s2: [f64; 3],
+    /// Samples averaged.
+    pub samples: u32,
+    /// 1σ of one sample on each axis (m/s²; the sensor's noise).
+    pub sample_sigma_m_s2: f64,
+    /// The calibrated bias subtracted from the mean (sensor axes, m/s²).
+    pub bias_m_s2: [f64; 3],
+    /// 1σ of that bias on each axis (m/s²).
+    pub bias_sigma_m_s2: f64,
+    /// The calibrated rotation from the sensor's axes into the camera frame (rotation
+    /// vector, radians).
+    pub camera_from_sensor_rad: [f64; 3],
+    /// 1σ of that rotation about each axis (radians).
+    pub alignment_sigma_rad: f64,
+}
+
+impl AccelerometerRecord {
+    /// Gravity in the camera frame (unit vector, pointing down) and the 1σ of its direction
+    /// about any axis across it (radians): `ĝ = −R (a − b)/|a − b|`,
+    /// `σ² = (σ_b² + σ_a²/N)/|a − b|² + σ_R²` (`docs/building.md`, eq. (B9)). `Err` names the
+    /// field that makes it unusable.
+    pub fn gravity_camera(&self) -> Result<([f64; 3], f64), String> {
+        let v = |a: [f64; 3]| nalgebra::Vector3::new(a[0], a[1], a[2]);
+        let finite = |a: [f64; 3]| a.iter().all(|x| x.is_finite());
+        if !finite(self.mean_m_s2) || !finite(self.bias_m_s2) {
+            return Err("accelerometer.mean_m_s2 or bias_m_s2 is not finite".into());
+        }
+        if !finite(self.camera_from_sensor_rad) {
+            return Err("accelerometer.camera_from_sensor_rad is not finite".into());
+        }
+        for (name, x) in [
+            ("sample_sigma_m_s2", self.sample_sigma_m_s2),
+            ("bias_sigma_m_s2", self.bias_sigma_m_s2),
+            ("alignment_sigma_rad", self.alignment_sigma_rad),
+        ] {
+            if !(x >= 0.0 && x.is_finite()) {
+                return Err(format!("accelerometer.{name} = {x}: must be ≥ 0"));
+            }
+        }
+        if self.samples == 0 {
+            return Err("accelerometer.samples = 0: at least one".into());
+        }
+        let up = v(self.mean_m_s2) - v(self.bias_m_s2);
+        let g = up.norm();
+        // A device at rest reads 1 g; far from it the device was moving (or the part is
+        // broken): no vertical reference.
+        if !(g > 0.5 * STANDARD_GRAVITY && g < 1.5 * STANDARD_GRAVITY) {
+            return Err(format!(
+                "accelerometer.mean_m_s2 less bias is {g:.2} m/s², not ≈ 9.81: the device was not at rest"
+            ));
+        }
+        let r = nalgebra::Rotation3::new(v(self.camera_from_sensor_rad));
+        let down = -(r * up) / g;
+        let noise2 =
+            self.bias_sigma_m_s2.powi(2) + self.sample_sigma_m_s2.powi(2) / self.samples as f64;
+        let sigma = (noise2 / (g * g) + self.alignment_sigma_rad.powi(2)).sqrt();
+        Ok(([down.x, down.y, down.z], sigma))
+    }
+}
+
+/// Standard gravity (m/s²).
+pub const STANDARD_GRAVITY: f64 = 9.806_65;
 
 /// Why a capture could not be read or written. Files are named relative to the capture
 /// directory, which the message does not repeat: the caller puts it in front.

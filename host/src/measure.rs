@@ -49,6 +49,9 @@ pub enum MeasureError {
     /// The off and on frames differ in bit depth.
     #[error("the laser-off and laser-on frames differ in bit depth")]
     MixedDepth,
+    /// The capture's `[accelerometer]` table gives no vertical reference.
+    #[error("capture.toml [accelerometer]: {0}")]
+    Accelerometer(String),
 }
 
 /// Tilt of the stem, in degrees for people.
@@ -531,7 +534,12 @@ pub fn measure_loaded(
             (r, reading, buffers)
         }
         Mode::Wall => {
-            let params = wall_params(&calibration, params);
+            let mut params = wall_params(&calibration, params);
+            // The vertical reference, when the device recorded one (docs/building.md §6).
+            if let Some(a) = &capture.meta.accelerometer {
+                let (g, sigma) = a.gravity_camera().map_err(MeasureError::Accelerometer)?;
+                params.walls.gravity = Some((Vec3::new(g[0], g[1], g[2]), sigma));
+            }
             let (r, buffers) = solve_capture::<Wall>(capture, &calibration, config, &params)?;
             let reading = Reading::from_wall(name, r.as_ref(), Some(capture));
             (r.map(|m| Solved::Wall(Box::new(m))), reading, buffers)

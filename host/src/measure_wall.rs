@@ -233,6 +233,10 @@ pub struct WallTruth {
     /// True length of the segment (mm), when both its ends are in view.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub segment_mm: Option<f64>,
+    /// True deviation of the aimed wall from the plumb (degrees), when the capture records
+    /// the true gravity.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub plumb_deg: Option<f64>,
 }
 
 impl WallTruth {
@@ -252,6 +256,9 @@ impl WallTruth {
         }
         if let Some(l) = self.segment_mm {
             parts.push(format!("segment {l:.1} mm"));
+        }
+        if let Some(p) = self.plumb_deg {
+            parts.push(format!("plumb {p:+.2}°"));
         }
         parts.join(", ")
     }
@@ -380,6 +387,11 @@ pub fn wall_truth(capture: &Capture, s: &WallSolution) -> Option<WallTruth> {
         )
         .map(|l| l * 1e3)
     });
+    // As the solver's plumb: asin(n·ĝ), n away from the camera, ĝ down.
+    let plumb_deg = s.plumb.and_then(|_| {
+        let g = Vec3d::from(capture.meta.truth.as_ref()?.gravity?).try_normalize(1e-12)?;
+        Some(aimed?.n.dot(&g).clamp(-1.0, 1.0).asin().to_degrees())
+    });
     Some(WallTruth {
         axis_distance_mm: orient.map(|o| o.0),
         yaw_deg: orient.map(|o| o.1),
@@ -387,6 +399,7 @@ pub fn wall_truth(capture: &Capture, s: &WallSolution) -> Option<WallTruth> {
         corner_deg,
         parallel_mm,
         segment_mm,
+        plumb_deg,
     })
 }
 

@@ -3,8 +3,12 @@
 
 use std::path::Path;
 
+use tangent_core::noise::{displacement_per_pixel, NoiseModel};
 use tangent_core::pipeline::PipelineConfig;
+use tangent_core::real::Vec3;
 use tangent_core::solvers::stem::CylinderParams;
+use tangent_core::solvers::walls::WallParams;
+use tangent_host::capture::Capture;
 use tangent_host::measure::{measure_capture, Reading};
 use tangent_host::measure_wall::{ValueSigma, WallReport};
 
@@ -71,13 +75,67 @@ fn walls_face_as_the_truth_says() {
         );
         // Pitch, the weak direction of two parallel lines (docs/building.md §1), with 3.5σ.
         within(name, a.pitch_deg, t.pitch_deg.unwrap(), 3.5, 0.0);
-        // The quality index 1 − λ₃/λ₂ of two parallel lines 50 mm apart falls with distance as
-        // the depth noise grows against their separation (docs/building.md, the third-line
-        // decision): at 3 m it is ≈ 0.9 by the error model itself, so it is no test there.
-        if t.axis_distance_mm.unwrap() <= 2000.0 {
-            assert!(a.quality > 0.9, "{name}: {a:?}");
-        }
+        // The accelerometer's vertical: the plumb within 3σ (pitch's σ ⊕ gravity's, (B7)).
+        let plumb = w.plumb_deg.unwrap_or_else(|| panic!("{name}: no plumb"));
+        within(name, plumb, t.plumb_deg.unwrap(), 3.0, 0.0);
+        // The quality index 1 − λ₃/λ₂ at least what the error model allows.
+        let bound = quality_bound(name, a.lines.as_slice(), &t);
+        println!(
+            "{name}: quality {:.4}, error-model bound {bound:.4}",
+            a.quality
+        );
+        assert!(
+            a.quality >= bound,
+            "{name}: quality {} < {bound}",
+            a.quality
+        );
     }
+}
+
+/// The error model's lowest quality index of a flat wall (`docs/building.md`, "Quality
+/// index" and eq. (B8)): `q = 1 − λ₃/λ₂` with `λ₃` the harmonic mean of the points' variance
+/// along the normal (`|n·∂X/∂v|·σ_v` from the reference noise model, the solver's roughness
+/// beside it) and `λ₂` the lines' spread across them; allowing the points' scatter twice the
+/// model's σ (χ² ≤ 4), `q ≥ 1 − 4 λ₃/λ₂`. The points are those of each line on the image's
+/// central column, on the true plane.
+fn quality_bound(name: &str, lines: &[usize], t: &tangent_host::measure_wall::WallTruth) -> f64 {
+    let dir = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/captures")).join(name);
+    let capture = Capture::read(&dir).unwrap();
+    let (z0, yaw, pitch) = (
+        t.axis_distance_mm.unwrap() * 1e-3,
+        t.yaw_deg.unwrap().to_radians(),
+        t.pitch_deg.unwrap().to_radians(),
+    );
+    let n = Vec3::new(
+        yaw.sin() * pitch.cos(),
+        pitch.sin(),
+        yaw.cos() * pitch.cos(),
+    );
+    let noise = NoiseModel::reference();
+    let roughness = WallParams::default().roughness;
+    // Per line: the weight 1/σ² of its points and their position down the wall.
+    let mut lines_wy = Vec::new();
+    for &k in lines {
+        let plane = &capture.calibration.planes[k];
+        // On the central column (x = 0): n_y y + n_z z = n_z z0 and the laser plane.
+        let (a, b) = (plane.normal.y, plane.normal.z);
+        let det = n.y * b - n.z * a;
+        let y = (n.z * z0 * b - n.z * plane.offset) / det;
+        let z = (n.y * plane.offset - a * n.z * z0) / det;
+        let x = Vec3::new(0.0, y, z);
+        let dxdv = displacement_per_pixel(plane, capture.calibration.camera.fy, x).unwrap();
+        let s = n.dot(&dxdv).abs() * noise.image_px();
+        lines_wy.push((1.0 / (s * s + roughness * roughness), y / pitch.cos()));
+    }
+    let w: f64 = lines_wy.iter().map(|l| l.0).sum();
+    let mean = lines_wy.iter().map(|l| l.0 * l.1).sum::<f64>() / w;
+    let lambda2 = lines_wy
+        .iter()
+        .map(|l| l.0 * (l.1 - mean).powi(2))
+        .sum::<f64>()
+        / w;
+    let lambda3 = lines_wy.len() as f64 / w;
+    1.0 - 4.0 * lambda3 / lambda2
 }
 
 #[test]

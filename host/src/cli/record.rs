@@ -165,6 +165,7 @@ pub fn build_capture(
         calibration: toml::Value::Table(Default::default()),
         truth: None,
         simulation: None,
+        accelerometer: None,
     };
     let maxval = ((1u32 << info.bit_depth.clamp(1, 8)) - 1) as u8;
     Ok(Capture {

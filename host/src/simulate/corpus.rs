@@ -13,33 +13,10 @@ use tangent_core::calibration::Calibration;
 use tangent_core::camera::Distortion;
 
 use super::render::{HandMotion, Lighting};
+pub use super::rig::{lab_light, one_plane_calibration, two_plane_calibration, CorpusEntry};
 use super::{simulate, Exposure, SimError, SimParams, SimSpec};
 use crate::capture::Mode;
 use crate::truth::{Board, Cylinder, Object, Plane, Road, Sphere, Texture, Wave};
-
-/// One corpus capture: directory name and spec.
-#[derive(Debug, Clone)]
-pub struct CorpusEntry {
-    /// Directory name under `tests/captures/`.
-    pub name: String,
-    /// What it renders.
-    pub spec: SimSpec,
-}
-
-/// The reference design with only its first plane (a one-laser caliper), id 1.
-pub fn one_plane_calibration() -> Calibration {
-    let mut c = Calibration::reference_design();
-    c.planes.truncate(1);
-    c.id = 1;
-    c
-}
-
-/// The two-plane reference design (tilted-stem variant), id 2.
-pub fn two_plane_calibration() -> Calibration {
-    let mut c = Calibration::reference_design();
-    c.id = 2;
-    c
-}
 
 /// A plausible calibrated unit: principal point off-centre, barrel distortion, slightly
 /// unequal focal lengths (one plane), id 3.
@@ -528,7 +505,8 @@ pub fn entries() -> Vec<CorpusEntry> {
         "plaster wall perpendicular to the optical axis at 1.5 m",
         two_plane_calibration(),
         vec![wall([0.0, 0.0, 1.5], [0.0, 0.0, -1.0])],
-        |_| {},
+        // The accelerometer draws from its own stream: the frames are as before it.
+        |p| p.accelerometer = Some(super::accelerometer::AccelerometerSim::reference()),
     );
     b.add(
         "wall-corner-z200",
@@ -539,7 +517,8 @@ pub fn entries() -> Vec<CorpusEntry> {
             wall([0.0, 0.0, 2.0], [1.0, 0.0, -1.0]),
             wall([0.0, 0.0, 2.0], [-1.0, 0.0, -1.0]),
         ],
-        |_| {},
+        // The accelerometer draws from its own stream: the frames are as before it.
+        |p| p.accelerometer = Some(super::accelerometer::AccelerometerSim::reference()),
     );
     // --- road ----------------------------------------------------------------------------------
     let road = |waves: Vec<Wave>| {
@@ -659,18 +638,6 @@ pub fn lab_wall() -> Object {
         texture_contrast: 0.2,
         bounds_m: None,
     })
-}
-
-/// Indoor light for calibration: 2 W/m² diffuse in band, so the board is well exposed in
-/// the laser-off frame while the 1 mW stripe (≈ 0.9 W/m² at 1 m) still stands out on the
-/// light squares.
-pub fn lab_light() -> Lighting {
-    Lighting {
-        diffuse_w_m2: 2.0,
-        sun_w_m2: 0.0,
-        sun_direction: [0.0, -1.0, 0.0],
-        background_w_m2: 0.3,
-    }
 }
 
 /// A random stem in the product's envelope (for Monte-Carlo and accuracy runs, not the

@@ -9,11 +9,13 @@
 //! Deterministic: every random draw comes from a `Pcg64` seeded from the spec's seed and
 //! the (frame, row) it belongs to, so the result does not depend on thread scheduling.
 
+pub mod accelerometer;
 pub mod corpus;
 pub mod laser;
 pub mod physics;
 pub mod reflectance;
 pub mod render;
+pub mod rig;
 pub mod road_corpus;
 pub mod scene;
 pub mod sensor;
@@ -30,6 +32,7 @@ use crate::calibration_file::CalibrationToml;
 use crate::capture::{Capture, CaptureMeta, FrameEntry, Mode, Truth, FORMAT_VERSION};
 use crate::pgm::Pgm;
 use crate::truth::{Object, PhysicsModel};
+use accelerometer::AccelerometerSim;
 use laser::LaserParams;
 use reflectance::Reflectance;
 use render::{HandMotion, Lighting, RenderSetup};
@@ -99,6 +102,10 @@ pub struct SimParams {
     /// ([`scene::Scene::with_texture_scale`]).
     #[serde(default = "one", skip_serializing_if = "is_one")]
     pub texture_scale: f64,
+    /// The device's accelerometer, when it has one (`docs/building.md` §6): its record is
+    /// written to the capture's `[accelerometer]` and the true gravity to `[truth]`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub accelerometer: Option<AccelerometerSim>,
 }
 
 fn is_reference(m: &PhysicsModel) -> bool {
@@ -137,6 +144,7 @@ impl Default for SimParams {
             physics: PhysicsModel::Reference,
             reflectance: Reflectance::Lambertian,
             texture_scale: 1.0,
+            accelerometer: None,
         }
     }
 }
@@ -482,8 +490,10 @@ pub fn simulate(spec: &SimSpec) -> Result<(Capture, SimReport), SimError> {
             // The reference model is left implicit (as in `[simulation]`), so the reference
             // captures' `capture.toml` is what it was before the models existed.
             physics_model: (p.physics != PhysicsModel::Reference).then_some(p.physics),
+            gravity: p.accelerometer.as_ref().map(|a| a.gravity_camera),
         }),
         simulation: Some(simulation),
+        accelerometer: p.accelerometer.as_ref().map(|a| a.record(p.seed)),
     };
     let capture = Capture {
         meta,

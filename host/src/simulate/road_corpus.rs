@@ -14,7 +14,7 @@ use rand_pcg::Pcg64;
 use tangent_core::calibration::Calibration;
 use tangent_core::instrument::road::{road_head_calibration, ROAD_HEAD_STANDOFF};
 
-use super::corpus::CorpusEntry;
+use super::rig::CorpusEntry;
 use super::{SimParams, SimSpec};
 use crate::capture::Mode;
 use crate::truth::{Object, Plane, Road, Texture, Wave};

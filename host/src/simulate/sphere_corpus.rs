@@ -9,7 +9,7 @@
 use rand::{RngExt, SeedableRng};
 use rand_pcg::Pcg64;
 
-use super::corpus::{two_plane_calibration, CorpusEntry};
+use super::rig::{two_plane_calibration, CorpusEntry};
 use super::{SimParams, SimSpec};
 use crate::capture::Mode;
 use crate::truth::{Cylinder, Object, Plane, Sphere, Texture};

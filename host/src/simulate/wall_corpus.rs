@@ -8,8 +8,9 @@ use rand::{RngExt, SeedableRng};
 use rand_pcg::Pcg64;
 use tangent_core::calibration::Calibration;
 
-use super::corpus::{lab_light, one_plane_calibration, two_plane_calibration};
+use super::accelerometer::AccelerometerSim;
 use super::render::Lighting;
+use super::rig::{lab_light, one_plane_calibration, two_plane_calibration};
 use super::{SimParams, SimSpec};
 use crate::capture::Mode;
 use crate::truth::{Cylinder, Object, Plane, Texture};
@@ -200,10 +201,12 @@ pub fn entries() -> Vec<WallEntry> {
     ]
 }
 
-/// The simulation settings of every wall capture: indoor light, the surface's roughness.
+/// The simulation settings of every wall capture: indoor light, the surface's roughness, the
+/// reference accelerometer.
 pub fn wall_params(params: &mut SimParams) {
     params.lighting = room_light();
     params.surface_roughness_m = 3e-4;
+    params.accelerometer = Some(AccelerometerSim::reference());
 }
 
 /// What a random room shows.

@@ -375,7 +375,10 @@ fn assert_nothing_lost_unnamed(
     let mut recovered = vec![false; records.len()];
     let mut last = None;
     for l in &scan.records {
-        let i = origin[l.offset].and_then(|b| record_of(ranges, b));
+        // An inserted byte equal to its neighbour makes the two indistinguishable: a record
+        // may then begin on the inserted copy, so it is mapped by its first original byte.
+        let first_original = origin[l.offset..].iter().flatten().next();
+        let i = first_original.and_then(|&b| record_of(ranges, b));
         let Some(i) = i.filter(|&i| records[i] == l.record) else {
             return Err(TestCaseError::fail(format!("invented: {l:?}")));
         };

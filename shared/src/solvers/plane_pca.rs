@@ -125,6 +125,60 @@ where
     })
 }
 
+/// Most laser lines [`add_line_bias`] tells apart (the calibration's plane limit).
+pub const MAX_LINES: usize = crate::calibration::MAX_PLANES;
+
+/// Adds to `fit`'s covariance the error a common stripe-row bias of 1σ `bias_px` on each
+/// laser line puts on the plane (`docs/building.md`, eq. (B3b)): the peak estimator's
+/// phase-dependent bias is the same for every point of a line that sits at one subpixel row
+/// phase (a frontal wall), so it does not average out along the line, and two parallel lines
+/// 5 cm apart turn a 0.01 px difference into tenths of a degree of pitch.
+///
+/// `samples`: `(line, point, σ, ∂X/∂v)` with the σ of the fit (its weights) and
+/// [`crate::noise::displacement_per_pixel`]; lines at or beyond [`MAX_LINES`] are ignored.
+/// The weighted least-squares response of the plane (two in-plane rotations `α_k` about the
+/// centroid and the offset) to residual shifts `δr_i = n·∂X_i/∂v · b` is
+/// `α_k = Σ w_i ((X_i − c)·e_k) δr_i / (W λ_k)`, `δρ = Σ w_i δr_i / W`; independent biases per
+/// line add their squares.
+pub fn add_line_bias<I>(fit: &mut PlaneFit, samples: I, bias_px: Real)
+where
+    I: Iterator<Item = (usize, Vec3, Real, Vec3)>,
+{
+    if !(bias_px > 0.0) {
+        return;
+    }
+    let mut per_line = [[0.0 as Real; 3]; MAX_LINES];
+    let mut w_sum = 0.0 as Real;
+    for (line, p, s, dxdv) in samples {
+        if !(s > 0.0 && s.is_finite()) {
+            continue;
+        }
+        let w = 1.0 / (s * s);
+        w_sum += w;
+        let Some(g) = per_line.get_mut(line) else {
+            continue;
+        };
+        let shift = w * fit.normal.dot(&dxdv);
+        let arm = p - fit.centroid;
+        g[0] += shift * arm.dot(&fit.axes[0]);
+        g[1] += shift * arm.dot(&fit.axes[1]);
+        g[2] += shift;
+    }
+    if !(w_sum > 0.0 && fit.spread[0] > 0.0 && fit.spread[1] > 0.0) {
+        return;
+    }
+    let b2 = bias_px * bias_px;
+    let mut centroid_var = fit.centroid_sigma * fit.centroid_sigma;
+    for g in per_line {
+        let dn = fit.axes[0] * (g[0] / (w_sum * fit.spread[0]))
+            + fit.axes[1] * (g[1] / (w_sum * fit.spread[1]));
+        fit.normal_cov += dn * dn.transpose() * b2;
+        let drho = g[2] / w_sum;
+        centroid_var += drho * drho * b2;
+    }
+    fit.centroid_sigma = sqrt(centroid_var);
+}
+
 /// Below this ratio of the second to the first spread the points are a line, not an area.
 const LINE_RATIO: Real = 1e-8;
 

@@ -154,3 +154,47 @@ fn angle_distance_and_plumb_of_known_planes() {
     assert!((point - Vec3::new(0.0, 0.0, 2.0)).norm() < TOL);
     assert!(plane_intersection(a.normal, a.offset, far.normal, far.offset).is_none());
 }
+
+#[test]
+fn a_line_bias_predicts_the_tilt_it_causes() {
+    // A frontal wall at 1.5 m lit by two lines 50 mm apart; the lower line's points all move
+    // by the same ∂X/∂v·b (a stripe-row bias b shared along the line). The rotation the refit
+    // shows must be what add_line_bias predicts for that line alone.
+    let normal = Vec3::z();
+    let pts = two_lines(normal, 1.5, 0.5, 100, 0.0, 1);
+    let sigma = 1e-3;
+    let dxdv = Vec3::new(0.0, 1.5e-3, -22.5e-3); // ≈ z/f, −z²/(f e) at 1.5 m, e = 0.1 m
+    let bias = 0.01;
+    let shifted = |i: usize, p: Vec3| if i >= 100 { p + dxdv * bias } else { p };
+    let clean = fit_plane(pts[..200].iter().map(|&p| (p, sigma))).unwrap();
+    let biased = fit_plane(
+        pts[..200]
+            .iter()
+            .enumerate()
+            .map(|(i, &p)| (shifted(i, p), sigma)),
+    )
+    .unwrap();
+    let tilt = (biased.normal - clean.normal).dot(&Vec3::y()).abs();
+    // Line 0 is counted in the weights but not biased (line index beyond MAX_LINES).
+    let mut fit = clean;
+    fit.normal_cov = Mat3::zeros();
+    fit.centroid_sigma = 0.0;
+    let lines = pts[..200]
+        .iter()
+        .enumerate()
+        .map(|(i, &p)| (if i >= 100 { 1 } else { MAX_LINES }, p, sigma, dxdv));
+    add_line_bias(&mut fit, lines, bias);
+    let predicted = sqrt(fit.normal_variance_along(Vec3::y()));
+    assert!(tilt > 1e-4, "the bias tilts the plane: {tilt}");
+    assert!(
+        (predicted - tilt).abs() <= 0.02 * tilt + TOL / 10.0,
+        "predicted {predicted} rad, refit moved {tilt} rad"
+    );
+    // The plane's move along its normal at the centroid.
+    let shift = biased.signed_distance(clean.centroid).abs();
+    assert!((fit.centroid_sigma - shift).abs() <= 0.02 * shift + TOL);
+    // No bias, no change.
+    let mut same = clean;
+    add_line_bias(&mut same, core::iter::empty(), 0.01);
+    assert_eq!(same, clean);
+}

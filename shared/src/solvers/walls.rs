@@ -13,11 +13,11 @@ use crate::real::Float;
 use crate::real::{norm, sqrt, Real, Vec3, PI};
 
 use crate::laser_plane::LaserPlane;
-use crate::noise::DisplacementField;
+use crate::noise::{displacement_per_pixel, DisplacementField};
 
 use super::plane_pca::{
-    fit_plane, normal_angle, orientation, parallel_distance, plane_intersection, plumb_deviation,
-    Estimate, Orientation, PlaneFit,
+    add_line_bias, fit_plane, normal_angle, orientation, parallel_distance, plane_intersection,
+    plumb_deviation, Estimate, Orientation, PlaneFit,
 };
 use super::result::Flags;
 use super::SolveError;
@@ -71,6 +71,11 @@ pub struct WallParams {
     /// A wall whose rms distance from its plane exceeds this, and its χ² per point
     /// `coplanar_chi2`, is not flat (metres).
     pub max_rms: Real,
+    /// 1σ of the stripe-row bias common to all points of one laser line (pixels): the peak
+    /// estimator's phase-dependent bias with 8-bit samples and speckle, 0.006–0.011 px
+    /// (`docs/subpixel-study.md`), 0.009 px measured on the frontal wall capture
+    /// (`docs/building.md`, "The pitch bias"). 0 leaves it out.
+    pub line_bias_px: Real,
     /// Gravity in the camera frame (pointing down, any length) and its direction's 1σ
     /// (radians), when the instrument knows it: enables [`WallSolution::plumb`].
     pub gravity: Option<(Vec3, Real)>,
@@ -95,6 +100,7 @@ impl Default for WallParams {
             parallel_max: 2.0 * PI / 180.0,
             curved_max: 30.0 * PI / 180.0,
             max_rms: 6.0e-3,
+            line_bias_px: 0.01,
             gravity: None,
         }
     }
@@ -367,6 +373,18 @@ fn samples<'a>(
     trim: usize,
     roughness: Real,
 ) -> impl Iterator<Item = (Vec3, Real)> + Clone + 'a {
+    line_samples(input, runs, take, normal, trim, roughness).map(|(_, p, s)| (p, s))
+}
+
+/// [`samples`] with each point's laser line (curve index).
+fn line_samples<'a>(
+    input: &'a WallInput<'a>,
+    runs: &'a [Run],
+    take: impl Fn(usize, &Run) -> bool + Clone + 'a,
+    normal: Option<Vec3>,
+    trim: usize,
+    roughness: Real,
+) -> impl Iterator<Item = (usize, Vec3, Real)> + Clone + 'a {
     runs.iter()
         .enumerate()
         .filter(move |(i, r)| take(*i, r))
@@ -383,7 +401,7 @@ fn samples<'a>(
                         Some(n) => s * field.direction(p).dot(&n).abs(),
                         None => s,
                     };
-                    (p, sqrt(along * along + roughness * roughness))
+                    (k, p, sqrt(along * along + roughness * roughness))
                 })
         })
 }
@@ -557,6 +575,21 @@ fn refit(
             params.roughness,
         ))?;
     }
+    // docs/building.md, eq. (B3b): the stripe-row bias shared by each line's points.
+    let lines = line_samples(
+        input,
+        runs,
+        take,
+        Some(plane.normal),
+        params.trim_points,
+        params.roughness,
+    )
+    .map(|(k, p, s)| {
+        let dxdv = displacement_per_pixel(&input.planes[k], params.focal_px, p)
+            .unwrap_or_else(|_| Vec3::zeros());
+        (k, p, s, dxdv)
+    });
+    add_line_bias(&mut plane, lines, params.line_bias_px);
     Ok(plane)
 }
 
@@ -664,7 +697,9 @@ fn segment(
         let corner_end = next.and_then(|r| {
             let other = &walls[r.wall? as usize].plane;
             let along = dir.dot(&other.normal);
-            if along.abs() < 1e-3 {
+            // A parallel wall beyond a jump (a niche's front wall seen past a jamb too thin
+            // to fit) meets the line nowhere near: that end is an edge, not a corner.
+            if along.abs() < params.parallel_max.sin() {
                 return None;
             }
             let t = (other.offset - other.normal.dot(&origin)) / along;
