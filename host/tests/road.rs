@@ -32,7 +32,7 @@ fn random_profile(seed: u64) -> Vec<Vec2> {
             (
                 rng.random_range(0.05e-3..0.8e-3),
                 rng.random_range(1.0e-3..40e-3),
-                rng.random_range(0.0..6.283),
+                rng.random_range(0.0..std::f64::consts::TAU),
             )
         })
         .collect();
