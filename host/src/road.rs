@@ -166,12 +166,13 @@ pub fn raw_profile(
     Ok(out)
 }
 
+/// What [`mpd_of_profile`] gives: the MPD, each segment, the drop-out-corrected heights and
+/// the filtered resampled profile.
+pub type ProfileDepth = (MeanProfileDepth, Vec<SegmentDepth>, Vec<f64>, Vec<f64>);
+
 /// The MPD chain on a profile (allocating the core's buffers): the result, each segment,
 /// the drop-out-corrected heights and the filtered resampled profile.
-pub fn mpd_of_profile(
-    profile: &[Vec2],
-    params: &RoadParams,
-) -> Result<(MeanProfileDepth, Vec<SegmentDepth>, Vec<f64>, Vec<f64>), RoadError> {
+pub fn mpd_of_profile(profile: &[Vec2], params: &RoadParams) -> Result<ProfileDepth, RoadError> {
     let n = profile.len();
     let bins = (params.profile.window_length / params.mpd.spacing).ceil() as usize + 2;
     let mut heights = vec![0.0; n];

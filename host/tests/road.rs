@@ -32,7 +32,7 @@ fn random_profile(seed: u64) -> Vec<Vec2> {
             (
                 rng.random_range(0.05e-3..0.8e-3),
                 rng.random_range(1.0e-3..40e-3),
-                rng.random_range(0.0..6.283),
+                rng.random_range(0.0..std::f64::consts::TAU),
             )
         })
         .collect();
@@ -162,12 +162,12 @@ fn flat_target_and_furrow_meet_their_targets() {
     assert!((measured - truth).abs() <= 10e-6, "{measured} vs {truth}");
 }
 
-/// Fails today: the 630 µm furrow reads 663.5 µm against its truth 630.1 µm (+33 µm; the
-/// 146 µm one +8 µm): the pipeline's Savitzky–Golay curve smoothing (7 columns, negative end
-/// weights) overshoots the land beside a furrow's edge by ≈ 5 % of the step. Un-ignore when
-/// the road mode's curve smoothing is settled (`docs/accuracy.md`, road section).
+/// Fails today: the 630 µm furrow reads 663.5 µm against its truth 630.1 µm (+33 µm, 5.3 %;
+/// the 146 µm one passes its ±10 µm). Cause not yet found (suspected: the edges, e.g. the
+/// curve smoothing's overshoot beside a step); un-ignore when fixed (`docs/accuracy.md`,
+/// road section).
 #[test]
-#[ignore = "630 µm furrow reads +33 µm (target ±15 µm): curve-smoothing overshoot at the edges, open"]
+#[ignore = "630 µm furrow reads +33 µm (target ±15 µm): cause open, docs/accuracy.md road section"]
 fn the_630_um_furrow_meets_its_target() {
     let params = RoadParams::default();
     let spec = furrow_spec(630e-6, 77_012);

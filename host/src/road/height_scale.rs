@@ -44,7 +44,7 @@ pub fn fit_height_scale(steps: &[f64], measured: &[f64]) -> Option<HeightScaleFi
         .map(|(s, m)| (s - ms) * (m - mm))
         .sum();
     let gain = ssm / sss;
-    if !(gain > 0.0) {
+    if gain.is_nan() || gain <= 0.0 {
         return None;
     }
     let offset = mm - gain * ms;
@@ -89,7 +89,7 @@ pub fn furrow_depth(profile: &[Vec2], pitch: f64, width: f64) -> Option<FurrowDe
         .copied()
         .filter(|p| p.y.is_finite())
         .collect();
-    if valid.len() < 20 || !(pitch > 4.0 * BIN) {
+    if valid.len() < 20 || pitch.is_nan() || pitch <= 4.0 * BIN {
         return None;
     }
     // Detrend (regression line).
@@ -107,7 +107,7 @@ pub fn furrow_depth(profile: &[Vec2], pitch: f64, width: f64) -> Option<FurrowDe
         sum[k] += h;
         count[k] += 1;
     }
-    if count.iter().any(|&c| c == 0) {
+    if count.contains(&0) {
         return None;
     }
     let folded: Vec<(f64, f64)> = (0..bins)
