@@ -13,8 +13,9 @@ use crate::real::{norm, sqrt, Real, Vec3};
 
 use nalgebra::{SMatrix, SVector};
 
+use super::correlation::correlation_length;
 use super::lm::{minimise, Evaluated, LeastSquares, LmParams, NormalEquations};
-use super::sphere_sections::{correlation_inflation, Sphere};
+use super::sphere_sections::Sphere;
 use super::SolveError;
 
 /// Settings of [`fit_sphere`].
@@ -45,7 +46,8 @@ pub struct SphereFit {
     pub sphere: Sphere,
     /// Covariance of `(Cx, Cy, Cz, R)` (m²): `(JᵀWJ)⁻¹` scaled by the residuals' own variance
     /// (`χ²/ν`: the σ-weights set the points' relative weights, the data their scale) and by
-    /// the curves' lag-one correlation (`docs/sphere.md`, "Uncertainty of the joint fit").
+    /// the residuals' correlation length along the curves (`docs/sphere.md`, "Uncertainty of
+    /// the joint fit").
     pub covariance: SMatrix<Real, 4, 4>,
     /// `Σw·(d/σ)² / (Σw − 4)`: 1 when the residuals are as large as the points' σ predict.
     pub reduced_chi2: Real,
@@ -202,17 +204,33 @@ pub fn fit_sphere(
         return Err(SolveError::TooFewPoints);
     }
     let reduced_chi2 = min.normal.cost / (weight_sum - 4.0);
-    // Residual correlation along each curve (speckle, stripe bending) over the inliers.
+    // Residual correlation along each curve (speckle, smoothing, defocus) over the inliers:
+    // curve k's n_k points count as n_k/L_k independent ones, and the fit's variance is
+    // that of Σ n_k/L_k points (`docs/sphere.md`, "Uncertainty of the joint fit").
     let cut = problem.reference.map_or(Real::INFINITY, |(_, c)| c);
-    let mut inflation: Real = 1.0;
+    let (mut used, mut independent) = (0.0, 0.0);
     for (curve, sig) in curves.iter().zip(sigmas) {
-        let residuals = curve
+        let mut n = 0;
+        for (u, slot) in curve
             .iter()
             .zip(sig.iter())
-            .map(|(x, s)| (norm(&(x - sphere.centre)) - sphere.radius) / s);
-        let f = correlation_inflation(residuals, cut);
-        inflation = inflation.max(f);
+            .map(|(x, s)| (norm(&(x - sphere.centre)) - sphere.radius) / s)
+            .filter(|u| u.abs() < cut)
+            .zip(buf.iter_mut())
+        {
+            *slot = u;
+            n += 1;
+        }
+        if n > 0 {
+            used += n as Real;
+            independent += n as Real / correlation_length(&buf[..n]);
+        }
     }
+    let inflation = if independent > 0.0 {
+        used / independent
+    } else {
+        1.0
+    };
     let covariance =
         min.normal.jtj.try_inverse().ok_or(SolveError::Degenerate)? * (reduced_chi2 * inflation);
     Ok(SphereFit {

@@ -19,6 +19,7 @@ use crate::real::{norm, sqrt, Mat3, Real, Vec2, Vec3};
 use nalgebra::{SMatrix, SVector};
 
 use super::circle::{fit_hyper, fit_robust, CircleFit, RobustParams};
+use super::correlation::correlation_length;
 use super::lm::{minimise, Evaluated, LeastSquares, LmParams, NormalEquations};
 use super::SolveError;
 use crate::laser_plane::LaserPlane;
@@ -83,7 +84,7 @@ impl SphereEstimate {
 
 /// The circle section of one plane's curve: a robust geometric circle fit
 /// ([`fit_robust`] from [`fit_hyper`]) of the in-plane points, its covariance from the
-/// residuals' own scale, inflated by their lag-one correlation along the curve
+/// residuals' own scale, inflated by their correlation length along the curve
 /// (`docs/sphere.md`, "Section covariance").
 ///
 /// `points` are the plane's 3-D points in curve order; `flat` (≥ their count) receives their
@@ -106,8 +107,7 @@ pub fn circle_section(
     let fit = fit_robust(flat, start, robust, scratch)?;
     let c = fit.circle;
     let cutoff = robust.tuning * fit.rms_residual.max(robust.min_scale);
-    let residuals = flat.iter().map(|q| norm(&(q - c.centre)) - c.radius);
-    let inflation = correlation_inflation(residuals, cutoff);
+    let inflation = correlation_length(&inlier_residuals(flat, &c, cutoff, scratch));
     // The residuals' own scale (the point noise model overstates the noise normal to the
     // surface, `docs/sphere.md`), floored at 1 µm so that exact data keep an invertible
     // covariance.
@@ -133,29 +133,25 @@ pub fn circle_section(
     ))
 }
 
-/// Variance inflation `(1 + ρ₁)/(1 − ρ₁)` (at least 1, at most 25) for residuals with lag-one
-/// correlation `ρ₁` along the curve: an AR(1) sequence of `n` residuals carries the
-/// information of `n·(1 − ρ₁)/(1 + ρ₁)` independent ones. Points whose residual exceeds
-/// `cutoff` (outliers) are skipped. `residuals` come in curve order.
-pub fn correlation_inflation(residuals: impl Iterator<Item = Real>, cutoff: Real) -> Real {
-    let (mut sxx, mut sxy) = (0.0, 0.0);
-    let mut previous: Option<Real> = None;
-    for d in residuals {
-        if !(d.abs() <= cutoff) {
-            previous = None;
-            continue;
-        }
-        sxx += d * d;
-        if let Some(prev) = previous {
-            sxy += d * prev;
-        }
-        previous = Some(d);
+/// The residuals `|q − c| − r` of the points within `cutoff` of the circle, in curve order,
+/// written to the front of `buf` (as long as `points`).
+fn inlier_residuals<'b>(
+    points: &[Vec2],
+    circle: &super::circle::Circle,
+    cutoff: Real,
+    buf: &'b mut [Real],
+) -> &'b [Real] {
+    let mut n = 0;
+    for (q, slot) in points
+        .iter()
+        .map(|q| norm(&(q - circle.centre)) - circle.radius)
+        .filter(|d| d.abs() <= cutoff)
+        .zip(buf.iter_mut())
+    {
+        *slot = q;
+        n += 1;
     }
-    if !(sxx > 0.0) {
-        return 1.0;
-    }
-    let rho = (sxy / sxx).clamp(0.0, 0.92);
-    (1.0 + rho) / (1.0 - rho)
+    &buf[..n]
 }
 
 /// Angle spanned by the points `keep` accepts, seen from `centre`: the range of their polar
