@@ -134,7 +134,7 @@ impl<'w> PipelineMeasurer<'w> {
         profile: Result<pipeline::Profile, PipelineError>,
         cal: &Calibration,
     ) -> Result<Measurement, Failure> {
-        let profile = profile.map_err(|e| Failure::of(&e))?;
+        let profile = profile.map_err(|e| Failure::of(&instrument::image_failure(mode, e)))?;
         let t = self.now();
         // 8-bit frames: full scale 255.
         let solved = instrument::solve(mode, &profile, 255, cal, &self.params, &mut self.ws);

@@ -18,6 +18,10 @@ use crate::simulate::physics::{self, model_for_seed};
 use crate::simulate::{corpus::random_stem, simulate};
 use crate::truth::{Object, PhysicsModel};
 
+pub mod table;
+
+use table::{binned_rows, error_stats, failures_and_worst, ErrorStats, Evaluated, MethodDiameter};
+
 /// The frozen seed sets of the evaluation (`docs/accuracy.md`, "Seed sets"). A set's
 /// transversal captures use seeds `transversal_first + i`, its tilted ones
 /// `tilted_first + i`, `i < MAX_CAPTURES`; the four ranges are disjoint.
@@ -41,6 +45,15 @@ impl SeedSet {
             (SeedSet::Tuning, true) => 1_500_000,
             (SeedSet::Report, false) => 7_000_000,
             (SeedSet::Report, true) => 7_500_000,
+        }
+    }
+
+    /// First seed of the set's random balls (`docs/accuracy.md`, "Spheres"): tuning from
+    /// 2 000 000 (the balls the sphere solver's σ was calibrated on), report from 8 000 000.
+    pub fn first_sphere_seed(self) -> u64 {
+        match self {
+            SeedSet::Tuning => 2_000_000,
+            SeedSet::Report => 8_000_000,
         }
     }
 
@@ -140,78 +153,29 @@ fn stem_geometry(objects: &[Object]) -> (f64, f64) {
     (f64::NAN, f64::NAN)
 }
 
-/// Error statistics of a set of samples.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct Stats {
-    /// Samples.
-    pub n: usize,
-    /// Samples without a reading.
-    pub no_reading: usize,
-    /// Mean absolute error of the reported diameter (m).
-    pub mae: f64,
-    /// Mean signed error (m).
-    pub bias: f64,
-    /// Mean absolute error of the three-tangent diameter (m), over samples where it exists.
-    pub mae_three_tangent: f64,
-    /// Samples with a three-tangent diameter.
-    pub n_three_tangent: usize,
-    /// Mean absolute error of the fit diameter (m), over samples where it exists.
-    pub mae_fit: f64,
-    /// Samples with a fit diameter.
-    pub n_fit: usize,
-    /// Share of readings within 1 % of the true diameter.
-    pub within_1pct: f64,
-    /// 95th percentile of |error| / diameter over readings.
-    pub p95_relative: f64,
-    /// Share of readings whose |error| ≤ 2 × their stated 1σ (calibrated uncertainty check:
-    /// ≈ 95 % for a Gaussian error).
-    pub within_2sigma: f64,
+/// Statistics of `samples` (method columns: three-tangent, fit; within 1 %).
+pub fn stats(samples: &[&Sample]) -> ErrorStats {
+    error_stats(samples, &STEM_METHODS, 0.01)
 }
 
-/// Statistics of `samples`.
-pub fn stats(samples: &[&Sample]) -> Stats {
-    let mut s = Stats {
-        n: samples.len(),
-        ..Default::default()
-    };
-    let mut rel = Vec::new();
-    let (mut sum_abs, mut sum, mut within, mut within2) = (0.0, 0.0, 0usize, 0usize);
-    let (mut tt, mut fit) = (0.0, 0.0);
-    for x in samples {
-        let r = &x.reading;
-        if let Some(d) = r.three_tangent_diameter_m {
-            tt += (d - x.truth_m).abs();
-            s.n_three_tangent += 1;
-        }
-        if let Some(d) = r.fit_diameter_m {
-            fit += (d - x.truth_m).abs();
-            s.n_fit += 1;
-        }
-        match r.diameter_m {
-            Some(d) => {
-                let e = d - x.truth_m;
-                sum_abs += e.abs();
-                sum += e;
-                rel.push(e.abs() / x.truth_m);
-                within += (e.abs() <= 0.01 * x.truth_m) as usize;
-                within2 += (e.abs() <= 2.0 * r.uncertainty_m.unwrap_or(0.0)) as usize;
-            }
-            None => s.no_reading += 1,
-        }
+const STEM_METHODS: [MethodDiameter; 2] = [|r| r.three_tangent_diameter_m, |r| r.fit_diameter_m];
+
+impl Evaluated for Sample {
+    fn seed(&self) -> u64 {
+        self.seed
     }
-    let k = rel.len().max(1) as f64;
-    s.mae = sum_abs / k;
-    s.bias = sum / k;
-    s.within_1pct = within as f64 / k;
-    s.within_2sigma = within2 as f64 / k;
-    s.mae_three_tangent = tt / s.n_three_tangent.max(1) as f64;
-    s.mae_fit = fit / s.n_fit.max(1) as f64;
-    rel.sort_by(f64::total_cmp);
-    s.p95_relative = rel
-        .get(((rel.len() as f64 * 0.95).ceil() as usize).saturating_sub(1))
-        .copied()
-        .unwrap_or(f64::NAN);
-    s
+    fn truth_m(&self) -> f64 {
+        self.truth_m
+    }
+    fn distance_m(&self) -> f64 {
+        self.distance_m
+    }
+    fn reading(&self) -> &Reading {
+        &self.reading
+    }
+    fn placement(&self) -> String {
+        format!("at {:.2} m, tilt {:.0}°", self.distance_m, self.tilt_deg)
+    }
 }
 
 /// Distance bins of the tables (metres, half-open; the last one closes at 3 m).
@@ -223,7 +187,7 @@ const DIAMETER_BINS_MM: [(f64, f64); 4] = [
     (200.0, 400.0),
     (400.0, 1000.01),
 ];
-fn row(label: &str, s: &Stats) -> String {
+fn row(label: &str, s: &ErrorStats) -> String {
     let mm = |v: f64| format!("{:.2}", v * 1e3);
     format!(
         "| {label} | {} | {} | {} | {} | {} ({}) | {} ({}) | {:.0} % | {:.2} % | {:.0} % |\n",
@@ -231,11 +195,11 @@ fn row(label: &str, s: &Stats) -> String {
         s.no_reading,
         mm(s.mae),
         mm(s.bias),
-        mm(s.mae_three_tangent),
-        s.n_three_tangent,
-        mm(s.mae_fit),
-        s.n_fit,
-        s.within_1pct * 100.0,
+        mm(s.by_method[0].0),
+        s.by_method[0].1,
+        mm(s.by_method[1].0),
+        s.by_method[1].1,
+        s.within_tolerance * 100.0,
         s.p95_relative * 100.0,
         s.within_2sigma * 100.0
     )
@@ -248,70 +212,14 @@ pub fn section(title: &str, samples: &[Sample]) -> String {
     let mut out = format!("### {title}\n\n{HEADER}");
     let all: Vec<&Sample> = samples.iter().collect();
     out += &row("**all**", &stats(&all));
-    for (lo, hi) in DIAMETER_BINS_MM {
-        let b: Vec<&Sample> = samples
-            .iter()
-            .filter(|s| (lo..hi).contains(&(s.truth_m * 1e3)))
-            .collect();
-        if !b.is_empty() {
-            out += &row(&format!("d {lo:.0}–{:.0} mm", hi.floor()), &stats(&b));
-        }
-    }
-    for (lo, hi) in DISTANCE_BINS_M {
-        let b: Vec<&Sample> = samples
-            .iter()
-            .filter(|s| (lo..hi).contains(&s.distance_m))
-            .collect();
-        if !b.is_empty() {
-            out += &row(&format!("z {lo:.1}–{:.1} m", hi.floor()), &stats(&b));
-        }
-    }
-    let failures: Vec<&Sample> = samples
-        .iter()
-        .filter(|s| s.reading.error.is_some())
-        .collect();
-    if !failures.is_empty() {
-        let _ = writeln!(out, "\nNo reading ({}):\n", failures.len());
-        for f in failures.iter().take(12) {
-            let _ = writeln!(
-                out,
-                "- seed {}: d {:.0} mm at {:.2} m, tilt {:.0}°: {}",
-                f.seed,
-                f.truth_m * 1e3,
-                f.distance_m,
-                f.tilt_deg,
-                f.reading.error.as_deref().unwrap_or("")
-            );
-        }
-    }
-    let mut worst: Vec<&Sample> = samples
-        .iter()
-        .filter(|s| s.reading.diameter_m.is_some())
-        .collect();
-    worst.sort_by(|a, b| {
-        let e = |s: &Sample| (s.reading.diameter_m.unwrap_or(0.0) - s.truth_m).abs();
-        e(b).total_cmp(&e(a))
-    });
-    let _ = writeln!(out, "\nLargest errors:\n");
-    for w in worst.iter().take(5) {
-        let d = w.reading.diameter_m.unwrap_or(f64::NAN);
-        let _ = writeln!(
-            out,
-            "- seed {}: truth {:.1} mm at {:.2} m, tilt {:.0}° → {:.1} mm ({:+.1} mm, ±{:.1} mm, {}{}{})",
-            w.seed,
-            w.truth_m * 1e3,
-            w.distance_m,
-            w.tilt_deg,
-            d * 1e3,
-            (d - w.truth_m) * 1e3,
-            w.reading.uncertainty_m.unwrap_or(f64::NAN) * 1e3,
-            w.reading.method.unwrap_or("?"),
-            if w.reading.flags.is_empty() { "" } else { "; " },
-            w.reading.flags.join(", ")
-        );
-    }
-    out.push('\n');
-    out
+    out += &binned_rows(
+        samples,
+        &DIAMETER_BINS_MM,
+        &DISTANCE_BINS_M,
+        "z",
+        |label, b| row(label, &stats(b)),
+    );
+    out + &failures_and_worst(samples, 1)
 }
 
 /// The metrics of one pipeline (Tangent or the baseline) over a set of captures.

@@ -1,5 +1,5 @@
 //! Accuracy of the sphere instrument against the simulator's truth (`docs/accuracy.md`,
-//! "Spheres"): random balls ([`random_sphere`]) measured end to end by the core, tabulated by
+//! "Spheres"): random balls ([`crate::simulate::sphere_corpus::random_sphere`]) measured end to end by the core, tabulated by
 //! diameter and distance with the three methods side by side.
 
 use std::fmt::Write as _;
@@ -8,8 +8,12 @@ use rayon::prelude::*;
 use tangent_core::pipeline::PipelineConfig;
 use tangent_core::solvers::stem::CylinderParams;
 
+use crate::evaluate::table::{
+    binned_rows, error_stats, failures_and_worst, ErrorStats, Evaluated, MethodDiameter,
+};
 use crate::measure::{measure_loaded, Reading};
-use crate::simulate::{simulate, sphere_corpus::random_sphere};
+use crate::simulate::simulate;
+use crate::simulate::sphere_corpus::{Finish, RandomBall};
 use crate::truth::Object;
 
 /// One evaluated ball.
@@ -17,6 +21,8 @@ use crate::truth::Object;
 pub struct SphereSample {
     /// Simulator seed.
     pub seed: u64,
+    /// What the seed drew.
+    pub ball: RandomBall,
     /// True diameter (m).
     pub truth_m: f64,
     /// True distance of the centre from the camera (m).
@@ -32,7 +38,8 @@ pub fn run(first_seed: u64, count: u64) -> anyhow::Result<Vec<SphereSample>> {
     (first_seed..first_seed + count)
         .into_par_iter()
         .map(|seed| {
-            let spec = random_sphere(seed);
+            let ball = RandomBall::draw(seed);
+            let spec = ball.spec();
             let (capture, _) = simulate(&spec)?;
             let outcome =
                 measure_loaded(&capture, &format!("seed {seed}"), None, &config, &params)?;
@@ -49,6 +56,7 @@ pub fn run(first_seed: u64, count: u64) -> anyhow::Result<Vec<SphereSample>> {
                 .unwrap_or((f64::NAN, f64::NAN));
             Ok(SphereSample {
                 seed,
+                ball,
                 truth_m,
                 distance_m,
                 reading: outcome.reading,
@@ -57,89 +65,49 @@ pub fn run(first_seed: u64, count: u64) -> anyhow::Result<Vec<SphereSample>> {
         .collect()
 }
 
-/// Error statistics of a set of balls.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct SphereStats {
-    /// Balls.
-    pub n: usize,
-    /// Balls without a reading.
-    pub no_reading: usize,
-    /// Mean absolute error of the reported diameter (m).
-    pub mae: f64,
-    /// Mean signed error (m).
-    pub bias: f64,
-    /// MAE of the joint fit, the sections and the three-tangent construction (m), each over
-    /// the balls where it gave a diameter, with those counts.
-    pub by_method: [(f64, usize); 3],
-    /// Share of readings within 0.5 % of the true diameter.
-    pub within_half_pct: f64,
-    /// 95th percentile of |error| / diameter.
-    pub p95_relative: f64,
-    /// Share of readings with |error| ≤ 2 × the stated 1σ.
-    pub within_2sigma: f64,
-    /// The same with the random part of the 1σ only (the simulation's calibration is exact).
-    pub within_2sigma_random: f64,
+impl Evaluated for SphereSample {
+    fn seed(&self) -> u64 {
+        self.seed
+    }
+    fn truth_m(&self) -> f64 {
+        self.truth_m
+    }
+    fn distance_m(&self) -> f64 {
+        self.distance_m
+    }
+    fn reading(&self) -> &Reading {
+        &self.reading
+    }
+    fn placement(&self) -> String {
+        format!(
+            "{}, centre at {:.2} m",
+            if self.ball.finish == Finish::Shiny {
+                "steel"
+            } else {
+                "matt"
+            },
+            self.distance_m
+        )
+    }
 }
 
-/// Statistics of `samples`.
-pub fn stats(samples: &[&SphereSample]) -> SphereStats {
-    let mut s = SphereStats {
-        n: samples.len(),
-        ..Default::default()
-    };
-    let mut rel = Vec::new();
-    let (mut sum_abs, mut sum) = (0.0, 0.0);
-    let (mut half, mut w2, mut w2r) = (0usize, 0usize, 0usize);
-    for x in samples {
-        let r = &x.reading;
-        for (k, d) in [
-            r.fit_diameter_m,
-            r.sections_diameter_m,
-            r.three_tangent_diameter_m,
-        ]
-        .into_iter()
-        .enumerate()
-        {
-            if let Some(d) = d {
-                s.by_method[k].0 += (d - x.truth_m).abs();
-                s.by_method[k].1 += 1;
-            }
-        }
-        match r.diameter_m {
-            Some(d) => {
-                let e = d - x.truth_m;
-                sum_abs += e.abs();
-                sum += e;
-                rel.push(e.abs() / x.truth_m);
-                half += (e.abs() <= 0.005 * x.truth_m) as usize;
-                w2 += (e.abs() <= 2.0 * r.uncertainty_m.unwrap_or(0.0)) as usize;
-                w2r += (e.abs() <= 2.0 * r.random_uncertainty_m.unwrap_or(0.0)) as usize;
-            }
-            None => s.no_reading += 1,
-        }
-    }
-    let k = rel.len().max(1) as f64;
-    s.mae = sum_abs / k;
-    s.bias = sum / k;
-    s.within_half_pct = half as f64 / k;
-    s.within_2sigma = w2 as f64 / k;
-    s.within_2sigma_random = w2r as f64 / k;
-    for m in &mut s.by_method {
-        m.0 /= m.1.max(1) as f64;
-    }
-    rel.sort_by(f64::total_cmp);
-    s.p95_relative = rel
-        .get(((rel.len() as f64 * 0.95).ceil() as usize).saturating_sub(1))
-        .copied()
-        .unwrap_or(f64::NAN);
-    s
+/// The method columns: joint fit, sections, three-tangent.
+const SPHERE_METHODS: [MethodDiameter; 3] = [
+    |r| r.fit_diameter_m,
+    |r| r.sections_diameter_m,
+    |r| r.three_tangent_diameter_m,
+];
+
+/// Statistics of `samples` (within 0.5 %, the issue's target).
+pub fn stats(samples: &[&SphereSample]) -> ErrorStats {
+    error_stats(samples, &SPHERE_METHODS, 0.005)
 }
 
 const DIAMETER_BINS_MM: [(f64, f64); 4] =
     [(20.0, 50.0), (50.0, 100.0), (100.0, 200.0), (200.0, 400.01)];
 const DISTANCE_BINS_M: [(f64, f64); 4] = [(0.3, 0.6), (0.6, 1.0), (1.0, 1.5), (1.5, 2.1)];
 
-fn row(label: &str, s: &SphereStats) -> String {
+fn row(label: &str, s: &ErrorStats) -> String {
     let mm = |v: f64| format!("{:.2}", v * 1e3);
     let m = |k: usize| format!("{} ({})", mm(s.by_method[k].0), s.by_method[k].1);
     format!(
@@ -151,7 +119,7 @@ fn row(label: &str, s: &SphereStats) -> String {
         m(0),
         m(1),
         m(2),
-        s.within_half_pct * 100.0,
+        s.within_tolerance * 100.0,
         s.p95_relative * 100.0,
         s.within_2sigma * 100.0,
         s.within_2sigma_random * 100.0
@@ -160,77 +128,72 @@ fn row(label: &str, s: &SphereStats) -> String {
 
 const HEADER: &str = "| bin | n | no reading | MAE mm | bias mm | joint fit MAE mm (n) | sections MAE mm (n) | three-tangent MAE mm (n) | within 0.5 % | P95 \\|err\\|/d | within 2σ | within 2σ random |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n";
 
-/// A Markdown section: the target subset (d ≥ 50 mm, centre ≤ 1.5 m), everything, then per
+/// Whether a ball is in the issue's target subset (d ≥ 50 mm, centre ≤ 1.5 m).
+pub fn in_target(s: &SphereSample) -> bool {
+    s.truth_m >= 0.05 && s.distance_m <= 1.5
+}
+
+/// A Markdown section: the target subset, its matt and steel balls, everything, then per
 /// diameter and per distance bin; the refusals and the largest errors.
 pub fn section(title: &str, samples: &[SphereSample]) -> String {
     let mut out = format!("### {title}\n\n{HEADER}");
-    let target: Vec<&SphereSample> = samples
-        .iter()
-        .filter(|s| s.truth_m >= 0.05 && s.distance_m <= 1.5)
-        .collect();
+    let target: Vec<&SphereSample> = samples.iter().filter(|s| in_target(s)).collect();
     out += &row("**target: d ≥ 50 mm, ≤ 1.5 m**", &stats(&target));
+    for (finish, label) in [
+        (Finish::Matt, "target, matt"),
+        (Finish::Shiny, "target, steel"),
+    ] {
+        let b: Vec<&SphereSample> = target
+            .iter()
+            .copied()
+            .filter(|s| s.ball.finish == finish)
+            .collect();
+        out += &row(label, &stats(&b));
+    }
     let all: Vec<&SphereSample> = samples.iter().collect();
     out += &row("all", &stats(&all));
-    for (lo, hi) in DIAMETER_BINS_MM {
-        let b: Vec<&SphereSample> = samples
-            .iter()
-            .filter(|s| (lo..hi).contains(&(s.truth_m * 1e3)))
-            .collect();
-        if !b.is_empty() {
-            out += &row(&format!("d {lo:.0}–{:.0} mm", hi.floor()), &stats(&b));
-        }
-    }
-    for (lo, hi) in DISTANCE_BINS_M {
-        let b: Vec<&SphereSample> = samples
-            .iter()
-            .filter(|s| (lo..hi).contains(&s.distance_m))
-            .collect();
-        if !b.is_empty() {
-            out += &row(&format!("centre {lo:.1}–{hi:.1} m"), &stats(&b));
-        }
-    }
-    let failures: Vec<&SphereSample> = samples
-        .iter()
-        .filter(|s| s.reading.error.is_some())
-        .collect();
-    if !failures.is_empty() {
-        let _ = writeln!(out, "\nNo reading ({}), the first 12:\n", failures.len());
-        for f in failures.iter().take(12) {
-            let _ = writeln!(
-                out,
-                "- seed {}: d {:.0} mm, centre {:.2} m: {}",
-                f.seed,
-                f.truth_m * 1e3,
-                f.distance_m,
-                f.reading.error.as_deref().unwrap_or("")
-            );
-        }
-    }
-    let mut worst: Vec<&SphereSample> = samples
-        .iter()
-        .filter(|s| s.reading.diameter_m.is_some())
-        .collect();
-    worst.sort_by(|a, b| {
-        let e = |s: &SphereSample| (s.reading.diameter_m.unwrap_or(0.0) - s.truth_m).abs();
-        e(b).total_cmp(&e(a))
-    });
-    let _ = writeln!(out, "\nLargest errors:\n");
-    for w in worst.iter().take(5) {
-        let d = w.reading.diameter_m.unwrap_or(f64::NAN);
+    out += &binned_rows(
+        samples,
+        &DIAMETER_BINS_MM,
+        &DISTANCE_BINS_M,
+        "centre",
+        |label, b| row(label, &stats(b)),
+    );
+    out + &failures_and_worst(samples, 2)
+}
+
+/// One line per ball (comma-separated, a header first): the draw, the reading, each method's
+/// diameter, for analyses beyond the tables (`tangent evaluate --sphere-csv`).
+pub fn csv(samples: &[SphereSample]) -> String {
+    let mut out = String::from(
+        "seed,truth_mm,distance_m,across_m,shift,steel,floor,method,diameter_mm,error_mm,\
+         sigma_mm,sigma_random_mm,fit_mm,sections_mm,three_tangent_mm,points,flags,error\n",
+    );
+    let mm = |v: Option<f64>| v.map_or(String::new(), |v| format!("{:.4}", v * 1e3));
+    for s in samples {
+        let r = &s.reading;
         let _ = writeln!(
             out,
-            "- seed {}: truth {:.1} mm, centre {:.2} m → {:.1} mm ({:+.2} mm, ±{:.2} mm, {}{}{})",
-            w.seed,
-            w.truth_m * 1e3,
-            w.distance_m,
-            d * 1e3,
-            (d - w.truth_m) * 1e3,
-            w.reading.uncertainty_m.unwrap_or(f64::NAN) * 1e3,
-            w.reading.method.unwrap_or("?"),
-            if w.reading.flags.is_empty() { "" } else { "; " },
-            w.reading.flags.join(", ")
+            "{},{:.3},{:.4},{:.4},{:.3},{},{},{},{},{},{},{},{},{},{},{},{},\"{}\"",
+            s.seed,
+            s.truth_m * 1e3,
+            s.distance_m,
+            s.ball.x,
+            s.ball.shift,
+            (s.ball.finish == Finish::Shiny) as u8,
+            s.ball.on_floor as u8,
+            r.method.unwrap_or(""),
+            mm(r.diameter_m),
+            mm(r.diameter_m.map(|d| d - s.truth_m)),
+            mm(r.uncertainty_m),
+            mm(r.random_uncertainty_m),
+            mm(r.fit_diameter_m),
+            mm(r.sections_diameter_m),
+            mm(r.three_tangent_diameter_m),
+            r.points.map_or(String::new(), |p| p.to_string()),
+            r.flags.join(" "),
+            r.error.as_deref().unwrap_or("").replace('"', "'")
         );
     }
-    out.push('\n');
     out
 }

@@ -145,6 +145,24 @@ pub trait Instrument {
         params: &Self::Params,
         scratch: Scratch<'_>,
     ) -> Result<Self::Solution, PipelineError>;
+
+    /// What an image failure means to this instrument (identity unless overridden): the
+    /// sphere's missing second line is [`crate::solvers::SolveError::OneSection`], with the
+    /// advice that goes with it.
+    fn image_failure(e: PipelineError) -> PipelineError {
+        e
+    }
+}
+
+/// [`Instrument::image_failure`] of the instrument of `mode`: every reading path (host and
+/// device) passes its image failures through it, so both say the same.
+pub fn image_failure(mode: Mode, e: PipelineError) -> PipelineError {
+    match mode {
+        Mode::Cylinder => Stem::image_failure(e),
+        Mode::Sphere => Sphere::image_failure(e),
+        Mode::Road => Road::image_failure(e),
+        Mode::Wall => Wall::image_failure(e),
+    }
 }
 
 /// An instrument's solution together with the image summary it came from.
@@ -207,7 +225,8 @@ pub fn measure<P: Pixel>(
     if !supports(mode) {
         return Err(PipelineError::UnsupportedMode(mode));
     }
-    let profile = extract_profile(off, on, calibration, config, ws)?;
+    let profile =
+        extract_profile(off, on, calibration, config, ws).map_err(|e| image_failure(mode, e))?;
     solve(mode, &profile, on.max_value(), calibration, params, ws)
 }
 
@@ -255,7 +274,7 @@ pub fn measure_with<I: Instrument, P: Pixel>(
     params: &I::Params,
     ws: &mut Workspace<'_, P>,
 ) -> Result<Measured<I::Solution>, PipelineError> {
-    let profile = extract_profile(off, on, calibration, config, ws)?;
+    let profile = extract_profile(off, on, calibration, config, ws).map_err(I::image_failure)?;
     let solution = solve_with::<I, P>(&profile, on.max_value(), calibration, params, ws)?;
     Ok(Measured { solution, profile })
 }

@@ -46,9 +46,12 @@ pub struct Args {
     /// from `--sphere-seed`).
     #[arg(long, default_value_t = 0)]
     spheres: u64,
-    /// First seed of the balls.
-    #[arg(long, default_value_t = 2_000_000)]
-    sphere_seed: u64,
+    /// First seed of the balls (default: the `--set`'s, `SeedSet::first_sphere_seed`).
+    #[arg(long)]
+    sphere_seed: Option<u64>,
+    /// Also write one line per ball here (CSV: the draw, the reading, each method's diameter).
+    #[arg(long)]
+    sphere_csv: Option<PathBuf>,
     /// Report the spheres only (no stems).
     #[arg(long)]
     spheres_only: bool,
@@ -170,14 +173,22 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
 
 /// The sphere section: `--spheres` random balls from `--sphere-seed`.
 fn sphere_section(args: &Args) -> anyhow::Result<String> {
-    let samples = tangent_host::evaluate_sphere::run(args.sphere_seed, args.spheres)?;
+    let first = args
+        .sphere_seed
+        .unwrap_or_else(|| args.set.first_sphere_seed());
+    let samples = tangent_host::evaluate_sphere::run(first, args.spheres)?;
+    if let Some(path) = &args.sphere_csv {
+        std::fs::write(path, tangent_host::evaluate_sphere::csv(&samples))
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
     Ok(tangent_host::evaluate_sphere::section(
         &format!(
-            "{} random balls (seeds {}–{}): 20–400 mm, centre 0.3–2 m, matt and steel, in the \
-             air and on a floor, two laser planes",
+            "{} random balls (seeds {}–{}, set {}): 20–400 mm, centre 0.3–2 m, matt and steel, \
+             in the air and on a floor, two laser planes",
             args.spheres,
-            args.sphere_seed,
-            args.sphere_seed + args.spheres.saturating_sub(1)
+            first,
+            first + args.spheres.saturating_sub(1),
+            args.set.name()
         ),
         &samples,
     ))

@@ -200,40 +200,88 @@ pub fn entries() -> Vec<CorpusEntry> {
 /// free play off the mid-plane, matt or shiny, on a floor one time in three; the two-plane
 /// reference head.
 pub fn random_sphere(seed: u64) -> SimSpec {
-    let mut rng = Pcg64::seed_from_u64(super::scene::splitmix(seed ^ 0x5a5a_5a5a));
-    let d_mm = 20.0 * (20f64).powf(rng.random::<f64>());
-    let z = 0.3 + 1.7 * rng.random::<f64>();
-    let r = d_mm * 5e-4;
-    let x = (rng.random::<f64>() - 0.5) * 0.35 * z;
-    let play = ((r - 0.025) / r).max(0.0);
-    let shift = (rng.random::<f64>() - 0.5) * play;
-    let finish = if rng.random::<f64>() < 0.3 {
-        Finish::Shiny
-    } else {
-        Finish::Matt
-    };
-    let on_floor = rng.random::<f64>() < 1.0 / 3.0;
-    let b = ball(d_mm, z, x, shift, finish);
-    let mut objects = vec![b.clone()];
-    if on_floor {
-        if let Object::Sphere(s) = &b {
-            objects.push(floor_under(s.centre_m[1], s.radius_m));
+    RandomBall::draw(seed).spec()
+}
+
+/// What [`random_sphere`] drew for one seed (the evaluation tabulates by it).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RandomBall {
+    /// The seed.
+    pub seed: u64,
+    /// Diameter (mm).
+    pub d_mm: f64,
+    /// Centre's distance ahead (m).
+    pub z: f64,
+    /// Centre's offset across (m).
+    pub x: f64,
+    /// Offset below the mid-plane between the lasers, as a fraction of `R`.
+    pub shift: f64,
+    /// Matt or steel.
+    pub finish: Finish,
+    /// Resting on a floor.
+    pub on_floor: bool,
+}
+
+impl RandomBall {
+    /// The ball of `seed` (module documentation).
+    pub fn draw(seed: u64) -> RandomBall {
+        let mut rng = Pcg64::seed_from_u64(super::scene::splitmix(seed ^ 0x5a5a_5a5a));
+        let d_mm = 20.0 * (20f64).powf(rng.random::<f64>());
+        let z = 0.3 + 1.7 * rng.random::<f64>();
+        let r = d_mm * 5e-4;
+        let x = (rng.random::<f64>() - 0.5) * 0.35 * z;
+        let play = ((r - 0.025) / r).max(0.0);
+        let shift = (rng.random::<f64>() - 0.5) * play;
+        let finish = if rng.random::<f64>() < 0.3 {
+            Finish::Shiny
+        } else {
+            Finish::Matt
+        };
+        let on_floor = rng.random::<f64>() < 1.0 / 3.0;
+        RandomBall {
+            seed,
+            d_mm,
+            z,
+            x,
+            shift,
+            finish,
+            on_floor,
         }
     }
-    SimSpec {
-        mode: Mode::Sphere,
-        description: format!(
-            "random ball {d_mm:.1} mm, centre {z:.3} m ahead, {x:+.3} m across, {}{}",
-            if finish == Finish::Shiny {
-                "steel"
-            } else {
-                "matt"
-            },
-            if on_floor { ", on a floor" } else { "" }
-        ),
-        timestamp: "2025-06-04T12:00:00Z".into(),
-        calibration: two_plane_calibration(),
-        objects,
-        params: params(seed & (u64::MAX >> 1), finish),
+
+    /// The scene.
+    pub fn spec(&self) -> SimSpec {
+        let RandomBall {
+            seed,
+            d_mm,
+            z,
+            x,
+            shift,
+            finish,
+            on_floor,
+        } = *self;
+        let b = ball(d_mm, z, x, shift, finish);
+        let mut objects = vec![b.clone()];
+        if on_floor {
+            if let Object::Sphere(s) = &b {
+                objects.push(floor_under(s.centre_m[1], s.radius_m));
+            }
+        }
+        SimSpec {
+            mode: Mode::Sphere,
+            description: format!(
+                "random ball {d_mm:.1} mm, centre {z:.3} m ahead, {x:+.3} m across, {}{}",
+                if finish == Finish::Shiny {
+                    "steel"
+                } else {
+                    "matt"
+                },
+                if on_floor { ", on a floor" } else { "" }
+            ),
+            timestamp: "2025-06-04T12:00:00Z".into(),
+            calibration: two_plane_calibration(),
+            objects,
+            params: params(seed & (u64::MAX >> 1), finish),
+        }
     }
 }

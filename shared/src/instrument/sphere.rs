@@ -7,6 +7,7 @@ use crate::noise::NoiseModel;
 use crate::pipeline::PipelineError;
 use crate::real::Real;
 use crate::solvers::sphere::{self, SphereInput, SphereParams, SphereSolution};
+use crate::solvers::SolveError;
 
 use super::{Instrument, Measured, PlanePoints, Scratch};
 
@@ -49,6 +50,15 @@ impl Instrument for Sphere {
             .flags
             .insert(points.profile.image_flags(points.full_scale));
         Ok(solution)
+    }
+
+    /// A plane's curve too short to extract is a ball that one line misses: the radius is
+    /// unobservable ([`SolveError::OneSection`], which says what to do).
+    fn image_failure(e: PipelineError) -> PipelineError {
+        match e {
+            PipelineError::CurveTooShort { .. } => PipelineError::Solve(SolveError::OneSection),
+            e => e,
+        }
     }
 }
 

@@ -119,3 +119,31 @@ fn the_wall_instrument_measures_a_frontal_wall_through_the_real_pipeline() {
         Err(PipelineError::Solve(crate::solvers::SolveError::SingleLine))
     );
 }
+
+/// In sphere mode a plane whose curve is too short means a line missed the ball: the
+/// sphere's refusal (with its advice), not the stem's "aim the lines at the stem"; the
+/// other modes keep the image failure.
+#[test]
+fn a_missing_line_is_the_spheres_one_section_refusal() {
+    use crate::solvers::SolveError;
+    let short = PipelineError::CurveTooShort {
+        plane: 1,
+        points: 0,
+    };
+    assert_eq!(
+        image_failure(Mode::Sphere, short.clone()),
+        PipelineError::Solve(SolveError::OneSection)
+    );
+    for mode in [Mode::Cylinder, Mode::Road, Mode::Wall] {
+        assert_eq!(image_failure(mode, short.clone()), short, "{mode:?}");
+    }
+    let dark = PipelineError::NoLaserLight { max_difference: 3 };
+    assert_eq!(image_failure(Mode::Sphere, dark.clone()), dark);
+    let mut advice = heapless::String::<256>::new();
+    core::fmt::Write::write_fmt(&mut advice, format_args!("{}", SolveError::OneSection))
+        .expect("fits");
+    assert!(
+        advice.contains("centre the ball between the two lines"),
+        "{advice}"
+    );
+}

@@ -458,7 +458,7 @@ impl Default for RobustParams {
 }
 
 /// Tukey's biweight `w(u) = (1 − u²)²` for `|u| < 1`, else 0.
-fn tukey(u: Real) -> Real {
+pub(crate) fn tukey(u: Real) -> Real {
     if u.abs() < 1.0 {
         let t = 1.0 - u * u;
         t * t

@@ -34,6 +34,7 @@
 use core::fmt;
 
 pub mod circle;
+pub mod correlation;
 pub mod cylinder_fit;
 pub mod ellipse;
 pub mod lm;
@@ -105,7 +106,8 @@ impl fmt::Display for SolveError {
             SolveError::PlaneCount => "wrong number of laser planes for this solution",
             SolveError::NotRound => "section not round: measure across two directions",
             SolveError::OneSection => {
-                "only one laser line crosses the object: a sphere's size needs both lines on it"
+                "fewer than two laser lines cross the object: a sphere's size needs both lines on \
+                 it (centre the ball between the two lines, 0.6–1.5 m away)"
             }
             SolveError::NotSpherical => {
                 "the laser lines do not lie on one sphere (two objects in view, or not a ball)"

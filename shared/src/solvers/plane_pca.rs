@@ -7,7 +7,7 @@
 use crate::real::Float;
 use crate::real::{norm, sqrt, Mat3, Real, Vec3};
 
-use super::sphere_sections::correlation_inflation;
+use super::correlation::correlation_inflation;
 use super::SolveError;
 
 /// A plane fitted to weighted points: `normal·X = offset`, with what qualifies it.

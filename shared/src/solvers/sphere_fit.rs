@@ -13,8 +13,10 @@ use crate::real::{norm, sqrt, Real, Vec3};
 
 use nalgebra::{SMatrix, SVector};
 
-use super::lm::{minimise, Evaluated, LeastSquares, LmParams, NormalEquations};
-use super::sphere_sections::{correlation_inflation, Sphere};
+use super::circle::tukey;
+use super::correlation::correlation_length;
+use super::lm::{LmParams, NormalEquations};
+use super::sphere_sections::{minimise_sphere, Sphere, SphereCost};
 use super::SolveError;
 
 /// Settings of [`fit_sphere`].
@@ -45,7 +47,8 @@ pub struct SphereFit {
     pub sphere: Sphere,
     /// Covariance of `(Cx, Cy, Cz, R)` (m²): `(JᵀWJ)⁻¹` scaled by the residuals' own variance
     /// (`χ²/ν`: the σ-weights set the points' relative weights, the data their scale) and by
-    /// the curves' lag-one correlation (`docs/sphere.md`, "Uncertainty of the joint fit").
+    /// the residuals' correlation length along the curves (`docs/sphere.md`, "Uncertainty of
+    /// the joint fit").
     pub covariance: SMatrix<Real, 4, 4>,
     /// `Σw·(d/σ)² / (Σw − 4)`: 1 when the residuals are as large as the points' σ predict.
     pub reduced_chi2: Real,
@@ -70,15 +73,6 @@ struct Joint<'a> {
     reference: Option<(Sphere, Real)>,
 }
 
-fn tukey(u: Real) -> Real {
-    if u.abs() < 1.0 {
-        let t = 1.0 - u * u;
-        t * t
-    } else {
-        0.0
-    }
-}
-
 impl Joint<'_> {
     /// Each point with its σ and weight.
     fn each(&self, mut f: impl FnMut(Vec3, Real, Real)) {
@@ -96,13 +90,9 @@ impl Joint<'_> {
     }
 }
 
-impl LeastSquares<4> for Joint<'_> {
-    type Params = SVector<Real, 4>;
-    type Extra = ();
-
-    fn evaluate(&self, p: &Self::Params) -> Result<(NormalEquations<4>, ()), SolveError> {
-        let centre = Vec3::new(p[0], p[1], p[2]);
-        let radius = p[3];
+impl SphereCost for Joint<'_> {
+    fn normal_equations(&self, sphere: &Sphere) -> Result<NormalEquations<4>, SolveError> {
+        let (centre, radius) = (sphere.centre, sphere.radius);
         let mut jtj = SMatrix::<Real, 4, 4>::zeros();
         let mut jtr = SVector::<Real, 4>::zeros();
         let mut cost = 0.0;
@@ -128,15 +118,7 @@ impl LeastSquares<4> for Joint<'_> {
         if bad || !cost.is_finite() || !(radius > 0.0) {
             return Err(SolveError::Degenerate);
         }
-        Ok((NormalEquations { jtj, jtr, cost }, ()))
-    }
-
-    fn step(&self, p: &Self::Params, delta: &SVector<Real, 4>) -> Self::Params {
-        p + delta
-    }
-
-    fn step_scale(&self, p: &Self::Params) -> Real {
-        1.0 + p.norm()
+        Ok(NormalEquations { jtj, jtr, cost })
     }
 }
 
@@ -174,10 +156,8 @@ pub fn fit_sphere(
         sigmas,
         reference: None,
     };
-    let p0 = SVector::<Real, 4>::new(start.centre.x, start.centre.y, start.centre.z, start.radius);
-    let (mut min, _) = minimise(&problem, Evaluated::at(&problem, p0)?, &params.lm)?;
+    let (mut sphere, mut normal) = minimise_sphere(&problem, start, &params.lm)?;
     for _ in 0..params.rounds {
-        let sphere = sphere_of(&min.params);
         let mut k = 0;
         problem.each(|x, s, _| {
             buf[k] = ((norm(&(x - sphere.centre)) - sphere.radius) / s).abs();
@@ -187,10 +167,8 @@ pub fn fit_sphere(
         let (_, median, _) = buf.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
         let scale = (1.4826 * *median).max(1.0);
         problem.reference = Some((sphere, params.tuning * scale));
-        let start = Evaluated::at(&problem, min.params)?;
-        min = minimise(&problem, start, &params.lm)?.0;
+        (sphere, normal) = minimise_sphere(&problem, sphere, &params.lm)?;
     }
-    let sphere = sphere_of(&min.params);
     let (mut weight_sum, mut inliers) = (0.0, 0usize);
     problem.each(|_, _, w| {
         weight_sum += w;
@@ -201,20 +179,36 @@ pub fn fit_sphere(
     if !(weight_sum > 4.0) {
         return Err(SolveError::TooFewPoints);
     }
-    let reduced_chi2 = min.normal.cost / (weight_sum - 4.0);
-    // Residual correlation along each curve (speckle, stripe bending) over the inliers.
+    let reduced_chi2 = normal.cost / (weight_sum - 4.0);
+    // Residual correlation along each curve (speckle, smoothing, defocus) over the inliers:
+    // curve k's n_k points count as n_k/L_k independent ones, and the fit's variance is
+    // that of Σ n_k/L_k points (`docs/sphere.md`, "Uncertainty of the joint fit").
     let cut = problem.reference.map_or(Real::INFINITY, |(_, c)| c);
-    let mut inflation: Real = 1.0;
+    let (mut used, mut independent) = (0.0, 0.0);
     for (curve, sig) in curves.iter().zip(sigmas) {
-        let residuals = curve
+        let mut n = 0;
+        for (u, slot) in curve
             .iter()
             .zip(sig.iter())
-            .map(|(x, s)| (norm(&(x - sphere.centre)) - sphere.radius) / s);
-        let f = correlation_inflation(residuals, cut);
-        inflation = inflation.max(f);
+            .map(|(x, s)| (norm(&(x - sphere.centre)) - sphere.radius) / s)
+            .filter(|u| u.abs() < cut)
+            .zip(buf.iter_mut())
+        {
+            *slot = u;
+            n += 1;
+        }
+        if n > 0 {
+            used += n as Real;
+            independent += n as Real / correlation_length(&buf[..n]);
+        }
     }
+    let inflation = if independent > 0.0 {
+        used / independent
+    } else {
+        1.0
+    };
     let covariance =
-        min.normal.jtj.try_inverse().ok_or(SolveError::Degenerate)? * (reduced_chi2 * inflation);
+        normal.jtj.try_inverse().ok_or(SolveError::Degenerate)? * (reduced_chi2 * inflation);
     Ok(SphereFit {
         sphere,
         covariance,
@@ -222,11 +216,4 @@ pub fn fit_sphere(
         inliers,
         points: total,
     })
-}
-
-fn sphere_of(p: &SVector<Real, 4>) -> Sphere {
-    Sphere {
-        centre: Vec3::new(p[0], p[1], p[2]),
-        radius: p[3],
-    }
 }

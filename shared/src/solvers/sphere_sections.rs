@@ -19,6 +19,7 @@ use crate::real::{norm, sqrt, Mat3, Real, Vec2, Vec3};
 use nalgebra::{SMatrix, SVector};
 
 use super::circle::{fit_hyper, fit_robust, CircleFit, RobustParams};
+use super::correlation::correlation_length;
 use super::lm::{minimise, Evaluated, LeastSquares, LmParams, NormalEquations};
 use super::SolveError;
 use crate::laser_plane::LaserPlane;
@@ -33,6 +34,60 @@ pub struct Sphere {
     pub centre: Vec3,
     /// Radius (positive).
     pub radius: Real,
+}
+
+impl Sphere {
+    /// The least-squares parameters `(Cx, Cy, Cz, R)`.
+    pub fn params(&self) -> SVector<Real, 4> {
+        SVector::<Real, 4>::new(self.centre.x, self.centre.y, self.centre.z, self.radius)
+    }
+
+    /// The sphere of least-squares parameters `(Cx, Cy, Cz, R)`.
+    pub fn of_params(p: &SVector<Real, 4>) -> Sphere {
+        Sphere {
+            centre: Vec3::new(p[0], p[1], p[2]),
+            radius: p[3],
+        }
+    }
+}
+
+/// A weighted least-squares cost in a sphere's `(C, R)`: the one shape of both sphere fits
+/// (the sections' and the joint one), minimised by [`minimise_sphere`].
+pub(crate) trait SphereCost {
+    /// `JᵀWJ`, `JᵀWr` and `Σ rᵀWr` at `sphere`; an error outside the cost's domain.
+    fn normal_equations(&self, sphere: &Sphere) -> Result<NormalEquations<4>, SolveError>;
+}
+
+/// A [`SphereCost`] as the shared LM's problem: a flat parameter space, additive steps.
+struct SphereProblem<'c, C>(&'c C);
+
+impl<C: SphereCost> LeastSquares<4> for SphereProblem<'_, C> {
+    type Params = SVector<Real, 4>;
+    type Extra = ();
+
+    fn evaluate(&self, p: &Self::Params) -> Result<(NormalEquations<4>, ()), SolveError> {
+        Ok((self.0.normal_equations(&Sphere::of_params(p))?, ()))
+    }
+
+    fn step(&self, p: &Self::Params, delta: &SVector<Real, 4>) -> Self::Params {
+        p + delta
+    }
+
+    fn step_scale(&self, p: &Self::Params) -> Real {
+        1.0 + p.norm()
+    }
+}
+
+/// Minimises `cost` from `start` with the shared LM: the sphere and the normal equations
+/// there.
+pub(crate) fn minimise_sphere<C: SphereCost>(
+    cost: &C,
+    start: Sphere,
+    lm: &LmParams,
+) -> Result<(Sphere, NormalEquations<4>), SolveError> {
+    let problem = SphereProblem(cost);
+    let (min, _) = minimise(&problem, Evaluated::at(&problem, start.params())?, lm)?;
+    Ok((Sphere::of_params(&min.params), min.normal))
 }
 
 /// One planar section of the sphere: a circle in a laser plane, with the covariance of its
@@ -83,7 +138,7 @@ impl SphereEstimate {
 
 /// The circle section of one plane's curve: a robust geometric circle fit
 /// ([`fit_robust`] from [`fit_hyper`]) of the in-plane points, its covariance from the
-/// residuals' own scale, inflated by their lag-one correlation along the curve
+/// residuals' own scale, inflated by their correlation length along the curve
 /// (`docs/sphere.md`, "Section covariance").
 ///
 /// `points` are the plane's 3-D points in curve order; `flat` (≥ their count) receives their
@@ -106,8 +161,7 @@ pub fn circle_section(
     let fit = fit_robust(flat, start, robust, scratch)?;
     let c = fit.circle;
     let cutoff = robust.tuning * fit.rms_residual.max(robust.min_scale);
-    let residuals = flat.iter().map(|q| norm(&(q - c.centre)) - c.radius);
-    let inflation = correlation_inflation(residuals, cutoff);
+    let inflation = correlation_length(inlier_residuals(flat, &c, cutoff, scratch));
     // The residuals' own scale (the point noise model overstates the noise normal to the
     // surface, `docs/sphere.md`), floored at 1 µm so that exact data keep an invertible
     // covariance.
@@ -133,29 +187,25 @@ pub fn circle_section(
     ))
 }
 
-/// Variance inflation `(1 + ρ₁)/(1 − ρ₁)` (at least 1, at most 25) for residuals with lag-one
-/// correlation `ρ₁` along the curve: an AR(1) sequence of `n` residuals carries the
-/// information of `n·(1 − ρ₁)/(1 + ρ₁)` independent ones. Points whose residual exceeds
-/// `cutoff` (outliers) are skipped. `residuals` come in curve order.
-pub fn correlation_inflation(residuals: impl Iterator<Item = Real>, cutoff: Real) -> Real {
-    let (mut sxx, mut sxy) = (0.0, 0.0);
-    let mut previous: Option<Real> = None;
-    for d in residuals {
-        if !(d.abs() <= cutoff) {
-            previous = None;
-            continue;
-        }
-        sxx += d * d;
-        if let Some(prev) = previous {
-            sxy += d * prev;
-        }
-        previous = Some(d);
+/// The residuals `|q − c| − r` of the points within `cutoff` of the circle, in curve order,
+/// written to the front of `buf` (as long as `points`).
+fn inlier_residuals<'b>(
+    points: &[Vec2],
+    circle: &super::circle::Circle,
+    cutoff: Real,
+    buf: &'b mut [Real],
+) -> &'b [Real] {
+    let mut n = 0;
+    for (q, slot) in points
+        .iter()
+        .map(|q| norm(&(q - circle.centre)) - circle.radius)
+        .filter(|d| d.abs() <= cutoff)
+        .zip(buf.iter_mut())
+    {
+        *slot = q;
+        n += 1;
     }
-    if !(sxx > 0.0) {
-        return 1.0;
-    }
-    let rho = (sxy / sxx).clamp(0.0, 0.92);
-    (1.0 + rho) / (1.0 - rho)
+    &buf[..n]
 }
 
 /// Angle spanned by the points `keep` accepts, seen from `centre`: the range of their polar
@@ -251,13 +301,9 @@ struct FromSections<'a> {
     weights: [Mat3; crate::calibration::MAX_PLANES],
 }
 
-impl LeastSquares<4> for FromSections<'_> {
-    type Params = SVector<Real, 4>;
-    type Extra = ();
-
-    fn evaluate(&self, p: &Self::Params) -> Result<(NormalEquations<4>, ()), SolveError> {
-        let centre = Vec3::new(p[0], p[1], p[2]);
-        let radius = p[3];
+impl SphereCost for FromSections<'_> {
+    fn normal_equations(&self, sphere: &Sphere) -> Result<NormalEquations<4>, SolveError> {
+        let (centre, radius) = (sphere.centre, sphere.radius);
         let mut jtj = SMatrix::<Real, 4, 4>::zeros();
         let mut jtr = SVector::<Real, 4>::zeros();
         let mut cost = 0.0;
@@ -290,15 +336,7 @@ impl LeastSquares<4> for FromSections<'_> {
         if !cost.is_finite() {
             return Err(SolveError::NonFinite);
         }
-        Ok((NormalEquations { jtj, jtr, cost }, ()))
-    }
-
-    fn step(&self, p: &Self::Params, delta: &SVector<Real, 4>) -> Self::Params {
-        p + delta
-    }
-
-    fn step_scale(&self, p: &Self::Params) -> Real {
-        1.0 + p.norm()
+        Ok(NormalEquations { jtj, jtr, cost })
     }
 }
 
@@ -326,19 +364,12 @@ pub fn sphere_from_sections(
         }
     }
     let first = initial_sphere(sections)?;
-    let problem = FromSections { sections, weights };
-    let p0 = SVector::<Real, 4>::new(first.centre.x, first.centre.y, first.centre.z, first.radius);
-    let start = Evaluated::at(&problem, p0)?;
-    let (min, _) = minimise(&problem, start, lm)?;
-    let covariance = min.normal.jtj.try_inverse().ok_or(SolveError::Degenerate)?;
-    let p = min.params;
+    let (sphere, normal) = minimise_sphere(&FromSections { sections, weights }, first, lm)?;
+    let covariance = normal.jtj.try_inverse().ok_or(SolveError::Degenerate)?;
     Ok(SphereEstimate {
-        sphere: Sphere {
-            centre: Vec3::new(p[0], p[1], p[2]),
-            radius: p[3],
-        },
+        sphere,
         covariance,
-        chi2: min.normal.cost,
+        chi2: normal.cost,
         dof: 3 * sections.len() - 4,
     })
 }

@@ -21,8 +21,7 @@ use super::{RobustParams, SolveError};
 /// relief, the stripe's fade) cannot dominate the fit.
 pub const LATERAL_FLOOR: Real = 0.2;
 
-/// Longest lag (points) of the residual autocorrelation summed into the correlation length.
-pub const MAX_CORRELATION_LAG: usize = 64;
+pub use crate::solvers::correlation::MAX_CORRELATION_LAG;
 
 /// Result of [`fit_weighted`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -213,21 +212,7 @@ fn correlation_length<W: Fn(usize, Vec2) -> Real>(
             n += 1;
         }
     }
-    let u = &buf[..n];
-    let c0: Real = u.iter().map(|x| x * x).sum();
-    if !(c0 > 0.0) || n < 8 {
-        return 1.0;
-    }
-    let mut length = 1.0;
-    for k in 1..=MAX_CORRELATION_LAG.min(n / 4) {
-        let ck: Real = u.iter().zip(&u[k..]).map(|(a, b)| a * b).sum();
-        let rho = ck / c0;
-        if !(rho > 0.0) {
-            break;
-        }
-        length += 2.0 * rho;
-    }
-    length
+    crate::solvers::correlation::correlation_length(&buf[..n])
 }
 
 /// Radius σ of a circle fit with per-point σ along directions, as [`fit_weighted`] weighs
