@@ -122,6 +122,9 @@ impl TreeRecord {
 }
 
 /// One journal record.
+// Most records are trees; boxing them to shrink the rare plot header would only add an
+// allocation per reading.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "type", rename_all = "snake_case")]
 pub enum Record {

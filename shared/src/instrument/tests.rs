@@ -131,14 +131,14 @@ fn a_missing_line_is_the_spheres_one_section_refusal() {
         points: 0,
     };
     assert_eq!(
-        image_failure(Mode::Sphere, short.clone()),
+        image_failure(Mode::Sphere, short),
         PipelineError::Solve(SolveError::OneSection)
     );
     for mode in [Mode::Cylinder, Mode::Road, Mode::Wall] {
-        assert_eq!(image_failure(mode, short.clone()), short, "{mode:?}");
+        assert_eq!(image_failure(mode, short), short, "{mode:?}");
     }
     let dark = PipelineError::NoLaserLight { max_difference: 3 };
-    assert_eq!(image_failure(Mode::Sphere, dark.clone()), dark);
+    assert_eq!(image_failure(Mode::Sphere, dark), dark);
     let mut advice = heapless::String::<256>::new();
     core::fmt::Write::write_fmt(&mut advice, format_args!("{}", SolveError::OneSection))
         .expect("fits");
