@@ -30,13 +30,12 @@ use core::ops::Range;
 
 use crate::calibration::{Calibration, MAX_PLANES};
 use crate::curve::CurvePoint;
-use crate::image::subtract::SubtractStats;
 use crate::image::{Frame, Pixel};
 use crate::peaks::{self, Estimator};
 use crate::real::{Float, Real, Vec3};
 
 use super::planes;
-use super::profile::{self, Profile};
+use super::profile::{self, Profile, Subtracted};
 use super::{PipelineConfig, PipelineError, Workspace};
 
 /// Parameters of the faint-stripe search. Scores are in units of the block response's noise
@@ -96,17 +95,6 @@ pub(super) fn takes_over(e: &PipelineError, config: &PipelineConfig) -> bool {
                 | PipelineError::CurveTooShort { .. }
                 | PipelineError::Segment(_)
         )
-}
-
-/// What the streaming front end knows of the pair when the thresholded chain gave up.
-#[derive(Debug, Clone, Copy)]
-pub(super) struct Subtracted {
-    pub(super) width: usize,
-    pub(super) height: usize,
-    pub(super) bit_depth: u8,
-    pub(super) stats: SubtractStats,
-    /// Noise σ of the difference image (grey levels).
-    pub(super) noise: Real,
 }
 
 /// Most rows of the cross-profile kernel.

@@ -141,19 +141,26 @@ pub enum Stage {
     Triangulated,
 }
 
-/// What the streamed front end hands the rest of the chain ([`after_segmentation`]): the
-/// difference frame's layout (in `Workspace::diff`), the subtraction's statistics, the
-/// threshold, and the objects and labelled runs of the segmentation (in `Workspace::objects`
-/// and `Workspace::runs`).
+/// What the streaming front end knows of the pair once the laser-on frame is subtracted: the
+/// difference frame's layout (in `Workspace::diff`) and the subtraction's statistics. The
+/// thresholded chain ([`Segmented`]) and the faint search (`faint`) both start from it.
 #[derive(Debug, Clone, Copy)]
-pub(super) struct Segmented {
+pub(super) struct Subtracted {
     pub(super) width: usize,
     pub(super) height: usize,
     pub(super) bit_depth: u8,
     pub(super) stats: SubtractStats,
-    pub(super) threshold: u32,
     /// Noise σ of the difference image (grey levels).
     pub(super) noise: Real,
+}
+
+/// What the streamed front end hands the rest of the chain ([`after_segmentation`]): the
+/// subtracted pair, the threshold, and the objects and labelled runs of the segmentation (in
+/// `Workspace::objects` and `Workspace::runs`).
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Segmented {
+    pub(super) pair: Subtracted,
+    pub(super) threshold: u32,
     pub(super) objects: usize,
     pub(super) runs: usize,
     /// The points located during the read-out (in `Workspace::readout_fits`).
@@ -169,9 +176,9 @@ pub(super) fn after_segmentation<P: Pixel>(
     config: &PipelineConfig,
     mut probe: impl FnMut(Stage),
 ) -> Result<Profile, PipelineError> {
-    let (width, height) = (seg.width, seg.height);
+    let (width, height) = (seg.pair.width, seg.pair.height);
     let diff = Frame::new(&ws.diff[..width * height], width, height, width)?
-        .with_bit_depth(seg.bit_depth)?;
+        .with_bit_depth(seg.pair.bit_depth)?;
     let objects = &ws.objects[..seg.objects.min(ws.objects.len())];
 
     // Selection (§5.6) and plane assignment (docs/pipeline.md).
@@ -184,7 +191,7 @@ pub(super) fn after_segmentation<P: Pixel>(
         &ws.runs[..seg.runs.min(ws.runs.len())],
         objects,
         &used,
-        &seg.stats,
+        &seg.pair.stats,
         config,
         ws.seeds,
         ws.curve,
@@ -215,9 +222,9 @@ pub(super) fn after_segmentation<P: Pixel>(
     let usage = candidates.usage();
     let report = candidates.report;
     Ok(Profile {
-        subtract: seg.stats,
+        subtract: seg.pair.stats,
         threshold: seg.threshold,
-        noise: seg.noise,
+        noise: seg.pair.noise,
         objects: seg.objects,
         candidates: report.candidates,
         unused_candidates: usage.unused + report.candidates.saturating_sub(report.selected),

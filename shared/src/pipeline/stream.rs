@@ -266,6 +266,13 @@ impl ProfileStream {
         let histogram_len = (full_scale as usize + 1).min(ws.histogram.len());
         let histogram = &ws.histogram[..histogram_len];
         let noise = threshold::difference_noise(histogram);
+        let pair = profile::Subtracted {
+            width,
+            height,
+            bit_depth,
+            stats,
+            noise,
+        };
         // The thresholded chain; where it finds no stripe, the faint search may
         // (`faint::or_search`).
         let read = (|| {
@@ -306,12 +313,8 @@ impl ProfileStream {
             profile::after_segmentation(
                 ws,
                 profile::Segmented {
-                    width,
-                    height,
-                    bit_depth,
-                    stats,
+                    pair,
                     threshold: t,
-                    noise,
                     objects: segmentation.objects,
                     runs: n,
                     readout,
@@ -321,13 +324,6 @@ impl ProfileStream {
                 probe,
             )
         })();
-        let pair = faint::Subtracted {
-            width,
-            height,
-            bit_depth,
-            stats,
-            noise,
-        };
         faint::or_search(read, ws, pair, calibration, config)
     }
 }
