@@ -245,13 +245,7 @@ pub fn extract_window<P: Pixel>(
                 continue;
             };
             point.curve = k as u8;
-            let Some(slot) = out.get_mut(n) else {
-                return Err(CurveError::OutputFull {
-                    capacity: out.len(),
-                });
-            };
-            *slot = point;
-            n += 1;
+            push(out, &mut n, point)?;
         }
     }
     if n == 0 {
@@ -318,13 +312,7 @@ pub fn extract_seeded_with<P: Pixel>(
                     continue;
                 };
                 point.curve = k as u8;
-                let Some(slot) = out.get_mut(n) else {
-                    return Err(CurveError::OutputFull {
-                        capacity: out.len(),
-                    });
-                };
-                *slot = point;
-                n += 1;
+                push(out, &mut n, point)?;
             }
         }
     }
@@ -533,6 +521,15 @@ fn smooth_run(points: &mut [CurvePoint], c: u8, start: usize, n: usize, h: usize
             p.row = acc;
         }
     }
+}
+
+/// Stores `point` at `out[*n]` and counts it, or says the caller's buffer is full.
+fn push(out: &mut [CurvePoint], n: &mut usize, point: CurvePoint) -> Result<(), CurveError> {
+    let capacity = out.len();
+    let slot = out.get_mut(*n).ok_or(CurveError::OutputFull { capacity })?;
+    *slot = point;
+    *n += 1;
+    Ok(())
 }
 
 #[cfg(test)]
