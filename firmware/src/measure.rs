@@ -192,8 +192,9 @@ impl Measurer for PipelineMeasurer<'_> {
         let now = move || clock.map_or(0, |clock| clock());
         let mut stages = StageTimes::default();
         let mut last = now();
+        let config = instrument::pipeline_config(mode, &self.config);
         let profile =
-            pipeline::extract_profile_probed(&off, &on, cal, &self.config, &mut self.ws, |stage| {
+            pipeline::extract_profile_probed(&off, &on, cal, &config, &mut self.ws, |stage| {
                 let t = now();
                 stages.image_us[stage_index(stage)] = t.saturating_sub(last);
                 last = t;
@@ -265,7 +266,10 @@ impl StreamMeasurer for PipelineMeasurer<'_> {
         let now = move || clock.map_or(0, |clock| clock());
         let mut stages = self.last_stages;
         let mut last = now();
-        let profile = stream.finish_probed(&mut self.ws, &cal, &self.config, |stage| {
+        // `begin` ran on the base settings (the mode is known only now): the instruments'
+        // own settings differ from them only in what is done here (fragments kept, smoothing).
+        let config = instrument::pipeline_config(mode, &self.config);
+        let profile = stream.finish_probed(&mut self.ws, &cal, &config, |stage| {
             let t = now();
             stages.image_us[stage_index(stage)] = t.saturating_sub(last);
             last = t;

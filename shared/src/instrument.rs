@@ -152,6 +152,24 @@ pub trait Instrument {
     fn image_failure(e: PipelineError) -> PipelineError {
         e
     }
+
+    /// The image chain's settings this instrument measures with, from the caller's `base`
+    /// (`base` unless overridden): the road instrument takes its profile unsmoothed
+    /// (`docs/road.md`, "Furrow validation").
+    fn pipeline_config(base: &PipelineConfig) -> PipelineConfig {
+        *base
+    }
+}
+
+/// [`Instrument::pipeline_config`] of the instrument of `mode`: every reading path (host and
+/// device) extracts its profile with it, so both measure alike.
+pub fn pipeline_config(mode: Mode, base: &PipelineConfig) -> PipelineConfig {
+    match mode {
+        Mode::Cylinder => Stem::pipeline_config(base),
+        Mode::Sphere => Sphere::pipeline_config(base),
+        Mode::Road => Road::pipeline_config(base),
+        Mode::Wall => Wall::pipeline_config(base),
+    }
 }
 
 /// [`Instrument::image_failure`] of the instrument of `mode`: every reading path (host and
@@ -187,7 +205,8 @@ pub struct InstrumentParams {
     pub wall: WallInstrumentParams,
 }
 
-/// Measures a frame pair with the instrument of `mode`: [`extract_profile`], then its solver.
+/// Measures a frame pair with the instrument of `mode`: [`extract_profile`] (with the
+/// instrument's [`pipeline_config`] of `config`), then its solver.
 /// A mode this build has no solver for is [`PipelineError::UnsupportedMode`] (every mode has
 /// one today; see [`supports`]).
 ///
@@ -225,8 +244,9 @@ pub fn measure<P: Pixel>(
     if !supports(mode) {
         return Err(PipelineError::UnsupportedMode(mode));
     }
+    let config = pipeline_config(mode, config);
     let profile =
-        extract_profile(off, on, calibration, config, ws).map_err(|e| image_failure(mode, e))?;
+        extract_profile(off, on, calibration, &config, ws).map_err(|e| image_failure(mode, e))?;
     solve(mode, &profile, on.max_value(), calibration, params, ws)
 }
 
@@ -274,7 +294,8 @@ pub fn measure_with<I: Instrument, P: Pixel>(
     params: &I::Params,
     ws: &mut Workspace<'_, P>,
 ) -> Result<Measured<I::Solution>, PipelineError> {
-    let profile = extract_profile(off, on, calibration, config, ws).map_err(I::image_failure)?;
+    let config = I::pipeline_config(config);
+    let profile = extract_profile(off, on, calibration, &config, ws).map_err(I::image_failure)?;
     let solution = solve_with::<I, P>(&profile, on.max_value(), calibration, params, ws)?;
     Ok(Measured { solution, profile })
 }

@@ -3,10 +3,11 @@
 //! microtexture on its highest macrotexture peak ([`crate::solvers::mpd`]); `docs/road.md`.
 
 use crate::calibration::{Calibration, CalibrationError};
+use crate::curve::MAX_CURVES;
 use crate::camera::Camera;
 use crate::laser_plane::LaserPlane;
 use crate::measurement::{Measurement, Micro, Mode, RoadReading};
-use crate::pipeline::PipelineError;
+use crate::pipeline::{PipelineConfig, PipelineError};
 #[allow(unused_imports)]
 use crate::real::Float;
 use crate::real::{sqrt, Real};
@@ -86,6 +87,21 @@ impl Instrument for Road {
 
     /// Plane 0's curve is the profile. A refused profile is [`PipelineError::Road`] with the
     /// reason.
+    /// The curve is not smoothed: the profile's heights at column resolution are the data,
+    /// filtered by the ISO 13473-1 chain alone. The pipeline's quadratic Savitzky–Golay over
+    /// 7 columns (1.05 mm on the road) is as wide as a 1 mm furrow: its negative end weights
+    /// reach the land and read the floor 5 % too deep, and it attenuates the microtexture
+    /// band (`docs/road.md`, "Furrow validation"). And the line breaks at every drop-out
+    /// run, so it keeps as many fragments as the workspace holds ([`MAX_CURVES`]): up to 7
+    /// drop-out runs are drop-outs, not a lost fragment read as a gap (`docs/road.md`,
+    /// "Bad input").
+    fn pipeline_config(base: &PipelineConfig) -> PipelineConfig {
+        let mut config = *base;
+        config.smooth.half_window = 0;
+        config.max_fragments = MAX_CURVES;
+        config
+    }
+
     fn solve(
         points: &PlanePoints<'_>,
         params: &RoadParams,

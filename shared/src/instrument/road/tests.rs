@@ -169,3 +169,25 @@ fn a_wet_patch_a_tilted_head_and_a_road_out_of_range_are_refused() {
         Err(PipelineError::Road(RoadError::OutOfRange { .. }))
     ));
 }
+
+#[test]
+fn the_road_instrument_alone_takes_its_curve_unsmoothed_and_in_fragments() {
+    use crate::instrument::pipeline_config;
+    use crate::measurement::Mode;
+    let base = PipelineConfig::default();
+    assert!(base.smooth.half_window > 1);
+    let road = pipeline_config(Mode::Road, &base);
+    assert_eq!(road.smooth.half_window, 0);
+    assert_eq!(road.max_fragments, crate::curve::MAX_CURVES);
+    assert_eq!(
+        PipelineConfig {
+            smooth: base.smooth,
+            max_fragments: base.max_fragments,
+            ..road
+        },
+        base
+    );
+    for mode in [Mode::Cylinder, Mode::Sphere, Mode::Wall] {
+        assert_eq!(pipeline_config(mode, &base), base);
+    }
+}
