@@ -25,6 +25,7 @@ use crate::calibration::MAX_PLANES;
 use crate::laser_plane::LaserPlane;
 use crate::noise::{self, NoiseModel};
 
+mod along;
 mod budget;
 mod level;
 mod sigma;
