@@ -25,7 +25,6 @@ use crate::calibration::MAX_PLANES;
 use crate::laser_plane::LaserPlane;
 use crate::noise::{self, NoiseModel};
 
-mod along;
 mod budget;
 mod level;
 mod sigma;

@@ -10,7 +10,7 @@
 use crate::real::Float;
 use crate::real::{norm, sqrt, Real, Vec2, Vec3, PI};
 
-use super::{along, CylinderParams, Scratch};
+use super::{CylinderParams, Scratch};
 use crate::laser_plane::LaserPlane;
 use crate::noise;
 use crate::solvers::circle;
@@ -196,13 +196,6 @@ pub(super) fn projected_data_sigma(
         .then_some((rc.fit.circle, s, rc.fit.rms_residual))
 }
 
-/// Largest move of the radius (in the weighted fit's random σ) that the along-the-noise
-/// fit ([`along::fit_along`]) may make from the weighted fit it starts from: the pull it
-/// corrects is a second-order bias, ≤ 2σ on every tuning capture (173 of 184 below 1σ); the
-/// two moves beyond 3σ there were the along fit's LM settling in another minimum
-/// (`docs/cylinder.md` §5c).
-const ALONG_MAX_MOVE: Real = 3.0;
-
 /// The whole-arc circle fit with its data-driven σ terms (`docs/error-model.md`, "Data-driven fit
 /// uncertainty"), as the one-plane and the projected two-plane results both use.
 pub(super) struct RobustCircle {
@@ -242,33 +235,10 @@ pub(super) fn robust_circle(
     // Whole-arc fit (docs/cylinder.md, "Whole-arc fit"): every point with its own σ along
     // its noise direction, none trimmed but real outliers.
     let wf = circle::fit_weighted(pts, &noise, init, &rp, values).ok()?;
-    let mut fit = wf.fit;
-    let mut data_sigma = wf.sigma_radius;
-    // The residuals along each point's own noise direction, from the weighted fit's circle
-    // (`along`: the normal residuals pull a far arc's circle in). Its σ takes the weighted
-    // fit's inflation (reduced χ² and correlation length) over its own model σ.
-    // A move beyond `ALONG_MAX_MOVE` of the weighted fit's σ is not the correction of its
-    // second-order pull but another minimum: the weighted fit stands.
-    let weighted_sigma = wf.sigma_radius.hypot(bending_sigma(&fit, pts, &noise));
-    if let Some((circle, model, _)) =
-        along::fit_along(pts, &noise, fit.circle, rp.tuning, &rp.lm, values)
-            .ok()
-            .filter(|(c, _, _)| {
-                (c.radius - fit.circle.radius).abs() <= ALONG_MAX_MOVE * weighted_sigma
-            })
-    {
-        let inflation = if wf.model_sigma_radius > 0.0 {
-            (wf.sigma_radius / wf.model_sigma_radius).max(1.0)
-        } else {
-            1.0
-        };
-        fit.circle = circle;
-        fit.rms_residual =
-            orthogonal_rms(pts, &circle, rp.tuning * fit.rms_residual.max(rp.min_scale));
-        data_sigma = model * inflation;
-    }
+    let fit = wf.fit;
     let cutoff = rp.tuning * fit.rms_residual.max(rp.min_scale);
     let bending = bending_sigma(&fit, pts, noise);
+    let data_sigma = wf.sigma_radius;
     Some(RobustCircle {
         fit,
         near_sigma: s_point,
@@ -276,24 +246,6 @@ pub(super) fn robust_circle(
         data_sigma,
         bending,
     })
-}
-
-/// RMS distance to `circle` of the points within `cutoff` of it (what the weighted fit's
-/// `rms_residual` measures, for a circle moved by [`along::fit_along`]).
-fn orthogonal_rms(pts: &[Vec2], circle: &circle::Circle, cutoff: Real) -> Real {
-    let (mut ss, mut n) = (0.0, 0usize);
-    for q in pts {
-        let d = norm(&(q - circle.centre)) - circle.radius;
-        if d.abs() <= cutoff {
-            ss += d * d;
-            n += 1;
-        }
-    }
-    if n > 0 {
-        sqrt(ss / n as Real)
-    } else {
-        0.0
-    }
 }
 
 /// Random variance of a three-tangent radius (`docs/cylinder.md`, "Sensitivity"): `α` from
