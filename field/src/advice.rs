@@ -7,7 +7,7 @@ use tangent_core::solvers::result::Flags;
 
 /// The sentence for every flag of [`codes::FLAG_NAMES`], in the same order (a test checks
 /// that each flag has one).
-pub const FLAG_ADVICE: [(Flags, &str); 16] = [
+pub const FLAG_ADVICE: [(Flags, &str); 17] = [
     (
         Flags::ARC_TOO_SHORT,
         "too little of the stem was lit: step back or aim at its centre",
@@ -69,6 +69,10 @@ pub const FLAG_ADVICE: [(Flags, &str); 16] = [
         Flags::NOT_SPHERICAL,
         "the object is not a ball: this reading is not a sphere's diameter",
     ),
+    (
+        Flags::FAINT_STRIPE,
+        "the laser line was barely visible (sun or a dark, far stem): shade it or step closer",
+    ),
 ];
 
 /// Flags that describe the instrument rather than the reading: a one-laser caliper sets
@@ -77,7 +81,7 @@ pub const NOT_WARNINGS: Flags = Flags::TILT_IGNORED;
 
 /// The warnings for `flags`, in bit order, without [`NOT_WARNINGS`]; a bit this version does
 /// not know gets a sentence naming it.
-pub fn warnings(flags: u16) -> Vec<String> {
+pub fn warnings(flags: u32) -> Vec<String> {
     let mut out: Vec<String> = FLAG_ADVICE
         .iter()
         .filter(|(f, _)| flags & f.0 != 0 && NOT_WARNINGS.0 & f.0 == 0)

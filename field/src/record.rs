@@ -48,7 +48,7 @@ pub struct TreeRecord {
     /// Stem tilt from the laser-plane normal (degrees; 0 when not measured).
     pub tilt_deg: f64,
     /// Quality flags (bits of `solvers::result::Flags`).
-    pub flags: u16,
+    pub flags: u32,
     /// Host time of the reading (RFC 3339, UTC).
     pub time: String,
     /// Device id (USB serial number, or the board name).
@@ -155,7 +155,7 @@ pub fn select_plot(records: &[Record], plot_id: &str) -> Vec<Record> {
 
 /// Flag names in capitals (how exports have always spelt [`codes::FLAG_NAMES`]) joined by
 /// `+`, unknown bits as hex; empty when no flag is set.
-pub fn flag_names(flags: u16) -> String {
+pub fn flag_names(flags: u32) -> String {
     let mut names: Vec<String> = codes::flag_names(Flags(flags))
         .map(str::to_ascii_uppercase)
         .collect();

@@ -26,7 +26,7 @@ fn plot(id: &str) -> Record {
     })
 }
 
-fn tree(plot_id: &str, tree_id: u32, species: &str, d: f64, flags: u16, seq: u32) -> Record {
+fn tree(plot_id: &str, tree_id: u32, species: &str, d: f64, flags: u32, seq: u32) -> Record {
     Record::Tree(TreeRecord {
         plot_id: plot_id.into(),
         tree_id,

@@ -5,7 +5,7 @@ use tangent_core::measurement::{Measurement, StemReading};
 use tangent_core::protocol::{FromDevice, Method, Response};
 use tangent_core::solvers::result::Flags;
 
-fn reading(seq: u32, flags: u16) -> Reading {
+fn reading(seq: u32, flags: u32) -> Reading {
     Reading {
         seq,
         timestamp_ms: 1000 * seq as u64,

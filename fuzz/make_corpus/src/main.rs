@@ -172,7 +172,7 @@ fn main() {
         started: "2025-06-01T08:00:00Z".into(),
         note: "north slope, \"wet\"".into(),
     });
-    let tree = |tree_id: u32, species: &str, d: f64, flags: u16| {
+    let tree = |tree_id: u32, species: &str, d: f64, flags: u32| {
         Record::Tree(TreeRecord {
             plot_id: "P-017".into(),
             tree_id,

@@ -283,7 +283,7 @@ fn arb_record(seq: u32) -> impl Strategy<Value = Record> {
         any::<u32>(),
         arb_text(),
         (0.0f64..3000.0, 0.0f64..50.0, -90.0f64..90.0),
-        any::<u16>(),
+        any::<u32>(),
         arb_text(),
         arb_text(),
         any::<u32>(),

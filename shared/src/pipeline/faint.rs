@@ -434,6 +434,7 @@ fn extract_and_triangulate<P: Pixel>(
         plane_points,
         saturated_points,
         touches_edge,
+        faint: true,
     })
 }
 

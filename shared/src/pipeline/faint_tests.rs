@@ -53,6 +53,10 @@ fn a_stripe_below_the_darkness_test_is_found() {
     let profile = extract_profile(&off_f, &on_f, &cal, &PipelineConfig::default(), &mut ws)
         .expect("the faint search finds the stripe");
     assert_eq!(profile.threshold, 0, "read by the faint search");
+    assert!(profile.faint);
+    assert!(profile
+        .image_flags(on_f.max_value())
+        .contains(crate::solvers::result::Flags::FAINT_STRIPE));
     let (s, e) = profile.plane_points[0];
     assert!(e - s > 200, "{} points", e - s);
     let errors: Vec<Real> = ws.curve[s..e]

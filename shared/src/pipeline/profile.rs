@@ -45,6 +45,9 @@ pub struct Profile {
     pub saturated_points: usize,
     /// Some plane's curve reaches the left or right frame edge.
     pub touches_edge: bool,
+    /// The faint-stripe search read the curves ([`super::faint`]): no threshold separated
+    /// the stripe from the noise ([`Flags::FAINT_STRIPE`]).
+    pub faint: bool,
 }
 
 impl Profile {
@@ -57,7 +60,8 @@ impl Profile {
         }
     }
 
-    /// Quality flags that the image alone tells (saturation, ambient light, other objects);
+    /// Quality flags that the image alone tells (saturation, ambient light, other objects, a
+    /// stripe only the faint search found);
     /// `full_scale` is the laser-on frame's [`Frame::max_value`].
     pub fn image_flags(&self, full_scale: u32) -> Flags {
         let mut flags = Flags::default();
@@ -77,6 +81,9 @@ impl Profile {
             && self.largest_unused as Real >= OTHER_OBJECT_FRACTION * self.smallest_used as Real
         {
             flags.insert(Flags::OTHER_OBJECTS);
+        }
+        if self.faint {
+            flags.insert(Flags::FAINT_STRIPE);
         }
         flags
     }
@@ -234,6 +241,7 @@ pub(super) fn after_segmentation<P: Pixel>(
         plane_points,
         saturated_points,
         touches_edge,
+        faint: false,
     })
 }
 

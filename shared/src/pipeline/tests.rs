@@ -84,6 +84,8 @@ fn wall_points_lie_on_the_wall() {
     let mut b = buffers(1);
     let mut ws = b.workspace();
     let prof = extract_profile(&off_f, &on_f, &cal, &PipelineConfig::default(), &mut ws).unwrap();
+    // A stripe the threshold separates is not flagged as faint.
+    assert!(!prof.faint);
     let pts = prof.points(ws.points, 0);
     // Every column of the stripe gives a point (the estimator needs the window inside the
     // frame, which holds here).

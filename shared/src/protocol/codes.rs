@@ -40,7 +40,7 @@ pub const HISTORY_LEN: usize = 64;
 
 /// Every quality flag with its name as printed, exported and logged (stable: exports and
 /// scripts read them).
-pub const FLAG_NAMES: [(Flags, &str); 16] = [
+pub const FLAG_NAMES: [(Flags, &str); 17] = [
     (Flags::ARC_TOO_SHORT, "arc_too_short"),
     (Flags::POOR_FIT, "poor_fit"),
     (Flags::TILT_IGNORED, "tilt_ignored"),
@@ -57,6 +57,7 @@ pub const FLAG_NAMES: [(Flags, &str); 16] = [
     (Flags::ELLIPTIC, "elliptic"),
     (Flags::NEAR_POLE, "near_pole"),
     (Flags::NOT_SPHERICAL, "not_spherical"),
+    (Flags::FAINT_STRIPE, "faint_stripe"),
 ];
 
 /// The names of the flags set in `flags`, in bit order (bits without a name are skipped:

@@ -32,10 +32,12 @@ pub enum Method {
     PlanePca,
 }
 
-/// Quality flags of a solution (a bit set; `Flags::ARC_TOO_SHORT.0 | …`).
+/// Quality flags of a solution (a bit set; `Flags::ARC_TOO_SHORT.0 | …`). 32 bits: on the
+/// wire (postcard's variable-length integers) a set whose bits all lie below 16 encodes as
+/// it did when the set had 16 bits, so older messages and logs still read.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(transparent)]
-pub struct Flags(pub u16);
+pub struct Flags(pub u32);
 
 impl Flags {
     /// The lit and visible arc spans less than `min_arc_angle` seen from the centre: the fit
@@ -86,6 +88,12 @@ impl Flags {
     /// Sphere: the object fails the sphere test — its sections are not round, or do not lie
     /// on one sphere within their noise (`docs/sphere.md`, "Is it a sphere?").
     pub const NOT_SPHERICAL: Flags = Flags(1 << 15);
+    /// Image: no threshold separated the stripe from the noise; the faint-stripe search
+    /// (matched filter across the stripe, a track along it) found it
+    /// (`docs/image-processing.md`, "Faint stripes"). Its points are weak and the reading is
+    /// noisier and more often wrong than a thresholded one; its σ says by how much (set by
+    /// `pipeline`).
+    pub const FAINT_STRIPE: Flags = Flags(1 << 16);
 
     /// Whether every flag of `other` is set.
     pub fn contains(self, other: Flags) -> bool {

@@ -176,7 +176,7 @@ fn every_flag_has_one_name_and_known_flags_are_all_of_them() {
     names.sort_unstable();
     names.dedup();
     assert_eq!(names.len(), FLAG_NAMES.len());
-    let mut bits = 0u16;
+    let mut bits = 0u32;
     for (f, _) in FLAG_NAMES {
         assert_eq!(f.0.count_ones(), 1);
         assert_eq!(bits & f.0, 0);
