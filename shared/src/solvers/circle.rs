@@ -38,7 +38,7 @@ use super::lm::{self, Evaluated, LeastSquares, LmParams, NormalEquations};
 use super::SolveError;
 
 pub mod weighted;
-pub use weighted::{fit_weighted, weighted_radius_sigma, WeightedFit};
+pub use weighted::{fit_weighted, weighted_radius_sigma, WeightedFit, WEIGHTED_SCRATCH_PER_POINT};
 
 /// A circle: centre and radius (same units as the points).
 #[derive(Debug, Clone, Copy, PartialEq)]

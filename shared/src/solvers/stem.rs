@@ -12,7 +12,7 @@
 use crate::real::Float;
 use crate::real::{norm, sqrt, Real, Vec2, Vec3, PI};
 
-use super::circle::{self, RobustParams};
+use super::circle::{self, RobustParams, WEIGHTED_SCRATCH_PER_POINT};
 use super::cylinder_fit::{fit_cylinder_weighted, initial_cylinder, project_along_axis, to_plane};
 use super::ellipse::{self, EllipseFit};
 use super::lm::LmParams;
@@ -127,7 +127,10 @@ impl Default for CylinderParams {
     }
 }
 
-/// Caller-owned working memory of [`solve`]: both at least as long as the longest curve.
+/// Caller-owned working memory of [`solve`]: `points` at least as long as the longest curve,
+/// `values` at least [`circle::WEIGHTED_SCRATCH_PER_POINT`] times as long (the whole-arc fit's
+/// per-point σ, direction and weight; a curve longer than
+/// [`CylinderParams::point_budget`] needs that only per bin, plus the bins' σ).
 pub struct Scratch<'a> {
     /// In-plane / projected points.
     pub points: &'a mut [Vec2],
@@ -290,7 +293,25 @@ fn budget_split(n: usize, budget: usize, values: usize) -> Option<usize> {
         return None;
     }
     let m = n.div_ceil(n.div_ceil(budget));
-    (values >= 2 * m).then_some(m)
+    (values >= (1 + WEIGHTED_SCRATCH_PER_POINT) * m).then_some(m)
+}
+
+/// Length of [`Scratch::values`] that [`solve`] needs for `curves`: the whole-arc fit's
+/// scratch for plane 0's curve (after binning to `budget`, with the bins' σ) and, with two or
+/// more planes, for each curve projected along the axis (every point).
+fn values_needed(curves: &[&[Vec3]], budget: usize) -> usize {
+    let first = curves.first().map_or(0, |c| c.len());
+    let one_plane = match budget_split(first, budget, usize::MAX) {
+        Some(m) => (1 + WEIGHTED_SCRATCH_PER_POINT) * m,
+        None => WEIGHTED_SCRATCH_PER_POINT * first,
+    };
+    let longest = curves.iter().map(|c| c.len()).max().unwrap_or(0);
+    let projected = if curves.len() >= 2 {
+        WEIGHTED_SCRATCH_PER_POINT * longest
+    } else {
+        0
+    };
+    one_plane.max(projected).max(longest)
 }
 
 /// The ellipse fitted to the circle fit's inliers when the section is detectably not round
@@ -389,7 +410,9 @@ pub fn solve(
         return Err(SolveError::InvalidParameter);
     }
     let longest = input.curves.iter().map(|c| c.len()).max().unwrap_or(0);
-    if scratch.points.len() < longest || scratch.values.len() < longest {
+    if scratch.points.len() < longest
+        || scratch.values.len() < values_needed(input.curves, params.point_budget)
+    {
         return Err(SolveError::ScratchTooSmall);
     }
     let plane0 = &input.planes[0];
