@@ -23,6 +23,13 @@ pub const LATERAL_FLOOR: Real = 0.2;
 
 pub use crate::solvers::correlation::MAX_CORRELATION_LAG;
 
+/// Convergence of [`fit_weighted`] in the data's own units (`docs/cylinder.md`, "Whole-arc
+/// fit", convergence): the cost `Σwᵢdᵢ²` is a χ² (weights `1/σ²`), so an LM step that lowers it
+/// by less than this, or a reweighting round that moves the circle by `Δθ` with
+/// `ΔθᵀJᵀWJΔθ` below it, moves the circle by less than 1 % of its model σ — instead of
+/// iterating to the last bits of the arithmetic (the other fits' step tolerance).
+pub const SETTLED_CHI2: Real = 1e-4;
+
 /// Result of [`fit_weighted`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct WeightedFit {
@@ -143,11 +150,14 @@ pub fn fit_weighted(
         points_noise.weights(points, &norm, theta, cs, buf);
         let weights: &[Real] = buf;
         let weight = |i: usize, _: Vec2| weights.get(i).copied().unwrap_or(0.0);
-        let (next, it) = lm(points, &norm, theta, &params.lm, &weight)?;
+        let (next, it, jtj) = lm(points, &norm, theta, &params.lm, &weight, SETTLED_CHI2)?;
         last_it = it;
-        let change = real::norm(&(next - theta));
+        let delta = next - theta;
+        let change = real::norm(&delta);
         theta = next;
-        if change <= params.lm.tolerance * (1.0 + real::norm(&theta)) {
+        if change <= params.lm.tolerance * (1.0 + real::norm(&theta))
+            || delta.dot(&(jtj * delta)) < SETTLED_CHI2
+        {
             break;
         }
         // The last allowed round must have settled to within the noise.
@@ -247,7 +257,12 @@ impl PointNoise<'_> {
 /// `ρ_k > 0`, `k ≤` [`MAX_CORRELATION_LAG`] and `k < n/4`; at least 1. `buf` holds the
 /// weights `wᵢ` on entry and is overwritten with the `uᵢ` (the `n`-th inlier's `u` goes to
 /// `buf[n]`, `n ≤ i`: each weight is read before its entry is reused).
-fn correlation_length(points: &[Vec2], norm: &Normalisation, theta: Vec3, buf: &mut [Real]) -> Real {
+fn correlation_length(
+    points: &[Vec2],
+    norm: &Normalisation,
+    theta: Vec3,
+    buf: &mut [Real],
+) -> Real {
     let centre = Vec2::new(theta.x, theta.y);
     let mut n = 0;
     for (i, p) in points.iter().enumerate() {
