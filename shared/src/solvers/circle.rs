@@ -38,7 +38,7 @@ use super::lm::{self, Evaluated, LeastSquares, LmParams, NormalEquations};
 use super::SolveError;
 
 pub mod weighted;
-pub use weighted::{fit_weighted, weighted_radius_sigma, WeightedFit};
+pub use weighted::{fit_weighted, weighted_radius_sigma, WeightedFit, WEIGHTED_SCRATCH_PER_POINT};
 
 /// A circle: centre and radius (same units as the points).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -313,6 +313,9 @@ struct CircleProblem<'a, W> {
     points: &'a [Vec2],
     norm: &'a Normalisation,
     weight: &'a W,
+    /// An accepted step that lowers the cost by less than this ends the iteration
+    /// ([`LeastSquares::settled`]); 0: never.
+    settle: Real,
 }
 
 impl<W: Fn(usize, Vec2) -> Real> LeastSquares<3> for CircleProblem<'_, W> {
@@ -334,28 +337,35 @@ impl<W: Fn(usize, Vec2) -> Real> LeastSquares<3> for CircleProblem<'_, W> {
     fn step_scale(&self, theta: &Vec3) -> Real {
         1.0 + real::norm(theta)
     }
+
+    fn settled(&self, before: Real, after: Real) -> bool {
+        before - after < self.settle
+    }
 }
 
 /// Levenberg–Marquardt ([`lm::minimise`]) on normalised coordinates; returns
-/// `(θ, iterations)`.
+/// `(θ, iterations, JᵀWJ at θ)`. An accepted step that lowers the cost by less than `settle`
+/// ends it (0: only a short step does).
 fn lm<W: Fn(usize, Vec2) -> Real>(
     points: &[Vec2],
     norm: &Normalisation,
     start: Vec3,
     params: &LmParams,
     weight: &W,
-) -> Result<(Vec3, u32), SolveError> {
+    settle: Real,
+) -> Result<(Vec3, u32, Mat3), SolveError> {
     let problem = CircleProblem {
         points,
         norm,
         weight,
+        settle,
     };
     let start = Evaluated::at(&problem, start)?;
     if !start.normal.cost.is_finite() {
         return Err(SolveError::NonFinite);
     }
     let (min, iterations) = lm::minimise(&problem, start, params)?;
-    Ok((min.params, iterations))
+    Ok((min.params, iterations, min.normal.jtj))
 }
 
 fn finish<W: Fn(usize, Vec2) -> Real>(
@@ -426,7 +436,7 @@ pub fn fit_geometric(
     let norm = Normalisation::of(points, 3)?;
     let start = normalised_start(&initial, &norm)?;
     let unit = |_: usize, _: Vec2| 1.0;
-    let (theta, it) = lm(points, &norm, start, params, &unit)?;
+    let (theta, it, _) = lm(points, &norm, start, params, &unit, 0.0)?;
     finish(points, &norm, theta, it, &unit)
 }
 
@@ -509,7 +519,7 @@ pub fn fit_robust(
         }
         let cs = params.tuning * scale;
         let weight = move |_: usize, q: Vec2| tukey((real::norm(&(q - centre)) - r) / cs);
-        let (next, it) = lm(points, &norm, theta, &params.lm, &weight)?;
+        let (next, it, _) = lm(points, &norm, theta, &params.lm, &weight, 0.0)?;
         last_it = it;
         let change = real::norm(&(next - theta));
         theta = next;
@@ -530,7 +540,7 @@ pub fn fit_robust(
     let scale = (1.4826 * *median).max(min_scale);
     let cs = params.tuning * scale;
     let weight = move |_: usize, q: Vec2| tukey((real::norm(&(q - centre)) - r) / cs);
-    let (next, it) = lm(points, &norm, theta, &params.lm, &weight)?;
+    let (next, it, _) = lm(points, &norm, theta, &params.lm, &weight, 0.0)?;
     if real::norm(&(next - theta)) > scale {
         return Err(SolveError::NotConverged);
     }

@@ -12,7 +12,7 @@
 use crate::real::Float;
 use crate::real::{norm, sqrt, Real, Vec2, Vec3, PI};
 
-use super::circle::{self, RobustParams};
+use super::circle::{self, RobustParams, WEIGHTED_SCRATCH_PER_POINT};
 use super::cylinder_fit::{fit_cylinder_weighted, initial_cylinder, project_along_axis, to_plane};
 use super::ellipse::{self, EllipseFit};
 use super::lm::LmParams;
@@ -127,7 +127,11 @@ impl Default for CylinderParams {
     }
 }
 
-/// Caller-owned working memory of [`solve`]: both at least as long as the longest curve.
+/// Caller-owned working memory of [`solve`]: `points` at least as long as the longest curve;
+/// `values` at least as long, and holding the whole-arc fit's
+/// [`circle::WEIGHTED_SCRATCH_PER_POINT`] values per fitted point — plane 0's curve is binned
+/// to the point budget, lowered to what `values` holds (one more value per bin: its σ); with
+/// two or more planes, every point of the longest curve (the projected fits).
 pub struct Scratch<'a> {
     /// In-plane / projected points.
     pub points: &'a mut [Vec2],
@@ -220,17 +224,13 @@ fn solve_plane(
     // Robust fit, scale floor = predicted point noise at the arc's nearest point; each data
     // point's noise vector is its stored σ along the field's direction.
     // A long arc is binned to the point budget first (docs/error-model.md, "Point budget");
-    // the bins' σ go to the front of `values`, the fit's median scratch after them.
+    // the bins' σ go to the front of `values`, the fit's scratch after them.
+    let budget = point_budget(params, scratch.values.len());
     let (pts, sigmas, values): (&[Vec2], &[Real], &mut [Real]) =
-        match budget_split(n, params.point_budget, scratch.values.len()) {
+        match budget_split(n, budget, scratch.values.len()) {
             Some(m) => {
                 let (binned, rest) = scratch.values.split_at_mut(m);
-                let m = decimate(
-                    &mut scratch.points[..n],
-                    sigmas,
-                    binned,
-                    params.point_budget,
-                );
+                let m = decimate(&mut scratch.points[..n], sigmas, binned, budget);
                 (&scratch.points[..m], &binned[..m], rest)
             }
             None => (&scratch.points[..n], sigmas, &mut scratch.values[..]),
@@ -290,7 +290,34 @@ fn budget_split(n: usize, budget: usize, values: usize) -> Option<usize> {
         return None;
     }
     let m = n.div_ceil(n.div_ceil(budget));
-    (values >= 2 * m).then_some(m)
+    (values >= (1 + WEIGHTED_SCRATCH_PER_POINT) * m).then_some(m)
+}
+
+/// The point budget of the one-plane fit: [`CylinderParams::point_budget`], lowered to what
+/// `values` (its length) holds with the bins' σ and the fit's scratch (a workspace sized for
+/// a narrow frame bins its longer curves rather than refusing them).
+fn point_budget(params: &CylinderParams, values: usize) -> usize {
+    params
+        .point_budget
+        .min(values / (1 + WEIGHTED_SCRATCH_PER_POINT))
+}
+
+/// Length of [`Scratch::values`] that [`solve`] needs for `curves`: the whole-arc fit's
+/// scratch for plane 0's curve (after binning to `budget`, with the bins' σ) and, with two or
+/// more planes, for each curve projected along the axis (every point).
+fn values_needed(curves: &[&[Vec3]], budget: usize) -> usize {
+    let first = curves.first().map_or(0, |c| c.len());
+    let one_plane = match budget_split(first, budget, usize::MAX) {
+        Some(m) => (1 + WEIGHTED_SCRATCH_PER_POINT) * m,
+        None => WEIGHTED_SCRATCH_PER_POINT * first,
+    };
+    let longest = curves.iter().map(|c| c.len()).max().unwrap_or(0);
+    let projected = if curves.len() >= 2 {
+        WEIGHTED_SCRATCH_PER_POINT * longest
+    } else {
+        0
+    };
+    one_plane.max(projected).max(longest)
 }
 
 /// The ellipse fitted to the circle fit's inliers when the section is detectably not round
@@ -389,7 +416,10 @@ pub fn solve(
         return Err(SolveError::InvalidParameter);
     }
     let longest = input.curves.iter().map(|c| c.len()).max().unwrap_or(0);
-    if scratch.points.len() < longest || scratch.values.len() < longest {
+    if scratch.points.len() < longest
+        || scratch.values.len()
+            < values_needed(input.curves, point_budget(params, scratch.values.len()))
+    {
         return Err(SolveError::ScratchTooSmall);
     }
     let plane0 = &input.planes[0];

@@ -301,7 +301,7 @@ fn weighted_fit_keeps_noisy_ends_rejects_a_branch_and_states_its_sigma() {
     let mut stated = std::vec::Vec::new();
     let mut geo = std::vec::Vec::new();
     let mut pts = std::vec![Vec2::zeros(); n];
-    let mut scratch = std::vec![0.0; n];
+    let mut scratch = std::vec![0.0; WEIGHTED_SCRATCH_PER_POINT * n];
     for trial in 0..200 {
         for (i, p) in pts.iter_mut().enumerate() {
             let q = point(i);
@@ -368,7 +368,7 @@ fn weighted_fit_sigma_follows_correlated_noise() {
     let mut rng = Rng::new(11);
     let (mut radii, mut stated) = (std::vec::Vec::new(), std::vec::Vec::new());
     let mut pts = std::vec![Vec2::zeros(); n];
-    let mut scratch = std::vec![0.0; n];
+    let mut scratch = std::vec![0.0; WEIGHTED_SCRATCH_PER_POINT * n];
     for _ in 0..200 {
         let raw: std::vec::Vec<Real> = (0..n + 8).map(|_| rng.gauss() as Real).collect();
         for (i, p) in pts.iter_mut().enumerate() {

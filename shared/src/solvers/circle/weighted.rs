@@ -23,6 +23,13 @@ pub const LATERAL_FLOOR: Real = 0.2;
 
 pub use crate::solvers::correlation::MAX_CORRELATION_LAG;
 
+/// Convergence of [`fit_weighted`] in the data's own units (`docs/cylinder.md`, "Whole-arc
+/// fit", convergence): the cost `Σwᵢdᵢ²` is a χ² (weights `1/σ²`), so an LM step that lowers it
+/// by less than this, or a reweighting round that moves the circle by `Δθ` with
+/// `ΔθᵀJᵀWJΔθ` below it, moves the circle by less than 1 % of its model σ — instead of
+/// iterating to the last bits of the arithmetic (the other fits' step tolerance).
+pub const SETTLED_CHI2: Real = 1e-4;
+
 /// Result of [`fit_weighted`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct WeightedFit {
@@ -53,6 +60,11 @@ fn residual_sigma(q: Vec2, centre: Vec2, sigma: Real, direction: Vec2) -> Real {
     sigma * sqrt(along * along + LATERAL_FLOOR * LATERAL_FLOOR)
 }
 
+/// Reals of scratch [`fit_weighted`] needs per point: each point's σ and unit noise direction
+/// (computed once per fit), and one value per point for the robust scale's median and then the
+/// round's weights.
+pub const WEIGHTED_SCRATCH_PER_POINT: usize = 4;
+
 /// Whole-arc weighted, robust geometric circle fit.
 ///
 /// Point `i` has the 1σ noise vector `noise(i)` (same units as the points): σᵢ along the unit
@@ -61,7 +73,10 @@ fn residual_sigma(q: Vec2, centre: Vec2, sigma: Real, direction: Vec2) -> Real {
 /// with `uᵢ = dᵢ/σ_{dᵢ}`, `s = max(1.4826·median|uᵢ|, 1)` (the data are not taken to be
 /// quieter than their own σ), `c` = `params.tuning`, frozen at the previous round's circle,
 /// LM ([`super::super::lm`]) inside each round. `params.min_scale` is not used (the σ's set
-/// the scale). `scratch` (at least `points.len()`) holds the `|uᵢ|` for the median.
+/// the scale). `scratch` (at least [`WEIGHTED_SCRATCH_PER_POINT`]` × points.len()`) holds
+/// each point's σ and direction, evaluated once (`noise` is called once per point), and the
+/// `|uᵢ|` for the median, then the round's weights: frozen within a round, each LM step reads
+/// them instead of evaluating the noise model again (`docs/performance.md`).
 ///
 /// Points with a non-positive or non-finite σ are left out. Errors as [`super::fit_robust`].
 pub fn fit_weighted(
@@ -76,26 +91,36 @@ pub fn fit_weighted(
         return Err(SolveError::InvalidParameter);
     }
     let norm = Normalisation::of(points, 3)?;
-    let buf = scratch
-        .get_mut(..points.len())
+    let n = points.len();
+    let scratch = scratch
+        .get_mut(..WEIGHTED_SCRATCH_PER_POINT * n)
         .ok_or(SolveError::ScratchTooSmall)?;
+    let (sigmas, rest) = scratch.split_at_mut(n);
+    let (dir_x, rest) = rest.split_at_mut(n);
+    let (dir_y, buf) = rest.split_at_mut(n);
     let inv_scale = 1.0 / norm.scale;
-    let sigma_of = |i: usize| {
-        let s = real::norm(&noise(i)) * inv_scale;
-        if s > 0.0 && s.is_finite() {
-            s
+    // Each point's σ (normalised units; infinite: no weight) and unit noise direction.
+    for (i, ((s, dx), dy)) in sigmas
+        .iter_mut()
+        .zip(dir_x.iter_mut())
+        .zip(dir_y.iter_mut())
+        .enumerate()
+    {
+        let g = noise(i);
+        let len = real::norm(&g);
+        let sigma = len * inv_scale;
+        *s = if sigma > 0.0 && sigma.is_finite() {
+            sigma
         } else {
             Real::INFINITY
-        }
-    };
-    let direction = |i: usize| {
-        let g = noise(i);
-        let s = real::norm(&g);
-        if s > 0.0 {
-            g / s
-        } else {
-            Vec2::zeros()
-        }
+        };
+        let d = if len > 0.0 { g / len } else { Vec2::zeros() };
+        (*dx, *dy) = (d.x, d.y);
+    }
+    let points_noise = PointNoise {
+        sigmas,
+        dir_x,
+        dir_y,
     };
     let mut theta = normalised_start(&initial, &norm)?;
     let mut last_it = 0;
@@ -106,7 +131,7 @@ pub fn fit_weighted(
         let mut k = 0;
         for (i, p) in points.iter().enumerate() {
             let q = norm.apply(*p);
-            let s = residual_sigma(q, centre, sigma_of(i), direction(i));
+            let s = points_noise.residual_sigma(i, q, centre);
             if s.is_finite() {
                 buf[k] = ((real::norm(&(q - centre)) - r) / s).abs();
                 k += 1;
@@ -122,18 +147,17 @@ pub fn fit_weighted(
             return Err(SolveError::Degenerate);
         }
         cs = params.tuning * scale;
-        let weight = |i: usize, q: Vec2| {
-            let s = residual_sigma(q, centre, sigma_of(i), direction(i));
-            if !s.is_finite() {
-                return 0.0;
-            }
-            tukey((real::norm(&(q - centre)) - r) / (s * cs)) / (s * s)
-        };
-        let (next, it) = lm(points, &norm, theta, &params.lm, &weight)?;
+        points_noise.weights(points, &norm, theta, cs, buf);
+        let weights: &[Real] = buf;
+        let weight = |i: usize, _: Vec2| weights.get(i).copied().unwrap_or(0.0);
+        let (next, it, jtj) = lm(points, &norm, theta, &params.lm, &weight, SETTLED_CHI2)?;
         last_it = it;
-        let change = real::norm(&(next - theta));
+        let delta = next - theta;
+        let change = real::norm(&delta);
         theta = next;
-        if change <= params.lm.tolerance * (1.0 + real::norm(&theta)) {
+        if change <= params.lm.tolerance * (1.0 + real::norm(&theta))
+            || delta.dot(&(jtj * delta)) < SETTLED_CHI2
+        {
             break;
         }
         // The last allowed round must have settled to within the noise.
@@ -143,27 +167,22 @@ pub fn fit_weighted(
     }
     let centre = Vec2::new(theta.x, theta.y);
     let r = theta.z;
-    let weight = |i: usize, q: Vec2| {
-        let s = residual_sigma(q, centre, sigma_of(i), direction(i));
-        if !s.is_finite() {
-            return 0.0;
-        }
-        tukey((real::norm(&(q - centre)) - r) / (s * cs)) / (s * s)
-    };
+    points_noise.weights(points, &norm, theta, cs, buf);
+    let weights: &[Real] = buf;
+    let weight = |i: usize, _: Vec2| weights.get(i).copied().unwrap_or(0.0);
     let (jtj, _, chi2, _, used) = accumulate(points, &norm, theta, &weight);
     let mut fit = finish(points, &norm, theta, last_it, &weight)?;
     // Unweighted RMS of the inliers (metres), as the unweighted fits report.
-    let (mut ss, mut n) = (0.0, 0usize);
-    for (i, p) in points.iter().enumerate() {
-        let q = norm.apply(*p);
-        if weight(i, q) > 0.0 {
-            let d = real::norm(&(q - centre)) - r;
+    let (mut ss, mut count) = (0.0, 0usize);
+    for (p, w) in points.iter().zip(weights) {
+        if *w > 0.0 {
+            let d = real::norm(&(norm.apply(*p) - centre)) - r;
             ss += d * d;
-            n += 1;
+            count += 1;
         }
     }
-    fit.rms_residual = if n > 0 {
-        sqrt(ss / n as Real) * norm.scale
+    fit.rms_residual = if count > 0 {
+        sqrt(ss / count as Real) * norm.scale
     } else {
         0.0
     };
@@ -177,7 +196,7 @@ pub fn fit_weighted(
         sqrt(fit.covariance[(1, 1)].max(0.0)),
         sqrt(fit.covariance[(2, 2)].max(0.0)),
     );
-    let correlation = correlation_length(points, &norm, theta, &weight, buf);
+    let correlation = correlation_length(points, &norm, theta, buf);
     let factor = (chi2_dof * correlation).max(1.0);
     let sigma_radius = model * sqrt(factor);
     if !(sigma_radius.is_finite() && fit.circle.radius.is_finite()) {
@@ -192,22 +211,64 @@ pub fn fit_weighted(
     })
 }
 
+/// Each point's σ (normalised units) and unit noise direction, as [`fit_weighted`] evaluates
+/// them once per fit.
+struct PointNoise<'a> {
+    sigmas: &'a [Real],
+    dir_x: &'a [Real],
+    dir_y: &'a [Real],
+}
+
+impl PointNoise<'_> {
+    /// σ of point `i`'s orthogonal residual about a circle centred at `centre` (`q` the
+    /// point, normalised); infinite for a point without σ.
+    fn residual_sigma(&self, i: usize, q: Vec2, centre: Vec2) -> Real {
+        match (self.sigmas.get(i), self.dir_x.get(i), self.dir_y.get(i)) {
+            (Some(s), Some(x), Some(y)) => residual_sigma(q, centre, *s, Vec2::new(*x, *y)),
+            _ => Real::INFINITY,
+        }
+    }
+
+    /// The weights `tukey(dᵢ/(σ_{dᵢ}·cs))/σ_{dᵢ}²` about the circle `theta` (normalised) into
+    /// `out[i]`; 0 for a point without σ.
+    fn weights(
+        &self,
+        points: &[Vec2],
+        norm: &Normalisation,
+        theta: Vec3,
+        cs: Real,
+        out: &mut [Real],
+    ) {
+        let centre = Vec2::new(theta.x, theta.y);
+        for (i, (p, w)) in points.iter().zip(out.iter_mut()).enumerate() {
+            let q = norm.apply(*p);
+            let s = self.residual_sigma(i, q, centre);
+            *w = if s.is_finite() {
+                tukey((real::norm(&(q - centre)) - theta.z) / (s * cs)) / (s * s)
+            } else {
+                0.0
+            };
+        }
+    }
+}
+
 /// Correlation length of the inliers' normalised residuals `uᵢ = dᵢ·√wᵢ` in curve order
 /// (`docs/error-model.md`, "Correlation along the stripe"): `1 + 2 Σ_{k≥1} ρ_k` while
-/// `ρ_k > 0`, `k ≤` [`MAX_CORRELATION_LAG`] and `k < n/4`; at least 1. `buf` holds the `uᵢ`.
-fn correlation_length<W: Fn(usize, Vec2) -> Real>(
+/// `ρ_k > 0`, `k ≤` [`MAX_CORRELATION_LAG`] and `k < n/4`; at least 1. `buf` holds the
+/// weights `wᵢ` on entry and is overwritten with the `uᵢ` (the `n`-th inlier's `u` goes to
+/// `buf[n]`, `n ≤ i`: each weight is read before its entry is reused).
+fn correlation_length(
     points: &[Vec2],
     norm: &Normalisation,
     theta: Vec3,
-    weight: &W,
     buf: &mut [Real],
 ) -> Real {
     let centre = Vec2::new(theta.x, theta.y);
     let mut n = 0;
     for (i, p) in points.iter().enumerate() {
-        let q = norm.apply(*p);
-        let w = weight(i, q);
+        let Some(&w) = buf.get(i) else { break };
         if w > 0.0 {
+            let q = norm.apply(*p);
             buf[n] = (real::norm(&(q - centre)) - theta.z) * sqrt(w);
             n += 1;
         }

@@ -46,7 +46,7 @@ fn solve_transversal_stem() {
     let mut rng = Rng::new(1);
     let mut curve = std::vec::Vec::new();
     let mut pts = std::vec![Vec2::zeros(); 800];
-    let mut vals = std::vec![0.0; 800];
+    let mut vals = std::vec![0.0; 3200];
     for (d, diam) in [(1.5, 0.3), (0.8, 0.12), (2.5, 0.5)] {
         let (d, diam): (Real, Real) = (d, diam);
         let c = Circle::new(Vec2::new(0.02, d + diam / 2.0), diam / 2.0);
@@ -101,7 +101,7 @@ fn solve_tilted_stem_two_planes() {
         ) * 3e-4;
     }
     let mut pts = std::vec![Vec2::zeros(); 1500];
-    let mut vals = std::vec![0.0; 1500];
+    let mut vals = std::vec![0.0; 6000];
     let sol = solve(
         &CylinderInput {
             curves: &[&c0, &c1],
@@ -184,7 +184,7 @@ fn solve_errors() {
         &mut big,
     );
     let mut pts = std::vec![Vec2::zeros(); 800];
-    let mut vals = std::vec![0.0; 800];
+    let mut vals = std::vec![0.0; 3200];
     let r = solve(
         &CylinderInput {
             curves: &[&big],
@@ -261,7 +261,7 @@ fn budget_keeps_the_reading() {
     let mut rng = Rng::new(3);
     let mut curve = std::vec::Vec::new();
     let mut pts = std::vec![Vec2::zeros(); 1600];
-    let mut vals = std::vec![0.0; 1600];
+    let mut vals = std::vec![0.0; 4 * 1600];
     let mut worst: Real = 0.0;
     for (d, diam) in [(1.0, 1.0), (0.6, 0.6), (1.2, 0.8)] {
         let (d, diam): (Real, Real) = (d, diam);
