@@ -31,8 +31,8 @@ use tangent_core::protocol::{
 use crate::exposure::{self, Exposure};
 use crate::measure::{FramePair, Measurer, StreamMeasurer};
 use crate::ports::{
-    Board, CalibrationStore, Camera, CameraError, Clock, Devices, Geometry, Laser, Link,
-    ModeStore, RowSink, Strobe, Trigger, Watchdog,
+    Board, CalibrationStore, Camera, CameraError, Clock, Devices, Geometry, Laser, Link, ModeStore,
+    RowSink, Strobe, Trigger, Watchdog,
 };
 use crate::stats::Welford;
 
@@ -349,7 +349,11 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
         // the user now sets explicitly is stored.
         if self.mode_store != ModeStoreState::Loaded(mode) {
             self.dev.modes.save(mode).map_err(|detail| {
-                B::log(format_args!("mode {} not stored: code {}", mode.name(), detail));
+                B::log(format_args!(
+                    "mode {} not stored: code {}",
+                    mode.name(),
+                    detail
+                ));
                 DeviceError {
                     code: ErrorCode::StorageFailure,
                     detail,

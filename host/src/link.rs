@@ -31,8 +31,9 @@ use std::time::{Duration, Instant};
 use tangent_core::measurement::Mode;
 use tangent_core::protocol::{
     self, codes, Board, Decoder, DeviceError, ErrorCode, Feed, FrameEncoder, FrameSel,
-    FrameSetInfo, FromDevice, LinkStats, ModeStoreState, ProtocolError, Reading, Request, Response, SelfTestReport,
-    ToDevice, WireCalibration, FRAME_CHUNK_MAX, MAX_FRAME_LEN, PROTOCOL_VERSION, UNSOLICITED,
+    FrameSetInfo, FromDevice, LinkStats, ModeStoreState, ProtocolError, Reading, Request, Response,
+    SelfTestReport, ToDevice, WireCalibration, FRAME_CHUNK_MAX, MAX_FRAME_LEN, PROTOCOL_VERSION,
+    UNSOLICITED,
 };
 use tangent_field::seq::{HistoryOutcome, SeqTracker};
 

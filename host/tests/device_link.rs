@@ -638,7 +638,7 @@ fn the_mode_set_before_a_reboot_is_the_mode_after_it() {
     dev.reboot();
     let mut link = open(&dev);
     let info = link.device_info().unwrap();
-    assert_eq!(info.uptime_ms < 5_000, true, "a fresh boot");
+    assert!(info.uptime_ms < 5_000, "a fresh boot");
     assert_eq!(info.mode, Mode::Sphere);
     assert_eq!(info.mode_store, ModeStoreState::Loaded(Mode::Sphere));
 }
@@ -703,6 +703,6 @@ fn the_emulated_device_remembers_its_mode_across_a_restart() {
         err.contains("mode cylinder") && err.contains("damaged"),
         "{err}"
     );
-    let mut link = Link::open(dev.pty.to_str().unwrap(), LinkConfig::default()).unwrap();
+    let link = Link::open(dev.pty.to_str().unwrap(), LinkConfig::default()).unwrap();
     assert_eq!(link.identity().mode_store, ModeStoreState::Corrupt);
 }

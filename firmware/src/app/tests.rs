@@ -11,8 +11,7 @@ use tangent_core::protocol::{ErrorCode, Request, MAX_FRAME_LEN};
 use super::*;
 use crate::fakes::{
     longest_lit_us, poll_bounded, CameraBehaviour, FailingMeasurer, FakeBoard, FakeCamera,
-    FakeClock, FakeLaser, FakeWatchdog, NoTrigger, QuietLink, RamSector, RefStore, Time,
-    GEOMETRY,
+    FakeClock, FakeLaser, FakeWatchdog, NoTrigger, QuietLink, RamSector, RefStore, Time, GEOMETRY,
 };
 use crate::mode_log::ModeLog;
 
@@ -345,7 +344,11 @@ fn the_mode_survives_a_power_cycle_and_a_failed_store_changes_nothing() {
         assert_eq!(app.mode_store(), ModeStoreState::Loaded(Mode::Sphere));
         app.set_mode(Mode::Sphere).unwrap();
     }
-    assert_eq!(rig.sector.0.borrow().programs, 1, "the same mode twice is stored once");
+    assert_eq!(
+        rig.sector.0.borrow().programs,
+        1,
+        "the same mode twice is stored once"
+    );
     let sector = rig.sector.clone();
     {
         let mut app = rig.app(CameraBehaviour::Works, false);
@@ -360,7 +363,10 @@ fn the_mode_survives_a_power_cycle_and_a_failed_store_changes_nothing() {
         // A power cut while the next change is programmed: that change is lost, not the
         // one before.
         sector.0.borrow_mut().tear_next_program = Some(13);
-        assert_eq!(app.set_mode(Mode::Road).unwrap_err().code, ErrorCode::StorageFailure);
+        assert_eq!(
+            app.set_mode(Mode::Road).unwrap_err().code,
+            ErrorCode::StorageFailure
+        );
         assert_eq!(app.mode(), Mode::Sphere);
     }
     let app = rig.app(CameraBehaviour::Works, false);

@@ -321,25 +321,21 @@ impl FlashWords for FileSector<'_> {
     }
 }
 
-/// The emulated board's mode store: the log in a file (`--mode-store`), or RAM only.
-pub enum QemuModes<'c> {
-    /// The mode log in a host file.
-    File(ModeLog<FileSector<'c>>),
-    /// No file: the mode is forgotten at reset.
-    Volatile(VolatileModes),
-}
+/// The emulated board's mode store: the log in a file (`--mode-store`), or none (the mode
+/// in RAM only, [`ModeStoreState::Volatile`]).
+pub struct QemuModes<'c>(Option<ModeLog<FileSector<'c>>>);
 
 impl ModeStore for QemuModes<'_> {
     fn load(&mut self) -> ModeStoreState {
-        match self {
-            QemuModes::File(log) => log.load(),
-            QemuModes::Volatile(v) => v.load(),
+        match &mut self.0 {
+            Some(log) => log.load(),
+            None => VolatileModes.load(),
         }
     }
     fn save(&mut self, mode: Mode) -> Result<(), u32> {
-        match self {
-            QemuModes::File(log) => log.save(mode),
-            QemuModes::Volatile(v) => v.save(mode),
+        match &mut self.0 {
+            Some(log) => log.save(mode),
+            None => VolatileModes.save(mode),
         }
     }
 }
@@ -760,10 +756,7 @@ pub fn start(syst: SYST) -> Started {
         link,
         clock: QemuClock,
         store: RamStore::new(calibration),
-        modes: match mode_path {
-            Some(p) => QemuModes::File(ModeLog::new(FileSector::open(p))),
-            None => QemuModes::Volatile(VolatileModes),
-        },
+        modes: QemuModes(mode_path.map(|p| ModeLog::new(FileSector::open(p)))),
         watchdog: NoWatchdog,
     };
     Started {

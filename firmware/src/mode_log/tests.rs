@@ -89,10 +89,18 @@ fn a_full_sector_is_erased_once_and_the_log_continues() {
         log.save(modes[i % 4]).unwrap();
     }
     assert_eq!(log.next_free(), n);
-    assert_eq!(sector.0.borrow().erases, 0, "no erase before the sector is full");
+    assert_eq!(
+        sector.0.borrow().erases,
+        0,
+        "no erase before the sector is full"
+    );
     let (mut log, state) = boot(&sector);
     assert_eq!(state, ModeStoreState::Loaded(modes[(n - 1) % 4]));
-    assert_eq!(log.next_free(), n, "a full sector is seen full after a power cycle");
+    assert_eq!(
+        log.next_free(),
+        n,
+        "a full sector is seen full after a power cycle"
+    );
     log.save(Mode::Road).unwrap();
     assert_eq!(sector.0.borrow().erases, 1);
     assert_eq!(log.next_free(), 1);

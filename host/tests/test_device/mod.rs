@@ -43,8 +43,8 @@ use tangent_firmware::mode_log::ModeLog;
 use tangent_firmware::ports::{Devices, Geometry};
 
 use board::{
-    block_on, NoWatchdog, PtyLink, RamStore, RamWords, RecordingLaser, TestBoard, TestCamera, TestClock,
-    TestMeasurer, TestTrigger,
+    block_on, NoWatchdog, PtyLink, RamStore, RamWords, RecordingLaser, TestBoard, TestCamera,
+    TestClock, TestMeasurer, TestTrigger,
 };
 // Each test binary that includes this module uses a part of it.
 #[allow(unused_imports)]
@@ -264,7 +264,12 @@ type Kept = (PtyLink, RamStore, ModeLog<RamWords>);
 
 /// Runs the firmware from a (re)boot until the test stops it (`None`) or reboots it (the
 /// link and stores survive a reboot, as the USB cable and the flash do).
-fn boot(link: PtyLink, store: RamStore, modes: ModeLog<RamWords>, control: &Shared) -> Option<Kept> {
+fn boot(
+    link: PtyLink,
+    store: RamStore,
+    modes: ModeLog<RamWords>,
+    control: &Shared,
+) -> Option<Kept> {
     let mut off = vec![0u8; FRAME.frame_len()];
     let mut on = vec![0u8; FRAME.frame_len()];
     let mut rx = vec![0u8; MAX_FRAME_LEN];

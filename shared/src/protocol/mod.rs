@@ -53,8 +53,8 @@ pub use framing::{
 };
 pub use messages::{
     self_test, Board, DeviceError, DeviceInfo, ErrorCode, FrameSel, FrameSetInfo, FromDevice,
-    LinkStats, Method, ModeStoreState, Reading, Request, Response, RunningStats, SelfTestReport, ToDevice,
-    WireCalibration, WirePlane, UNSOLICITED,
+    LinkStats, Method, ModeStoreState, Reading, Request, Response, RunningStats, SelfTestReport,
+    ToDevice, WireCalibration, WirePlane, UNSOLICITED,
 };
 
 /// Version of this protocol, the first byte of every raw frame. Bump it on any change to

@@ -199,9 +199,7 @@ impl ports::CalibrationStore for FlashStore {
             flash
                 .blocking_erase(CALIB_OFFSET, CALIB_OFFSET + CALIB_SECTOR)
                 .map_err(|_| 3u32)?;
-            flash
-                .blocking_write(CALIB_OFFSET, data)
-                .map_err(|_| 4u32)?;
+            flash.blocking_write(CALIB_OFFSET, data).map_err(|_| 4u32)?;
         }
         // Read back: a record that does not verify is not stored.
         match self.load() {
