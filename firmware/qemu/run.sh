@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Runs the emulated Tangent firmware under QEMU (mps2-an500, Cortex-M7).
 #
-#   firmware/qemu/run.sh [--build] [--icount] [--serial SPEC] -- [--calib FILE] [--bench] OFF.pgm ON.pgm [...]
+#   firmware/qemu/run.sh [--build] [--icount] [--serial SPEC] -- [--calib FILE] [--mode-store FILE] [--bench] OFF.pgm ON.pgm [...]
 #
 #   --build        build the ELF first (release, --no-default-features --features qemu)
 #   --icount       deterministic instruction counting: 1 ns of virtual time per instruction
@@ -12,7 +12,8 @@
 #
 # The firmware's log (and --bench results) go to stderr through semihosting. Frame files
 # are binary PGMs (8-bit, or 16-bit reduced to the top 8 bits); paths must not contain
-# spaces. The calibration is a calibration record (docs/protocol.md).
+# spaces. The calibration is a calibration record (docs/protocol.md); the mode store is the
+# file of the mode log (docs/hardware.md, "The instrument mode"), created on the first SetMode.
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
 fw=$(dirname "$here")

@@ -24,15 +24,15 @@ use tangent_core::protocol::codes::Failure;
 use tangent_core::protocol::codes::HISTORY_LEN;
 use tangent_core::protocol::{
     self, DeviceError, DeviceInfo, ErrorCode, Feed, FrameEncoder, FrameSel, FrameSetInfo,
-    FromDevice, LinkStats, Reading, Request, Response, SelfTestReport, ToDevice, WireCalibration,
-    FRAME_CHUNK_MAX, PROTOCOL_VERSION, UNSOLICITED,
+    FromDevice, LinkStats, ModeStoreState, Reading, Request, Response, SelfTestReport, ToDevice,
+    WireCalibration, FRAME_CHUNK_MAX, PROTOCOL_VERSION, UNSOLICITED,
 };
 
 use crate::exposure::{self, Exposure};
 use crate::measure::{FramePair, Measurer, StreamMeasurer};
 use crate::ports::{
-    Board, CalibrationStore, Camera, CameraError, Clock, Devices, Geometry, Laser, Link, RowSink,
-    Strobe, Trigger, Watchdog,
+    Board, CalibrationStore, Camera, CameraError, Clock, Devices, Geometry, Laser, Link, ModeStore,
+    RowSink, Strobe, Trigger, Watchdog,
 };
 use crate::stats::Welford;
 
@@ -78,9 +78,11 @@ pub struct App<'b, B: Board, M: Measurer> {
     exposure: Exposure,
     history: Deque<Reading, HISTORY_LEN>,
     stream: Option<(u16, Welford)>,
-    /// The instrument every reading is measured with ([`Request::SetMode`]); kept in RAM, so
-    /// a reset returns to [`Mode::Cylinder`].
+    /// The instrument every reading is measured with ([`Request::SetMode`]), remembered by
+    /// the board's [`ModeStore`]; [`Mode::Cylinder`] when the store has none.
     mode: Mode,
+    /// Where `mode` came from (reported in [`DeviceInfo::mode_store`]).
+    mode_store: ModeStoreState,
     /// Duration of the last pipeline run (µs of the board clock), for benchmarks.
     pub last_pipeline_us: u64,
 }
@@ -94,7 +96,9 @@ enum Event {
 }
 
 impl<'b, B: Board, M: Measurer> App<'b, B, M> {
-    /// Builds the application; switches the lasers off and loads the stored calibration.
+    /// Builds the application; switches the lasers off and loads the stored calibration,
+    /// then the stored mode (the default, [`Mode::Cylinder`], when the store has none: why is
+    /// logged and reported in [`DeviceInfo::mode_store`]).
     pub fn new(mut dev: Devices<B>, measurer: M, buffers: Buffers<'b>) -> Self {
         dev.laser.set(0);
         let (calibration, calibration_wire) = match dev.store.load() {
@@ -103,6 +107,14 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
                 Err(_) => (None, None),
             },
             None => (None, None),
+        };
+        let mode_store = dev.modes.load();
+        let mode = match mode_store {
+            ModeStoreState::Loaded(mode) => mode,
+            other => {
+                B::log(format_args!("mode: {}", other));
+                Mode::Cylinder
+            }
         };
         App {
             dev,
@@ -119,7 +131,8 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
             exposure: Exposure::new(),
             history: Deque::new(),
             stream: None,
-            mode: Mode::Cylinder,
+            mode,
+            mode_store,
             last_pipeline_us: 0,
         }
     }
@@ -137,6 +150,11 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
     /// The instrument the device measures with.
     pub fn mode(&self) -> Mode {
         self.mode
+    }
+
+    /// Where the mode came from: the store, or why the default.
+    pub fn mode_store(&self) -> ModeStoreState {
+        self.mode_store
     }
 
     /// Link counters.
@@ -310,19 +328,40 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
             Request::SetMode(mode) => {
                 let response = match self.set_mode(mode) {
                     Ok(()) => Response::Ack,
-                    Err(failure) => Response::Error(failure.device_error()),
+                    Err(e) => Response::Error(e),
                 };
                 self.send(tag, &response).await;
             }
         }
     }
 
-    /// Selects the instrument of later readings; a mode this build cannot measure is refused
-    /// ([`Failure::UnsupportedMode`]) and the mode stays. A running stream carries on in the
-    /// new mode with fresh statistics (a mean of stems and spheres means nothing).
-    pub fn set_mode(&mut self, mode: Mode) -> Result<(), Failure> {
+    /// Selects the instrument of later readings and stores it, so a reset or power cycle
+    /// keeps it. A mode this build cannot measure is refused
+    /// ([`Failure::UnsupportedMode`]), and a mode the store fails to keep is refused with
+    /// [`ErrorCode::StorageFailure`] (detail: the board's code); either way the mode stays as
+    /// it was. A running stream carries on in the new mode with fresh statistics (a mean of
+    /// stems and spheres means nothing).
+    pub fn set_mode(&mut self, mode: Mode) -> Result<(), DeviceError> {
         if !instrument::supports(mode) {
-            return Err(Failure::UnsupportedMode(mode));
+            return Err(Failure::UnsupportedMode(mode).device_error());
+        }
+        // Storing the mode already stored would only wear the flash; a default mode that
+        // the user now sets explicitly is stored.
+        if self.mode_store != ModeStoreState::Loaded(mode) {
+            self.dev.modes.save(mode).map_err(|detail| {
+                B::log(format_args!(
+                    "mode {} not stored: code {}",
+                    mode.name(),
+                    detail
+                ));
+                DeviceError {
+                    code: ErrorCode::StorageFailure,
+                    detail,
+                }
+            })?;
+            if self.mode_store != ModeStoreState::Volatile {
+                self.mode_store = ModeStoreState::Loaded(mode);
+            }
         }
         if mode != self.mode {
             if let Some((_, stats)) = self.stream.as_mut() {
@@ -410,6 +449,7 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
             last_seq: self.seq,
             link: self.rx.stats(),
             mode: self.mode,
+            mode_store: self.mode_store,
         };
         self.send(tag, &Response::Info(info)).await;
     }

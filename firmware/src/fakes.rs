@@ -15,6 +15,7 @@ use tangent_core::protocol::codes::Failure;
 use tangent_core::protocol::{self, WireCalibration};
 
 use crate::measure::{FramePair, Measurer};
+use crate::mode_log::{FlashWords, ModeLog, ERASED, WORD};
 use crate::ports::{
     Board, CalibrationStore, Camera, CameraError, Clock, Geometry, Laser, Link, LinkError, Strobe,
     Trigger, Watchdog,
@@ -236,6 +237,83 @@ impl Measurer for FailingMeasurer {
     }
 }
 
+/// A flash sector in RAM, shared (`Rc`) so a test can build the application again on the
+/// same contents — a power cycle — and with the faults of real flash on demand.
+#[derive(Clone)]
+pub struct RamSector(pub Rc<RefCell<SectorState>>);
+
+/// The contents of a [`RamSector`] and the faults it will inject.
+pub struct SectorState {
+    /// The words.
+    pub words: Vec<[u8; WORD]>,
+    /// Erases done.
+    pub erases: usize,
+    /// Programs done (whole or torn).
+    pub programs: usize,
+    /// The next program writes only this many bytes and fails: a power cut mid-program.
+    pub tear_next_program: Option<usize>,
+    /// Every program fails before touching the word (a locked or worn-out sector).
+    pub refuse_programs: bool,
+    /// Reading this word fails (an ECC error the hardware reports).
+    pub unreadable: Option<usize>,
+    /// Programming a word that is not erased (a bug the log must never have).
+    pub programmed_twice: bool,
+}
+
+impl RamSector {
+    /// An erased sector of `words` words.
+    pub fn new(words: usize) -> Self {
+        RamSector(Rc::new(RefCell::new(SectorState {
+            words: vec![[ERASED; WORD]; words],
+            erases: 0,
+            programs: 0,
+            tear_next_program: None,
+            refuse_programs: false,
+            unreadable: None,
+            programmed_twice: false,
+        })))
+    }
+}
+
+impl FlashWords for RamSector {
+    fn words(&self) -> usize {
+        self.0.borrow().words.len()
+    }
+    fn read(&mut self, index: usize, word: &mut [u8; WORD]) -> Result<(), u32> {
+        let s = self.0.borrow();
+        if s.unreadable == Some(index) {
+            return Err(7);
+        }
+        *word = *s.words.get(index).ok_or(1u32)?;
+        Ok(())
+    }
+    fn program(&mut self, index: usize, word: &[u8; WORD]) -> Result<(), u32> {
+        let mut s = self.0.borrow_mut();
+        if s.refuse_programs {
+            return Err(4);
+        }
+        let tear = s.tear_next_program.take();
+        s.programs += 1;
+        let was_erased = s.words.get(index).ok_or(1u32)?.iter().all(|&b| b == ERASED);
+        s.programmed_twice |= !was_erased;
+        let n = tear.unwrap_or(WORD).min(WORD);
+        let dst = s.words.get_mut(index).ok_or(1u32)?;
+        dst[..n].copy_from_slice(&word[..n]);
+        if tear.is_some() {
+            return Err(9);
+        }
+        Ok(())
+    }
+    fn erase(&mut self) -> Result<(), u32> {
+        let mut s = self.0.borrow_mut();
+        s.erases += 1;
+        for w in s.words.iter_mut() {
+            *w = [ERASED; WORD];
+        }
+        Ok(())
+    }
+}
+
 pub struct FakeBoard;
 
 impl Board for FakeBoard {
@@ -245,6 +323,7 @@ impl Board for FakeBoard {
     type Link = QuietLink;
     type Clock = FakeClock;
     type Store = RefStore;
+    type ModeStore = ModeLog<RamSector>;
     type Watchdog = FakeWatchdog;
     const KIND: protocol::Board = protocol::Board::Emulated;
     fn log(_args: core::fmt::Arguments<'_>) {}

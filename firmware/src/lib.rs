@@ -1,10 +1,12 @@
 //! Tangent firmware: the portable application and its two boards.
 //!
 //! * [`ports`] — the application's ports: one trait per device it uses (camera, laser,
-//!   trigger, link, clock, calibration store, watchdog);
+//!   trigger, link, clock, calibration store, mode store, watchdog);
 //! * [`app`] — the state machine over them (trigger → exposures → pipeline → report,
 //!   protocol commands);
 //! * [`measure`] — the seam to the shared pipeline;
+//! * [`mode_log`] — the instrument mode remembered across power cycles (an append-only log
+//!   in flash words, the [`ports::ModeStore`] of both boards);
 //! * [`mt9v034`] — the image sensor's set-up over any `embedded-hal-async` I²C bus;
 //! * [`adxl355`] — the accelerometer (the wall instrument's vertical reference) over I²C;
 //! * [`exposure`], [`stats`], [`pgm`] — small pure pieces;
@@ -29,6 +31,7 @@ pub mod board;
 mod buffers;
 pub mod exposure;
 pub mod measure;
+pub mod mode_log;
 pub mod mt9v034;
 pub mod pgm;
 pub mod ports;

@@ -1,5 +1,5 @@
 //! The application's ports: one small trait per device the application uses (camera,
-//! lasers, trigger, host link, clock, calibration store, watchdog) and [`Board`] that
+//! lasers, trigger, host link, clock, calibration store, mode store, watchdog) and [`Board`] that
 //! bundles them. Not a HAL: they say what the application needs, not what the chip offers.
 //!
 //! Each board (`board::h743`, `board::qemu`, and the host tests' test board) implements
@@ -10,7 +10,8 @@
 
 use core::cell::{Cell, RefCell};
 
-use tangent_core::protocol::{self, WireCalibration};
+use tangent_core::measurement::Mode;
+use tangent_core::protocol::{self, ModeStoreState, WireCalibration};
 
 /// Monotonic time since boot.
 pub trait Clock {
@@ -213,6 +214,16 @@ pub trait CalibrationStore {
     fn save(&mut self, calibration: &WireCalibration) -> Result<(), u32>;
 }
 
+/// Where the instrument mode lives between power cycles (beside the calibration, in a
+/// store of its own: a mode change must never put the calibration at risk). Both boards use
+/// [`crate::mode_log::ModeLog`] over their own flash words.
+pub trait ModeStore {
+    /// The stored mode ([`ModeStoreState::Loaded`]), or why there is none.
+    fn load(&mut self) -> ModeStoreState;
+    /// Stores `mode` so the next [`ModeStore::load`] returns it; the error is a board code.
+    fn save(&mut self, mode: Mode) -> Result<(), u32>;
+}
+
 /// The hardware watchdog that resets a hung firmware.
 pub trait Watchdog {
     /// Restarts the watchdog countdown.
@@ -233,6 +244,8 @@ pub trait Board {
     type Clock: Clock;
     /// Calibration storage.
     type Store: CalibrationStore;
+    /// Mode storage.
+    type ModeStore: ModeStore;
     /// The watchdog.
     type Watchdog: Watchdog;
     /// What the board reports in [`protocol::DeviceInfo::board`].
@@ -256,6 +269,8 @@ pub struct Devices<B: Board> {
     pub clock: B::Clock,
     /// Calibration storage.
     pub store: B::Store,
+    /// Mode storage.
+    pub modes: B::ModeStore,
     /// The watchdog.
     pub watchdog: B::Watchdog,
 }

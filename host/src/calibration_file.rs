@@ -29,6 +29,16 @@
 //!
 //! [road]                       # road head only: piezo height-scale calibration; optional
 //! height_scale = 0.9901
+//!
+//! [accelerometer]              # `tangent calibrate accelerometer`; optional
+//! bias_m_s2 = [0.21, -0.13, 0.05]
+//! bias_sigma_m_s2 = [1.5e-4, 1.4e-4, 1.3e-4]
+//! camera_from_sensor_rad = [0.012, -0.004, 0.017]
+//! alignment_sigma_rad = [9e-5, 8e-5, 1.1e-4]
+//! scale = 1.0021
+//! scale_sigma = 2e-5
+//! residual_rms_m_s2 = 2.4e-3
+//! poses = 12
 //! ```
 
 // `Real` is f64 on the host, but the casts keep this file correct if it ever is not.
@@ -188,6 +198,96 @@ pub struct CalibrationToml {
     /// The road head's height-scale calibration (`docs/road.md`); absent on other heads.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub road: Option<RoadToml>,
+    /// The accelerometer's calibration (`docs/hardware.md`, "Accelerometer calibration");
+    /// absent on a device without one or not yet calibrated.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub accelerometer: Option<AccelerometerToml>,
+}
+
+/// `[accelerometer]`: bias, scale and the rotation of the sensor's axes into the camera
+/// frame, with their 1σ (`tangent_core::accelerometer::AccelCalibration`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AccelerometerToml {
+    /// Bias (sensor axes, m/s²).
+    #[serde(deserialize_with = "three")]
+    pub bias_m_s2: [f64; 3],
+    /// 1σ of the bias per axis (m/s²).
+    #[serde(deserialize_with = "three")]
+    pub bias_sigma_m_s2: [f64; 3],
+    /// Rotation from the sensor's axes into the camera frame (rotation vector, radians).
+    #[serde(deserialize_with = "three")]
+    pub camera_from_sensor_rad: [f64; 3],
+    /// 1σ of that rotation about each camera axis (radians).
+    #[serde(deserialize_with = "three")]
+    pub alignment_sigma_rad: [f64; 3],
+    /// Common scale of the readings (1 for a perfect sensor under standard gravity).
+    pub scale: f64,
+    /// 1σ of the scale.
+    pub scale_sigma: f64,
+    /// RMS residual of the poses (m/s²).
+    pub residual_rms_m_s2: f64,
+    /// Poses the calibration was made from.
+    pub poses: usize,
+}
+
+impl AccelerometerToml {
+    /// The table of a calibration result.
+    pub fn from_calibration(c: &tangent_core::accelerometer::AccelCalibration) -> Self {
+        AccelerometerToml {
+            bias_m_s2: a3(c.bias_m_s2),
+            bias_sigma_m_s2: a3(c.bias_sigma_m_s2),
+            camera_from_sensor_rad: a3(c.camera_from_sensor_rad),
+            alignment_sigma_rad: a3(c.alignment_sigma_rad),
+            scale: c.scale as f64,
+            scale_sigma: c.scale_sigma as f64,
+            residual_rms_m_s2: c.rms_m_s2 as f64,
+            poses: c.poses,
+        }
+    }
+}
+
+/// The `[accelerometer]` table of a calibration file, if any; errors name the file.
+pub fn read_accelerometer(path: &Path) -> Result<Option<AccelerometerToml>, CalibrationFileError> {
+    let text = read_text(path)?;
+    let file: CalibrationToml = toml::from_str(&text)
+        .map_err(|e| map_toml_error(&e, &text))
+        .map_err(in_file(path))?;
+    Ok(file.accelerometer)
+}
+
+/// Writes `accelerometer` as the `[accelerometer]` table of an existing calibration file,
+/// every other key kept; errors name the file.
+pub fn write_accelerometer(
+    path: &Path,
+    accelerometer: &AccelerometerToml,
+) -> Result<(), CalibrationFileError> {
+    update_file(path, |file| {
+        file.accelerometer = Some(accelerometer.clone())
+    })
+}
+
+/// Reads the calibration file at `path`, changes it with `change` and writes it back, after
+/// checking that what is written reads back (so a file that would not is never left behind).
+fn update_file(
+    path: &Path,
+    change: impl FnOnce(&mut CalibrationToml),
+) -> Result<(), CalibrationFileError> {
+    let text = read_text(path)?;
+    let mut file: CalibrationToml = toml::from_str(&text)
+        .map_err(|e| map_toml_error(&e, &text))
+        .map_err(in_file(path))?;
+    change(&mut file);
+    let out = toml::to_string(&file)
+        .map_err(|e| CalibrationFileError::Syntax {
+            message: e.to_string(),
+            line: None,
+        })
+        .map_err(in_file(path))?;
+    parse_road(&out).map_err(in_file(path))?;
+    std::fs::write(path, out)
+        .map_err(CalibrationFileError::Io)
+        .map_err(in_file(path))
 }
 
 /// `[road]`: the result of the piezo-stage height-scale calibration of a road head
@@ -242,22 +342,7 @@ pub fn read_road(path: &Path) -> Result<Option<RoadToml>, CalibrationFileError> 
 /// Writes `road` as the `[road]` table of an existing calibration file, every other key kept;
 /// errors name the file.
 pub fn write_road(path: &Path, road: &RoadToml) -> Result<(), CalibrationFileError> {
-    let text = read_text(path)?;
-    let mut file: CalibrationToml = toml::from_str(&text)
-        .map_err(|e| map_toml_error(&e, &text))
-        .map_err(in_file(path))?;
-    file.road = Some(road.clone());
-    // Re-parse what is written, so a file that would not read back is never left behind.
-    let out = toml::to_string(&file)
-        .map_err(|e| CalibrationFileError::Syntax {
-            message: e.to_string(),
-            line: None,
-        })
-        .map_err(in_file(path))?;
-    parse_road(&out).map_err(in_file(path))?;
-    std::fs::write(path, out)
-        .map_err(CalibrationFileError::Io)
-        .map_err(in_file(path))
+    update_file(path, |file| file.road = Some(road.clone()))
 }
 
 /// A 3-vector that must have exactly three components: serde's fixed-size array impl reads
@@ -308,6 +393,7 @@ impl CalibrationToml {
                 })
                 .collect(),
             road: None,
+            accelerometer: None,
         }
     }
 

@@ -31,8 +31,9 @@ use std::time::{Duration, Instant};
 use tangent_core::measurement::Mode;
 use tangent_core::protocol::{
     self, codes, Board, Decoder, DeviceError, ErrorCode, Feed, FrameEncoder, FrameSel,
-    FrameSetInfo, FromDevice, LinkStats, ProtocolError, Reading, Request, Response, SelfTestReport,
-    ToDevice, WireCalibration, FRAME_CHUNK_MAX, MAX_FRAME_LEN, PROTOCOL_VERSION, UNSOLICITED,
+    FrameSetInfo, FromDevice, LinkStats, ModeStoreState, ProtocolError, Reading, Request, Response,
+    SelfTestReport, ToDevice, WireCalibration, FRAME_CHUNK_MAX, MAX_FRAME_LEN, PROTOCOL_VERSION,
+    UNSOLICITED,
 };
 use tangent_field::seq::{HistoryOutcome, SeqTracker};
 
@@ -165,6 +166,8 @@ pub struct DeviceIdentity {
     pub link: LinkStats,
     /// The instrument the device measures with.
     pub mode: Mode,
+    /// Whether `mode` was read from the device's mode store, or why it is the default.
+    pub mode_store: ModeStoreState,
 }
 
 /// A device message, owned ([`Response`] borrows from the receive buffer).
@@ -220,6 +223,7 @@ impl From<Response<'_>> for Reply {
                 last_seq: i.last_seq,
                 link: i.link,
                 mode: i.mode,
+                mode_store: i.mode_store,
             }),
             Response::Reading(r) => Reply::Reading(r),
             Response::Error(e) => Reply::Error(e),
@@ -355,6 +359,7 @@ impl Link {
                 last_seq: 0,
                 link: LinkStats::default(),
                 mode: Mode::Cylinder,
+                mode_store: ModeStoreState::Empty,
             },
             seq: SeqTracker::default(),
             streaming: false,
@@ -525,10 +530,12 @@ impl Link {
         // The handshake itself may hit another disconnect: it then recurses through
         // `write_bytes`, bounded by the reconnect timeout.
         self.handshake()?;
-        // A device that restarted forgot its mode: the readings must stay of the asked kind.
+        // A device that restarted keeps its mode in its mode store, but one whose store
+        // failed, or a board without one, comes back in the default: the readings must stay
+        // of the asked kind.
         if let Some(mode) = self.mode.filter(|m| *m != self.identity.mode) {
             self.expect_ack(Request::SetMode(mode), "SetMode")?;
-            self.identity.mode = mode;
+            self.note_mode_set(mode);
         }
         if self.streaming {
             self.request_inner(Request::StartStream, "StartStream", true)?;
@@ -771,11 +778,22 @@ impl Link {
     /// Selects the instrument the device measures with from now on (and again after it
     /// restarts). A mode the firmware cannot measure is [`LinkError::Device`] with the
     /// sentence of [`Failure::UnsupportedMode`](tangent_core::protocol::codes::Failure).
+    /// The device acknowledges a mode once its mode store holds it (a store that fails
+    /// is [`LinkError::Device`] with `StorageFailure`, the mode unchanged).
     pub fn set_mode(&mut self, mode: Mode) -> Result<(), LinkError> {
         self.expect_ack(Request::SetMode(mode), "SetMode")?;
-        self.identity.mode = mode;
+        self.note_mode_set(mode);
         self.mode = Some(mode);
         Ok(())
+    }
+
+    /// The identity after an acknowledged `SetMode`: the mode, now stored (unless the board
+    /// keeps none).
+    fn note_mode_set(&mut self, mode: Mode) {
+        self.identity.mode = mode;
+        if self.identity.mode_store != ModeStoreState::Volatile {
+            self.identity.mode_store = ModeStoreState::Loaded(mode);
+        }
     }
 
     /// Stops continuous measurement.

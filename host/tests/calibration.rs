@@ -818,6 +818,7 @@ fn camera_only_file_round_trip() {
         },
         planes: vec![],
         road: None,
+        accelerometer: None,
     };
     let text = toml::to_string(&file).unwrap();
     assert!(!text.contains("planes"), "{text}");

@@ -342,6 +342,12 @@ impl Drop for Emulated {
 /// with the reason printed, when the ELF is not built or QEMU is missing. CI builds the ELF
 /// (`cargo firmware-qemu`) before the host tests.
 fn boot_emulated(capture: &Path) -> Option<Emulated> {
+    boot_emulated_with(capture, &[])
+}
+
+/// [`boot_emulated`] with more of the firmware's options (`--mode-store FILE`) before the
+/// frames.
+fn boot_emulated_with(capture: &Path, options: &[&str]) -> Option<Emulated> {
     let elf = repo().join("firmware/target/thumbv7em-none-eabihf/release/tangent-qemu");
     if !elf.is_file() {
         eprintln!(
@@ -360,6 +366,7 @@ fn boot_emulated(capture: &Path) -> Option<Emulated> {
     }
     let mut child = Command::new(repo().join("firmware/qemu/run.sh"))
         .args(["--serial", "pty", "--"])
+        .args(options)
         .arg(capture.join("off.pgm"))
         .arg(capture.join("on.pgm"))
         .stdin(Stdio::null())
@@ -610,4 +617,92 @@ fn the_link_sets_the_mode_and_names_a_refusal() {
             }
         }
     }
+}
+
+/// The mode survives a reboot in the firmware itself: a fresh link (which never set a mode)
+/// finds the mode set before the reboot, read from the device's mode store.
+#[test]
+fn the_mode_set_before_a_reboot_is_the_mode_after_it() {
+    use tangent_core::measurement::Mode;
+    use tangent_core::protocol::ModeStoreState;
+    let dev = TestDevice::start();
+    {
+        let mut link = open(&dev);
+        assert_eq!(link.identity().mode_store, ModeStoreState::Empty);
+        link.set_mode(Mode::Sphere).unwrap();
+        assert_eq!(
+            link.identity().mode_store,
+            ModeStoreState::Loaded(Mode::Sphere)
+        );
+    }
+    dev.reboot();
+    let mut link = open(&dev);
+    let info = link.device_info().unwrap();
+    assert!(info.uptime_ms < 5_000, "a fresh boot");
+    assert_eq!(info.mode, Mode::Sphere);
+    assert_eq!(info.mode_store, ModeStoreState::Loaded(Mode::Sphere));
+}
+
+/// The emulated device keeps its mode across a restart of the emulator in its mode store
+/// file (`--mode-store`, the H743's flash sector), and a damaged file gives the default mode
+/// with the reason, which `tangent listen` prints.
+#[test]
+fn the_emulated_device_remembers_its_mode_across_a_restart() {
+    use tangent_core::measurement::Mode;
+    use tangent_core::protocol::ModeStoreState;
+    let source = repo().join(SOURCE);
+    let dir = tempfile::tempdir().unwrap();
+    let store = dir.path().join("modes.bin");
+    let store_arg = store.to_str().unwrap();
+    let Some(dev) = boot_emulated_with(&source, &["--mode-store", store_arg]) else {
+        return;
+    };
+    {
+        let mut link = Link::open(dev.pty.to_str().unwrap(), LinkConfig::default()).unwrap();
+        assert_eq!(link.identity().mode, Mode::Cylinder);
+        assert_eq!(link.identity().mode_store, ModeStoreState::Empty);
+        link.set_mode(Mode::Sphere).unwrap();
+    }
+    // Power off: the emulator ends, the file stays.
+    drop(dev);
+    assert!(store.is_file(), "the mode store file was written");
+    let dev = boot_emulated_with(&source, &["--mode-store", store_arg]).unwrap();
+    {
+        let mut link = Link::open(dev.pty.to_str().unwrap(), LinkConfig::default()).unwrap();
+        let info = link.device_info().unwrap();
+        assert_eq!(info.mode, Mode::Sphere, "remembered across the restart");
+        assert_eq!(info.mode_store, ModeStoreState::Loaded(Mode::Sphere));
+        // Changes append to the log; the last one wins after the next restart.
+        link.set_mode(Mode::Wall).unwrap();
+    }
+    drop(dev);
+    let dev = boot_emulated_with(&source, &["--mode-store", store_arg]).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_tangent"))
+        .args(["listen", "--port", dev.pty.to_str().unwrap(), "--log"])
+        .arg(dir.path().join("field.log"))
+        .args(["--measure", "0"])
+        .stdin(Stdio::null())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("mode wall"), "{err}");
+    drop(dev);
+
+    // A damaged store: every word garbage. The default, and the reason.
+    std::fs::write(&store, vec![0x5Au8; 64 * 32]).unwrap();
+    let dev = boot_emulated_with(&source, &["--mode-store", store_arg]).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_tangent"))
+        .args(["listen", "--port", dev.pty.to_str().unwrap(), "--log"])
+        .arg(dir.path().join("field.log"))
+        .args(["--measure", "0"])
+        .stdin(Stdio::null())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("mode cylinder") && err.contains("damaged"),
+        "{err}"
+    );
+    let link = Link::open(dev.pty.to_str().unwrap(), LinkConfig::default()).unwrap();
+    assert_eq!(link.identity().mode_store, ModeStoreState::Corrupt);
 }

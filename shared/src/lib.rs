@@ -12,6 +12,7 @@
 //! | camera model | [`camera`] | `docs/camera-model.md` |
 //! | laser planes, triangulation | [`laser_plane`] | `docs/laser-plane.md` |
 //! | calibration set | [`calibration`] | `docs/formats.md` |
+//! | accelerometer bias and alignment to the camera | [`accelerometer`] | `docs/hardware.md` |
 //! | frames, subtraction, thresholds, segmentation | [`image`] | `docs/image-processing.md` |
 //! | subpixel peak estimators | [`peaks`] | `docs/subpixel.md` |
 //! | laser-curve extraction and smoothing | [`curve`] | `docs/subpixel.md` §8 |
@@ -40,6 +41,7 @@
 #[cfg(feature = "std")]
 extern crate std;
 
+pub mod accelerometer;
 pub mod calibration;
 pub mod camera;
 pub mod curve;

@@ -11,8 +11,9 @@ use tangent_core::protocol::{ErrorCode, Request, MAX_FRAME_LEN};
 use super::*;
 use crate::fakes::{
     longest_lit_us, poll_bounded, CameraBehaviour, FailingMeasurer, FakeBoard, FakeCamera,
-    FakeClock, FakeLaser, FakeWatchdog, NoTrigger, QuietLink, RefStore, Time, GEOMETRY,
+    FakeClock, FakeLaser, FakeWatchdog, NoTrigger, QuietLink, RamSector, RefStore, Time, GEOMETRY,
 };
+use crate::mode_log::ModeLog;
 
 /// Polls enough for any bounded capture here (each poll advances the time by ≥ one guard
 /// poll while a capture hangs, and CAPTURE_TIMEOUT_US / GUARD_POLL_US = 500).
@@ -32,6 +33,8 @@ struct Rig {
     off: Vec<u8>,
     on: Vec<u8>,
     rx: Vec<u8>,
+    /// The mode store's flash: kept across [`Rig::app`] calls, as across power cycles.
+    sector: RamSector,
 }
 
 impl Rig {
@@ -44,6 +47,7 @@ impl Rig {
             off: vec![0; GEOMETRY.frame_len()],
             on: vec![0; GEOMETRY.frame_len()],
             rx: vec![0; MAX_FRAME_LEN],
+            sector: RamSector::new(16),
         }
     }
 
@@ -69,6 +73,7 @@ impl Rig {
             },
             clock,
             store: RefStore,
+            modes: ModeLog::new(self.sector.clone()),
             watchdog: FakeWatchdog {
                 time: self.time.clone(),
                 feeds: self.feeds.clone(),
@@ -306,11 +311,11 @@ fn set_mode_takes_what_the_build_measures_and_refuses_the_rest() {
                 );
                 assert_eq!(app.mode(), mode);
             }
-            Err(failure) => {
+            Err(error) => {
                 refused += 1;
                 assert!(!instrument::supports(mode), "{mode:?} refused");
-                assert_eq!(failure, Failure::UnsupportedMode(mode));
-                assert_eq!(failure.device_error().code, ErrorCode::MeasurementFailed);
+                assert_eq!(error, Failure::UnsupportedMode(mode).device_error());
+                assert_eq!(error.code, ErrorCode::MeasurementFailed);
                 assert_eq!(app.mode(), before, "a refused mode changes nothing");
             }
         }
@@ -319,4 +324,70 @@ fn set_mode_takes_what_the_build_measures_and_refuses_the_rest() {
         refused < Mode::ALL.len(),
         "the stem's mode is always measured"
     );
+}
+
+/// The mode survives a power cycle (the application built again on the same flash), a mode
+/// set again is not stored again, and a store that fails keeps the mode as it was and says
+/// `StorageFailure`.
+#[test]
+fn the_mode_survives_a_power_cycle_and_a_failed_store_changes_nothing() {
+    use tangent_core::measurement::Mode;
+    let mut rig = Rig::new();
+    {
+        let app = rig.app(CameraBehaviour::Works, false);
+        assert_eq!(app.mode(), Mode::Cylinder);
+        assert_eq!(app.mode_store(), ModeStoreState::Empty);
+    }
+    {
+        let mut app = rig.app(CameraBehaviour::Works, false);
+        app.set_mode(Mode::Sphere).unwrap();
+        assert_eq!(app.mode_store(), ModeStoreState::Loaded(Mode::Sphere));
+        app.set_mode(Mode::Sphere).unwrap();
+    }
+    assert_eq!(
+        rig.sector.0.borrow().programs,
+        1,
+        "the same mode twice is stored once"
+    );
+    let sector = rig.sector.clone();
+    {
+        let mut app = rig.app(CameraBehaviour::Works, false);
+        assert_eq!(app.mode(), Mode::Sphere, "kept across the power cycle");
+        assert_eq!(app.mode_store(), ModeStoreState::Loaded(Mode::Sphere));
+        sector.0.borrow_mut().refuse_programs = true;
+        let e = app.set_mode(Mode::Wall).unwrap_err();
+        assert_eq!(e.code, ErrorCode::StorageFailure);
+        assert_eq!(e.detail, 4, "the board's code");
+        assert_eq!(app.mode(), Mode::Sphere, "a mode not stored is not taken");
+        sector.0.borrow_mut().refuse_programs = false;
+        // A power cut while the next change is programmed: that change is lost, not the
+        // one before.
+        sector.0.borrow_mut().tear_next_program = Some(13);
+        assert_eq!(
+            app.set_mode(Mode::Road).unwrap_err().code,
+            ErrorCode::StorageFailure
+        );
+        assert_eq!(app.mode(), Mode::Sphere);
+    }
+    let app = rig.app(CameraBehaviour::Works, false);
+    assert_eq!(app.mode(), Mode::Sphere);
+    assert!(!rig.sector.0.borrow().programmed_twice);
+}
+
+/// A damaged store gives the default mode and says so; setting the default explicitly then
+/// stores it.
+#[test]
+fn a_damaged_store_gives_the_default_mode_reported() {
+    use tangent_core::measurement::Mode;
+    let mut rig = Rig::new();
+    rig.sector.0.borrow_mut().words[0] = [0x5A; 32];
+    {
+        let mut app = rig.app(CameraBehaviour::Works, false);
+        assert_eq!(app.mode(), Mode::Cylinder);
+        assert_eq!(app.mode_store(), ModeStoreState::Corrupt);
+        app.set_mode(Mode::Cylinder).unwrap();
+        assert_eq!(app.mode_store(), ModeStoreState::Loaded(Mode::Cylinder));
+    }
+    let app = rig.app(CameraBehaviour::Works, false);
+    assert_eq!(app.mode_store(), ModeStoreState::Loaded(Mode::Cylinder));
 }

@@ -12,11 +12,15 @@
 //!   hands each over as it is read, as the H743's DCMI line blocks arrive;
 //! * lasers: a bitmask in RAM (no hardware), trigger: none, watchdog: none (QEMU's
 //!   CMSDK watchdog is not wired to reset on this machine model);
-//! * calibration store: RAM, initialised from a calibration record file (`--calib`).
+//! * calibration store: RAM, initialised from a calibration record file (`--calib`);
+//! * mode store: the mode log ([`crate::mode_log`]) in a host file that stands for the
+//!   H743's flash sector (`--mode-store FILE`, [`MODE_WORDS`] flash words, created when the
+//!   first mode is stored), so a restarted emulator keeps the mode; without the option the
+//!   mode lives in RAM ([`ModeStoreState::Volatile`]).
 //!
 //! Command line (semihosting `SYS_GET_CMDLINE`, QEMU's `-append`):
-//! `[--calib FILE] [--bench] [--window ROW] OFF.pgm ON.pgm [OFF.pgm ON.pgm …]`; [`start`]
-//! reads it and brings the board up.
+//! `[--calib FILE] [--mode-store FILE] [--bench] [--window ROW] OFF.pgm ON.pgm [OFF.pgm ON.pgm …]`;
+//! [`start`] reads it and brings the board up.
 
 use core::fmt::Write as _;
 use core::future::poll_fn;
@@ -27,14 +31,16 @@ use core::task::Poll;
 use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m::peripheral::SYST;
 use cortex_m_semihosting::{nr, syscall};
-use tangent_core::protocol::{self, calibration_record, WireCalibration};
+use tangent_core::measurement::Mode;
+use tangent_core::protocol::{self, calibration_record, ModeStoreState, WireCalibration};
 
 use tangent_core::pipeline::{Workspace, WorkspaceSizes};
 
 use crate::app::Buffers;
 
+use crate::mode_log::{FlashWords, ModeLog, VolatileModes, ERASED, WORD};
 use crate::pgm;
-use crate::ports::{self, CameraError, Devices, Geometry, LinkError, Strobe};
+use crate::ports::{self, CameraError, Devices, Geometry, LinkError, ModeStore, Strobe};
 
 /// Largest frame the emulated board accepts (752 × 480 8-bit).
 pub const MAX_FRAME: usize = 752 * 480;
@@ -255,6 +261,85 @@ impl ports::CalibrationStore for RamStore {
     }
 }
 
+/// Flash words of the emulated mode sector: 2 KiB, small so a test reaches the log's erase
+/// (the H743's sector has 4 096).
+pub const MODE_WORDS: usize = 64;
+
+/// The emulated board's mode sector: a host file of [`MODE_WORDS`] flash words (missing or
+/// short: the rest erased), mirrored in RAM and written back whole after every program and
+/// erase. Board codes: 1 the file cannot be created, 2 it was written short, 3 a word
+/// programmed twice, 4 a word outside the sector.
+pub struct FileSector<'c> {
+    path: &'c str,
+    image: [[u8; WORD]; MODE_WORDS],
+}
+
+impl<'c> FileSector<'c> {
+    /// The sector in `path` (read now; a missing file is an erased sector).
+    pub fn open(path: &'c str) -> Self {
+        let mut image = [[ERASED; WORD]; MODE_WORDS];
+        if let Some(f) = HostFile::open(path, nr::open::R_BINARY) {
+            for word in image.iter_mut() {
+                if f.read_exact(word).is_none() {
+                    // A short file: the rest is erased (a partial word too).
+                    *word = [ERASED; WORD];
+                    break;
+                }
+            }
+        }
+        FileSector { path, image }
+    }
+
+    fn persist(&self) -> Result<(), u32> {
+        let f = HostFile::open(self.path, nr::open::W_TRUNC_BINARY).ok_or(1u32)?;
+        for word in &self.image {
+            f.write_all(word).ok_or(2u32)?;
+        }
+        Ok(())
+    }
+}
+
+impl FlashWords for FileSector<'_> {
+    fn words(&self) -> usize {
+        MODE_WORDS
+    }
+    fn read(&mut self, index: usize, word: &mut [u8; WORD]) -> Result<(), u32> {
+        *word = *self.image.get(index).ok_or(4u32)?;
+        Ok(())
+    }
+    fn program(&mut self, index: usize, word: &[u8; WORD]) -> Result<(), u32> {
+        let slot = self.image.get_mut(index).ok_or(4u32)?;
+        if slot.iter().any(|&b| b != ERASED) {
+            return Err(3);
+        }
+        *slot = *word;
+        self.persist()
+    }
+    fn erase(&mut self) -> Result<(), u32> {
+        self.image = [[ERASED; WORD]; MODE_WORDS];
+        self.persist()
+    }
+}
+
+/// The emulated board's mode store: the log in a file (`--mode-store`), or none (the mode
+/// in RAM only, [`ModeStoreState::Volatile`]).
+pub struct QemuModes<'c>(Option<ModeLog<FileSector<'c>>>);
+
+impl ModeStore for QemuModes<'_> {
+    fn load(&mut self) -> ModeStoreState {
+        match &mut self.0 {
+            Some(log) => log.load(),
+            None => VolatileModes.load(),
+        }
+    }
+    fn save(&mut self, mode: Mode) -> Result<(), u32> {
+        match &mut self.0 {
+            Some(log) => log.save(mode),
+            None => VolatileModes.save(mode),
+        }
+    }
+}
+
 /// Most frame pairs on the command line.
 pub const MAX_SCENES: usize = 32;
 
@@ -397,6 +482,13 @@ impl HostFile {
         // SAFETY: semihosting call writing at most buf.len() bytes into buf.
         let not_read = unsafe { syscall!(READ, self.0, buf.as_mut_ptr(), buf.len()) };
         buf.len().saturating_sub(not_read)
+    }
+
+    /// Writes every byte of `data`.
+    fn write_all(&self, data: &[u8]) -> Option<()> {
+        // SAFETY: semihosting call reading data.len() bytes from data.
+        let not_written = unsafe { syscall!(WRITE, self.0, data.as_ptr(), data.len()) };
+        (not_written == 0).then_some(())
     }
 
     fn read_exact(&self, buf: &mut [u8]) -> Option<()> {
@@ -543,6 +635,7 @@ impl<'c> ports::Board for Qemu<'c> {
     type Link = Uart;
     type Clock = QemuClock;
     type Store = RamStore;
+    type ModeStore = QemuModes<'c>;
     type Watchdog = NoWatchdog;
     const KIND: protocol::Board = protocol::Board::Emulated;
     fn log(args: core::fmt::Arguments<'_>) {
@@ -582,6 +675,7 @@ pub fn start(syst: SYST) -> Started {
     };
 
     let mut calib_path = None;
+    let mut mode_path = None;
     let mut bench = false;
     let mut row_offset = 0u16;
     let mut files: heapless::Vec<&str, { 2 * MAX_SCENES }> = heapless::Vec::new();
@@ -591,6 +685,13 @@ pub fn start(syst: SYST) -> Started {
     while let Some(a) = args.next() {
         match a {
             "--calib" => calib_path = args.next(),
+            "--mode-store" => match args.next() {
+                Some(p) => mode_path = Some(p),
+                None => {
+                    log(format_args!("--mode-store needs a file"));
+                    exit(false)
+                }
+            },
             "--bench" => bench = true,
             "--window" => match args.next().and_then(|r| r.parse().ok()) {
                 Some(r) => row_offset = r,
@@ -618,7 +719,7 @@ pub fn start(syst: SYST) -> Started {
     }
     if scenes.is_empty() || !files.len().is_multiple_of(2) {
         log(format_args!(
-            "usage: tangent-qemu [--calib FILE] [--bench] [--window ROW] OFF.pgm ON.pgm [OFF.pgm ON.pgm ...]"
+            "usage: tangent-qemu [--calib FILE] [--mode-store FILE] [--bench] [--window ROW] OFF.pgm ON.pgm [OFF.pgm ON.pgm ...]"
         ));
         exit(false)
     }
@@ -655,6 +756,7 @@ pub fn start(syst: SYST) -> Started {
         link,
         clock: QemuClock,
         store: RamStore::new(calibration),
+        modes: QemuModes(mode_path.map(|p| ModeLog::new(FileSector::open(p)))),
         watchdog: NoWatchdog,
     };
     Started {

@@ -1,6 +1,7 @@
 //! `tangent calibrate camera IMAGES… --board 9x6 --square 25mm`,
 //! `tangent calibrate laser CAPTURES… --camera FILE` and
-//! `tangent calibrate road CAPTURES… --steps-mm 0,0.1,… --calib FILE`.
+//! `tangent calibrate road CAPTURES… --steps-mm 0,0.1,… --calib FILE` and
+//! `tangent calibrate accelerometer POSES.toml --calib FILE`.
 //!
 //! The camera command writes a calibration file whose `[camera]` is the new calibration;
 //! if the output file already exists its id and laser planes are kept, otherwise it has no
@@ -8,7 +9,9 @@
 //! command reads the camera from such a file and writes the complete calibration. The road
 //! command (a road head's piezo height-scale calibration, `docs/road.md`) fits the measured
 //! heights of a flat target against the stage's known steps and writes the result with its
-//! residuals into the file's `[road]` table.
+//! residuals into the file's `[road]` table. The accelerometer command solves the sensor's
+//! bias, scale and alignment to the camera from static poses (`docs/hardware.md`,
+//! "Accelerometer calibration") and writes the file's `[accelerometer]` table.
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -19,7 +22,9 @@ use tangent_core::instrument::road::RoadParams;
 use tangent_core::pipeline::PipelineConfig;
 use tangent_core::protocol::codes::Failure;
 use tangent_host::calibrate::{corners, laser, refine, report, Board};
-use tangent_host::calibration_file::{self, CalibrationToml, CameraToml, DistortionToml, RoadToml};
+use tangent_host::calibration_file::{
+    self, AccelerometerToml, CalibrationToml, CameraToml, DistortionToml, RoadToml,
+};
 use tangent_host::capture::Capture;
 use tangent_host::measure::measure_road_dir;
 use tangent_host::road::height_scale::fit_height_scale;
@@ -97,6 +102,40 @@ enum Which {
         #[arg(long)]
         calib: PathBuf,
     },
+    /// Accelerometer bias, scale and alignment to the camera from static poses, each the
+    /// sensor's mean reading and gravity in the camera frame from the chessboard lying level
+    /// (`docs/hardware.md`, "Accelerometer calibration"); writes `[accelerometer]` into the
+    /// --calib file.
+    Accelerometer {
+        /// The poses: a TOML file of `[[pose]]` tables (`docs/formats.md`, "Accelerometer
+        /// poses").
+        poses: PathBuf,
+        /// The device's calibration file: its `[accelerometer]` table is (re)written; every
+        /// other key is kept.
+        #[arg(long)]
+        calib: PathBuf,
+    },
+}
+
+/// The poses file of `tangent calibrate accelerometer`.
+#[derive(serde::Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+struct PosesFile {
+    pose: Vec<PoseToml>,
+}
+
+/// One `[[pose]]`.
+#[derive(serde::Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+struct PoseToml {
+    /// Mean specific force over the pose (sensor axes, m/s²).
+    mean_m_s2: [f64; 3],
+    /// 1σ of that mean per axis (m/s²).
+    sigma_m_s2: f64,
+    /// Gravity in the camera frame (down, any length), from the chessboard's pose.
+    gravity_camera: [f64; 3],
+    /// 1σ of its direction about each axis across it (radians).
+    direction_sigma_rad: f64,
 }
 
 /// Runs `tangent calibrate`.
@@ -130,7 +169,68 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             steps_mm,
             calib,
         } => road_cmd(&captures, &steps_mm, &calib),
+        Which::Accelerometer { poses, calib } => accelerometer_cmd(&poses, &calib),
     }
+}
+
+/// `tangent calibrate accelerometer`: the poses solved ([`accelerometer::calibrate`]), the
+/// result printed with its σ and residuals, `[accelerometer]` written.
+fn accelerometer_cmd(poses: &Path, calib: &Path) -> anyhow::Result<ExitCode> {
+    use tangent_core::accelerometer::{self, Pose, STANDARD_GRAVITY};
+    use tangent_core::real::Vec3;
+    let text =
+        std::fs::read_to_string(poses).with_context(|| format!("reading {}", poses.display()))?;
+    let file: PosesFile =
+        toml::from_str(&text).with_context(|| format!("{}: not a poses file", poses.display()))?;
+    let v = |a: [f64; 3]| Vec3::new(a[0], a[1], a[2]);
+    let poses_in: Vec<Pose> = file
+        .pose
+        .iter()
+        .map(|p| Pose {
+            mean_m_s2: v(p.mean_m_s2),
+            sigma_m_s2: p.sigma_m_s2,
+            gravity_camera: v(p.gravity_camera),
+            direction_sigma_rad: p.direction_sigma_rad,
+        })
+        .collect();
+    let cal = accelerometer::calibrate(&poses_in).map_err(|e| {
+        anyhow::anyhow!(
+            "{}: the poses do not determine the calibration ({e}): give at least three poses, \
+             with gravity along two independent directions at least (e.g. the six faces), \
+             every σ positive",
+            poses.display()
+        )
+    })?;
+    let mg = 1e-3 * STANDARD_GRAVITY;
+    println!("pose  residual (mg)");
+    for (i, p) in poses_in.iter().enumerate() {
+        if let Some(r) = accelerometer::residual(p, &cal) {
+            println!("{i:4}  {:+.3} {:+.3} {:+.3}", r.x / mg, r.y / mg, r.z / mg);
+        }
+    }
+    let b = cal.bias_m_s2 / mg;
+    let bs = cal.bias_sigma_m_s2 / mg;
+    let a = cal.camera_from_sensor_rad.map(f64::to_degrees);
+    let as_ = cal.alignment_sigma_rad.map(f64::to_degrees);
+    println!(
+        "bias [{:+.3}, {:+.3}, {:+.3}] mg ± [{:.3}, {:.3}, {:.3}] mg",
+        b.x, b.y, b.z, bs.x, bs.y, bs.z
+    );
+    println!(
+        "camera_from_sensor [{:+.4}, {:+.4}, {:+.4}]° ± [{:.4}, {:.4}, {:.4}]°",
+        a.x, a.y, a.z, as_.x, as_.y, as_.z
+    );
+    println!(
+        "scale {:.5} ± {:.5}, residual RMS {:.3} mg, χ²/dof {:.2} over {} poses",
+        cal.scale,
+        cal.scale_sigma,
+        cal.rms_m_s2 / mg,
+        cal.chi2,
+        cal.poses
+    );
+    calibration_file::write_accelerometer(calib, &AccelerometerToml::from_calibration(&cal))?;
+    eprintln!("wrote [accelerometer] in {}", calib.display());
+    Ok(ExitCode::SUCCESS)
 }
 
 /// `tangent calibrate road`: each capture's mean profile height, measured with no height
@@ -274,6 +374,7 @@ fn camera(
         },
         planes: existing.map(|e| e.2).unwrap_or_default(),
         road: None,
+        accelerometer: None,
     };
     std::fs::write(out, toml::to_string(&file)?)
         .with_context(|| format!("writing {}", out.display()))?;

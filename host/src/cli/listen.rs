@@ -177,6 +177,14 @@ pub fn run(args: Args) -> Result<ExitCode> {
         id.mode.name(),
         args.log.display()
     );
+    if args.mode.is_none() && id.mode_store.is_default() {
+        // The device did not find the mode it was last set to: say why it measures this one.
+        eprintln!(
+            "the device measures {}: {} (choose one with --mode)",
+            id.mode.name(),
+            id.mode_store
+        );
+    }
 
     let mut next_tree = args.tree_id.unwrap_or_else(|| {
         log.last_tree_in(&plot_id)

@@ -15,6 +15,7 @@ use tangent_core::protocol::{
 };
 use tangent_core::solvers::result::Flags;
 use tangent_firmware::measure::{FramePair, Measurer};
+use tangent_firmware::mode_log::{FlashWords, ModeLog, ERASED, WORD};
 use tangent_firmware::ports::{
     Board, CalibrationStore, Camera, CameraError, Clock, Geometry, Laser, Link, LinkError, Strobe,
     Trigger, Watchdog,
@@ -58,6 +59,7 @@ impl Board for TestBoard {
     type Link = PtyLink;
     type Clock = TestClock;
     type Store = RamStore;
+    type ModeStore = ModeLog<RamWords>;
     type Watchdog = NoWatchdog;
     const KIND: protocol::Board = protocol::Board::Emulated;
     /// The firmware's log, on stderr when `TANGENT_TEST_DEVICE_LOG` is set (the tests
@@ -155,6 +157,34 @@ impl CalibrationStore for RamStore {
     }
     fn save(&mut self, calibration: &WireCalibration) -> Result<(), u32> {
         self.0 = Some(calibration.clone());
+        Ok(())
+    }
+}
+
+/// The mode log's sector in RAM (kept across the test device's reboots, as flash is).
+pub(super) struct RamWords(Vec<[u8; WORD]>);
+
+impl RamWords {
+    /// An erased sector of 64 words (the emulated board's size).
+    pub(super) fn new() -> Self {
+        RamWords(vec![[ERASED; WORD]; 64])
+    }
+}
+
+impl FlashWords for RamWords {
+    fn words(&self) -> usize {
+        self.0.len()
+    }
+    fn read(&mut self, index: usize, word: &mut [u8; WORD]) -> Result<(), u32> {
+        *word = *self.0.get(index).ok_or(1u32)?;
+        Ok(())
+    }
+    fn program(&mut self, index: usize, word: &[u8; WORD]) -> Result<(), u32> {
+        *self.0.get_mut(index).ok_or(1u32)? = *word;
+        Ok(())
+    }
+    fn erase(&mut self) -> Result<(), u32> {
+        self.0.fill([ERASED; WORD]);
         Ok(())
     }
 }

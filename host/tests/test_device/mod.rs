@@ -39,11 +39,12 @@ use tangent_core::calibration::Calibration;
 use tangent_core::protocol::codes::HISTORY_LEN;
 use tangent_core::protocol::{self, FrameSel, WireCalibration, MAX_FRAME_LEN};
 use tangent_firmware::app::{App, Buffers};
+use tangent_firmware::mode_log::ModeLog;
 use tangent_firmware::ports::{Devices, Geometry};
 
 use board::{
-    block_on, NoWatchdog, PtyLink, RamStore, RecordingLaser, TestBoard, TestCamera, TestClock,
-    TestMeasurer, TestTrigger,
+    block_on, NoWatchdog, PtyLink, RamStore, RamWords, RecordingLaser, TestBoard, TestCamera,
+    TestClock, TestMeasurer, TestTrigger,
 };
 // Each test binary that includes this module uses a part of it.
 #[allow(unused_imports)]
@@ -155,8 +156,9 @@ impl TestDevice {
         let thread = std::thread::spawn(move || {
             let mut link = link;
             let mut store = RamStore(calibration);
-            while let Some((l, s)) = boot(link, store, &c) {
-                (link, store) = (l, s);
+            let mut modes = ModeLog::new(RamWords::new());
+            while let Some((l, s, m)) = boot(link, store, modes, &c) {
+                (link, store, modes) = (l, s, m);
             }
         });
         TestDevice {
@@ -256,9 +258,18 @@ impl Drop for TestDevice {
     }
 }
 
+/// What survives a reboot of the test device: the link (the USB cable), the calibration
+/// store and the mode store (the flash).
+type Kept = (PtyLink, RamStore, ModeLog<RamWords>);
+
 /// Runs the firmware from a (re)boot until the test stops it (`None`) or reboots it (the
-/// link and store survive a reboot, as the USB cable and the flash do).
-fn boot(link: PtyLink, store: RamStore, control: &Shared) -> Option<(PtyLink, RamStore)> {
+/// link and stores survive a reboot, as the USB cable and the flash do).
+fn boot(
+    link: PtyLink,
+    store: RamStore,
+    modes: ModeLog<RamWords>,
+    control: &Shared,
+) -> Option<Kept> {
     let mut off = vec![0u8; FRAME.frame_len()];
     let mut on = vec![0u8; FRAME.frame_len()];
     let mut rx = vec![0u8; MAX_FRAME_LEN];
@@ -269,6 +280,7 @@ fn boot(link: PtyLink, store: RamStore, control: &Shared) -> Option<(PtyLink, Ra
         link,
         clock: TestClock(Instant::now()),
         store,
+        modes,
         watchdog: NoWatchdog,
     };
     let measurer = TestMeasurer {
@@ -300,6 +312,8 @@ fn boot(link: PtyLink, store: RamStore, control: &Shared) -> Option<(PtyLink, Ra
         // At most the firmware's idle tick (100 ms) long.
         block_on(app.step());
     }
-    let Devices { link, store, .. } = app.dev;
-    Some((link, store))
+    let Devices {
+        link, store, modes, ..
+    } = app.dev;
+    Some((link, store, modes))
 }

@@ -467,7 +467,10 @@ impl fmt::Display for DeviceError {
                     "the calibration is invalid (check it with `tangent calibrate`)"
                 ),
             },
-            ErrorCode::StorageFailure => write!(f, "its calibration storage failed (code {d})"),
+            ErrorCode::StorageFailure => write!(
+                f,
+                "its flash storage failed (board code {d}): nothing was stored and the setting stays as it was"
+            ),
             ErrorCode::CameraTimeout => write!(f, "the camera delivered no frame in time"),
             ErrorCode::CameraFailure if d == CAMERA_NO_FRAME_STORE => write!(
                 f,

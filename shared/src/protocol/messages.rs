@@ -158,6 +158,62 @@ pub struct DeviceInfo<'a> {
     pub link: LinkStats,
     /// The instrument the device measures with ([`Request::SetMode`]).
     pub mode: Mode,
+    /// Where [`DeviceInfo::mode`] came from: the device's non-volatile mode store, or the
+    /// default because the store was empty, damaged or unreadable (protocol version 4).
+    pub mode_store: ModeStoreState,
+}
+
+/// What the device's mode store held at boot, or did since: why [`DeviceInfo::mode`] is
+/// what it is (`docs/hardware.md`, "The instrument mode").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum ModeStoreState {
+    /// The mode was read from the store at boot, or stored by the last [`Request::SetMode`].
+    Loaded(Mode),
+    /// Nothing stored yet (a new device, or a store erased when it filled up and the power
+    /// failed before the new record): the default mode.
+    Empty,
+    /// The store holds no valid record (every record damaged): the default mode.
+    Corrupt,
+    /// The store could not be read (the board's error code): the default mode.
+    Unreadable(u32),
+    /// The last record names mode number `n`, which this firmware cannot measure (written by
+    /// another firmware version): the default mode.
+    Unusable(u8),
+    /// This board keeps the mode in RAM only (the emulated board without `--mode-store`):
+    /// a reset returns to the default mode.
+    Volatile,
+}
+
+impl ModeStoreState {
+    /// True when the mode was not read from the store, so a reset forgot the one last set.
+    pub fn is_default(self) -> bool {
+        !matches!(self, ModeStoreState::Loaded(_))
+    }
+}
+
+impl core::fmt::Display for ModeStoreState {
+    /// How the host reports it: "stored", or why the device measures with the default mode.
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            ModeStoreState::Loaded(m) => write!(f, "{} (stored)", m.name()),
+            ModeStoreState::Empty => write!(f, "no mode stored yet: the default"),
+            ModeStoreState::Corrupt => write!(
+                f,
+                "the stored mode is damaged (no valid record): the default, until a mode is set"
+            ),
+            ModeStoreState::Unreadable(code) => write!(
+                f,
+                "the mode store cannot be read (board code {code}): the default, until a mode is set"
+            ),
+            ModeStoreState::Unusable(n) => write!(
+                f,
+                "the stored mode number {n} is not one this firmware measures: the default, until a mode is set"
+            ),
+            ModeStoreState::Volatile => {
+                write!(f, "this board does not keep the mode across a reset")
+            }
+        }
+    }
 }
 
 /// Hardware the firmware runs on.
@@ -234,7 +290,7 @@ pub enum ErrorCode {
     NoCalibration,
     /// The calibration sent is invalid (`detail` = which check failed).
     InvalidCalibration,
-    /// The calibration could not be written to storage.
+    /// The calibration or the mode could not be written to storage (`detail` = board code).
     StorageFailure,
     /// The camera did not deliver a frame in time.
     CameraTimeout,

@@ -53,14 +53,14 @@ pub use framing::{
 };
 pub use messages::{
     self_test, Board, DeviceError, DeviceInfo, ErrorCode, FrameSel, FrameSetInfo, FromDevice,
-    LinkStats, Method, Reading, Request, Response, RunningStats, SelfTestReport, ToDevice,
-    WireCalibration, WirePlane, UNSOLICITED,
+    LinkStats, Method, ModeStoreState, Reading, Request, Response, RunningStats, SelfTestReport,
+    ToDevice, WireCalibration, WirePlane, UNSOLICITED,
 };
 
 /// Version of this protocol, the first byte of every raw frame. Bump it on any change to
 /// the message types (postcard has no field names: adding a variant in the middle or a
 /// field changes the bytes). The history of versions is in `docs/protocol.md`.
-pub const PROTOCOL_VERSION: u8 = 3;
+pub const PROTOCOL_VERSION: u8 = 4;
 
 /// Most pixel bytes in one [`Response::FrameChunk`].
 pub const FRAME_CHUNK_MAX: usize = 512;

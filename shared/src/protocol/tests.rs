@@ -513,6 +513,7 @@ fn the_mode_travels_as_its_number() {
         last_seq: 9,
         link: LinkStats::default(),
         mode: Mode::Sphere,
+        mode_store: ModeStoreState::Loaded(Mode::Sphere),
     });
     let msg = FromDevice {
         tag: 3,

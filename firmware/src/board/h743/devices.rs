@@ -1,5 +1,7 @@
 //! The H743 board's drivers: its implementations of the application's ports.
 
+use core::cell::RefCell;
+
 use embassy_embedded_hal::adapter::BlockingAsync;
 use embassy_stm32::dcmi::Dcmi;
 use embassy_stm32::dma::ReadableRingBuffer;
@@ -18,7 +20,11 @@ use embassy_usb::class::cdc_acm::CdcAcmClass;
 use embassy_usb::driver::EndpointError;
 use tangent_core::protocol::{self, calibration_record, WireCalibration};
 
-use super::{CALIB_OFFSET, CALIB_SECTOR, DEBOUNCE_US, FRAME_BYTES, PIXCLK_HZ, WIDTH, WINDOW};
+use super::{
+    CALIB_OFFSET, CALIB_SECTOR, DEBOUNCE_US, FRAME_BYTES, MODES_OFFSET, MODES_SECTOR, PIXCLK_HZ,
+    WIDTH, WINDOW,
+};
+use crate::mode_log::{FlashWords, ModeLog, WORD};
 use crate::mt9v034::Mt9v034;
 use crate::ports::{self, CameraError, Geometry, LinkError, Strobe};
 
@@ -153,16 +159,24 @@ impl ports::Watchdog for Iwdg {
 }
 
 /// Flash programming granularity of the H7 (a 256-bit flash word).
-const FLASH_WORD: usize = 32;
+const FLASH_WORD: usize = WORD;
+
+/// The flash, shared by the calibration store and the mode log (one driver, two sectors).
+/// Both run on the application's one task, never at the same time.
+pub type SharedFlash = &'static RefCell<Flash<'static, Blocking>>;
+
+/// Board code of a flash driver that is busy with the other store (cannot happen on the one
+/// task; reported rather than a panic).
+const FLASH_BUSY: u32 = 6;
 
 /// Calibration record in the last flash sector.
 pub struct FlashStore {
-    flash: Flash<'static, Blocking>,
+    flash: SharedFlash,
 }
 
 impl FlashStore {
-    /// Wraps the flash driver.
-    pub fn new(flash: Flash<'static, Blocking>) -> Self {
+    /// The calibration sector of `flash`.
+    pub fn new(flash: SharedFlash) -> Self {
         FlashStore { flash }
     }
 }
@@ -170,7 +184,8 @@ impl FlashStore {
 impl ports::CalibrationStore for FlashStore {
     fn load(&mut self) -> Option<WireCalibration> {
         let mut buf = [0u8; calibration_record::MAX_RECORD];
-        self.flash.blocking_read(CALIB_OFFSET, &mut buf).ok()?;
+        let mut flash = self.flash.try_borrow_mut().ok()?;
+        flash.blocking_read(CALIB_OFFSET, &mut buf).ok()?;
         calibration_record::decode(&buf)
     }
 
@@ -179,17 +194,107 @@ impl ports::CalibrationStore for FlashStore {
         let n = calibration_record::encode(calibration, &mut buf).ok_or(1u32)?;
         let padded = n.div_ceil(FLASH_WORD) * FLASH_WORD;
         let data = buf.get(..padded).ok_or(2u32)?;
-        self.flash
-            .blocking_erase(CALIB_OFFSET, CALIB_OFFSET + CALIB_SECTOR)
-            .map_err(|_| 3u32)?;
-        self.flash
-            .blocking_write(CALIB_OFFSET, data)
-            .map_err(|_| 4u32)?;
+        {
+            let mut flash = self.flash.try_borrow_mut().map_err(|_| FLASH_BUSY)?;
+            flash
+                .blocking_erase(CALIB_OFFSET, CALIB_OFFSET + CALIB_SECTOR)
+                .map_err(|_| 3u32)?;
+            flash.blocking_write(CALIB_OFFSET, data).map_err(|_| 4u32)?;
+        }
         // Read back: a record that does not verify is not stored.
         match self.load() {
             Some(ref c) if c == calibration => Ok(()),
             _ => Err(5),
         }
+    }
+}
+
+/// The mode log's sector (bank 2, sector 6; `memory.x`) as flash words. Board codes:
+/// 3 erase failed, 4 program failed, 6 flash busy, 7 the word has an uncorrectable ECC error
+/// (torn by a power cut), 8 a word outside the sector.
+pub struct ModeSector {
+    flash: SharedFlash,
+}
+
+/// The H743 board's mode store.
+pub type FlashModes = ModeLog<ModeSector>;
+
+impl ModeSector {
+    /// The mode sector of `flash`.
+    pub fn new(flash: SharedFlash) -> Self {
+        ModeSector { flash }
+    }
+
+    fn offset(index: usize) -> Result<u32, u32> {
+        let at = (index * WORD) as u32;
+        if at + WORD as u32 > MODES_SECTOR {
+            return Err(8);
+        }
+        Ok(MODES_OFFSET + at)
+    }
+}
+
+/// Reads one flash word at `address` with data bus faults ignored, and says whether the flash
+/// found an uncorrectable (double) ECC error in it. A word torn by a power cut while it was
+/// programmed can hold one; an ordinary read of it would be a bus fault at every boot. With
+/// FAULTMASK set the core runs at priority −1, where CCR.BFHFNMIGN makes a load's bus fault
+/// return without faulting (ARMv7-M ARM B3.2.8); FLASH_SR2.DBECCERR then tells.
+fn read_word_ecc_checked(address: u32, word: &mut [u8; WORD]) -> bool {
+    use cortex_m::peripheral::SCB;
+    const BFHFNMIGN: u32 = 1 << 8;
+    let bank = pac::FLASH.bank(1);
+    bank.ccr().write(|w| w.set_clr_dbeccerr(true));
+    // SAFETY: the SCB's CCR is changed and restored with faults masked (nothing else runs);
+    // the address is inside the mode sector of the flash, always mapped for reading.
+    unsafe {
+        core::arch::asm!("cpsid f");
+        let scb = &*SCB::PTR;
+        let ccr = scb.ccr.read();
+        scb.ccr.write(ccr | BFHFNMIGN);
+        cortex_m::asm::dsb();
+        cortex_m::asm::isb();
+        for (i, chunk) in word.chunks_exact_mut(4).enumerate() {
+            let v = core::ptr::read_volatile((address as usize + 4 * i) as *const u32);
+            chunk.copy_from_slice(&v.to_le_bytes());
+        }
+        cortex_m::asm::dsb();
+        scb.ccr.write(ccr);
+        cortex_m::asm::isb();
+        core::arch::asm!("cpsie f");
+    }
+    let failed = bank.sr().read().dbeccerr();
+    bank.ccr().write(|w| {
+        w.set_clr_dbeccerr(true);
+        w.set_clr_sneccerr(true);
+    });
+    !failed
+}
+
+impl FlashWords for ModeSector {
+    fn words(&self) -> usize {
+        MODES_SECTOR as usize / WORD
+    }
+
+    fn read(&mut self, index: usize, word: &mut [u8; WORD]) -> Result<(), u32> {
+        let address = 0x0800_0000 + Self::offset(index)?;
+        if read_word_ecc_checked(address, word) {
+            Ok(())
+        } else {
+            Err(7)
+        }
+    }
+
+    fn program(&mut self, index: usize, word: &[u8; WORD]) -> Result<(), u32> {
+        let at = Self::offset(index)?;
+        let mut flash = self.flash.try_borrow_mut().map_err(|_| FLASH_BUSY)?;
+        flash.blocking_write(at, word).map_err(|_| 4u32)
+    }
+
+    fn erase(&mut self) -> Result<(), u32> {
+        let mut flash = self.flash.try_borrow_mut().map_err(|_| FLASH_BUSY)?;
+        flash
+            .blocking_erase(MODES_OFFSET, MODES_OFFSET + MODES_SECTOR)
+            .map_err(|_| 3u32)
     }
 }
 
@@ -342,6 +447,7 @@ impl ports::Board for H743 {
     type Link = UsbLink;
     type Clock = EmbassyClock;
     type Store = FlashStore;
+    type ModeStore = FlashModes;
     type Watchdog = Iwdg;
     const KIND: protocol::Board = protocol::Board::H743;
     fn log(args: core::fmt::Arguments<'_>) {

@@ -9,6 +9,7 @@
 //!   by block as it is read out, so the whole 752 × 480 frame fits ([`WINDOW_ROWS`]);
 //! * link: USB CDC-ACM (embassy-usb);
 //! * calibration: a record in the last flash sector (`protocol::calibration_record`);
+//! * mode: the mode log ([`crate::mode_log`]) in the sector before it;
 //! * watchdog: IWDG1, fed by the application's main loop.
 //!
 //! What the board is — frame window, clocks, USB identity, buffer sizes — is here and builds
@@ -60,3 +61,7 @@ pub use tangent_core::protocol::codes::{USB_PID, USB_VID};
 pub const CALIB_OFFSET: u32 = 0x1E_0000;
 /// Size of the calibration sector.
 pub const CALIB_SECTOR: u32 = 128 * 1024;
+/// Offset of the mode log's sector from the start of flash (bank 2, sector 6; `memory.x`).
+pub const MODES_OFFSET: u32 = 0x1C_0000;
+/// Size of the mode log's sector: 4 096 flash words, one per mode change between erases.
+pub const MODES_SECTOR: u32 = 128 * 1024;

@@ -1,11 +1,12 @@
 //! Bringing the H743 board up: the clock tree, the pin map (`docs/hardware.md`, "Wiring"),
 //! the USB descriptors, and the buffers' places in RAM.
 
+use core::cell::RefCell;
 use core::ptr::addr_of_mut;
 use embassy_stm32::dcmi::{self, Dcmi};
 use embassy_stm32::dma::ReadableRingBuffer;
 use embassy_stm32::exti::{self, ExtiInput};
-use embassy_stm32::flash::Flash;
+use embassy_stm32::flash::{Blocking, Flash};
 use embassy_stm32::gpio::{Level, Output, Pull, Speed};
 use embassy_stm32::i2c::{self, I2c};
 use embassy_stm32::peripherals::USB_OTG_FS;
@@ -20,7 +21,8 @@ use tangent_core::pipeline::Workspace;
 
 use super::devices::BLOCK_WORDS;
 use super::devices::{
-    Button, EmbassyClock, FlashStore, GpioLasers, Iwdg, Mt9v034Dcmi, UsbLink, H743,
+    Button, EmbassyClock, FlashModes, FlashStore, GpioLasers, Iwdg, ModeSector, Mt9v034Dcmi,
+    UsbLink, H743,
 };
 use super::{FRAME_BYTES, POINTS, USB_PID, USB_VID, WATCHDOG_US};
 use crate::app::Buffers;
@@ -163,7 +165,11 @@ pub async fn start() -> Started {
     let camera = Mt9v034Dcmi::new(i2c, dcmi, ring, block, exposure_pin).await;
 
     let trigger = Button::new(ExtiInput::new(p.PC13, p.EXTI13, Pull::Down, Irqs));
-    let store = FlashStore::new(Flash::new_blocking(p.FLASH));
+    // One flash driver for the calibration's sector and the mode log's.
+    static FLASH: StaticCell<RefCell<Flash<'static, Blocking>>> = StaticCell::new();
+    let flash: &'static RefCell<_> = FLASH.init(RefCell::new(Flash::new_blocking(p.FLASH)));
+    let store = FlashStore::new(flash);
+    let modes = FlashModes::new(ModeSector::new(flash));
 
     // USB CDC-ACM.
     static EP_OUT: StaticCell<[u8; 256]> = StaticCell::new();
@@ -207,6 +213,7 @@ pub async fn start() -> Started {
         link: UsbLink::new(class),
         clock: EmbassyClock,
         store,
+        modes,
         watchdog: Iwdg::start(wdg),
     };
     Started {
