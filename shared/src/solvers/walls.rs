@@ -598,6 +598,10 @@ fn aimed_wall(input: &WallInput<'_>, params: &WallParams, runs: &[Run]) -> usize
     let mut best = (Real::INFINITY, 0usize);
     for r in runs {
         let Some(w) = r.wall else { continue };
+        // The crossing line runs down the image: its column says nothing of the aim.
+        if input.planes[r.curve as usize].is_row_wise() {
+            continue;
+        }
         let pts = &input.curves[r.curve as usize][r.start as usize..r.end as usize];
         for &p in pts {
             let off = (column(p, params) - params.principal_u).abs();
@@ -645,7 +649,8 @@ fn parallel(walls: &[Wall], params: &WallParams) -> Option<Estimate> {
     None
 }
 
-/// The aimed wall's segment along the lowest curve that lights it: its points' first and
+/// The aimed wall's segment along the lowest curve across the image that lights it: its
+/// points' first and
 /// last run, each end at the next wall (corner), at the edge where the line leaves the plane,
 /// or at the frame's side (`docs/building.md`, "Segment length").
 fn segment(
@@ -656,7 +661,9 @@ fn segment(
     aimed: usize,
 ) -> Option<Segment> {
     let wall = &walls[aimed];
-    let curve = (0..8).find(|k| wall.lines & (1 << k) != 0)?;
+    // A line across the image (the column-wise edge below needs one): not the crossing line.
+    let curve = (0..input.planes.len())
+        .find(|&k| wall.lines & (1 << k) != 0 && !input.planes[k].is_row_wise())?;
     let plane = &input.planes[curve];
     let mine = |r: &&Run| r.curve as usize == curve && r.wall == Some(aimed as u8);
     let first = runs.iter().filter(mine).min_by_key(|r| r.start)?;
