@@ -201,6 +201,22 @@ pub fn entries() -> Vec<WallEntry> {
                 texture_contrast: PLASTER.contrast,
             })],
         },
+        WallEntry {
+            name: "wall-z250-pitch3-crossing",
+            description: "plaster wall 2.5 m away turned 10° and tilted 3° (lower part nearer), \
+                          seen by the three-line head (the crossing line in its own frame)"
+                .into(),
+            calibration: three_plane_calibration(),
+            objects: vec![turned_wall(2.5, 10.0, 3.0, PLASTER)],
+        },
+        WallEntry {
+            name: "wall-corner-z200-crossing",
+            description: "room corner of 90° in concrete, edge 2.0 m away on the axis, turned \
+                          −5°, seen by the three-line head"
+                .into(),
+            calibration: three_plane_calibration(),
+            objects: corner(0.0, 2.0, 90.0, -5.0, CONCRETE),
+        },
     ]
 }
 
