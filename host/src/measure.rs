@@ -46,6 +46,10 @@ pub enum MeasureError {
     /// No frame lit every plane of the calibration.
     #[error("no laser-on frame lights all {0} planes of the calibration")]
     NoFullFrame(usize),
+    /// A wall capture whose laser planes across the image are lit only in frames of their
+    /// own: a laser-calibration capture (a chessboard's stripes), not a wall measurement.
+    #[error("a laser-calibration capture (each laser plane in a frame of its own, as for the chessboard poses of `tangent calibrate`), not a wall measurement: walls are measured from a capture that lights the parallel lines in one frame")]
+    CalibrationCapture,
     /// The off and on frames differ in bit depth.
     #[error("the laser-off and laser-on frames differ in bit depth")]
     MixedDepth,
@@ -534,6 +538,9 @@ pub fn measure_loaded(
             (r, reading, buffers)
         }
         Mode::Wall => {
+            if is_calibration_capture(capture, &calibration) {
+                return Err(MeasureError::CalibrationCapture);
+            }
             let mut params = wall_params(&calibration, params);
             // The vertical reference, when the device recorded one (docs/building.md §6).
             if let Some(a) = &capture.meta.accelerometer {
@@ -605,6 +612,18 @@ pub fn wall_params(calibration: &Calibration, params: &CylinderParams) -> WallIn
     p.walls.principal_u = calibration.camera.cx;
     p.walls.width_px = calibration.camera.width as f64;
     p
+}
+
+/// Whether a wall capture lights its planes across the image only one by one (the laser
+/// calibration's board poses): the device lights the parallel pair in one frame.
+fn is_calibration_capture(capture: &Capture, calibration: &Calibration) -> bool {
+    let across: Vec<usize> = (0..calibration.planes.len())
+        .filter(|&k| !calibration.planes[k].is_row_wise())
+        .collect();
+    across.len() > 1
+        && !capture
+            .on_frames()
+            .any(|(lit, _)| across.iter().all(|k| lit.contains(k)))
 }
 
 /// The crossing line of a wall capture (`docs/building.md`, "The crossing line"): the last

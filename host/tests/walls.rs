@@ -198,3 +198,24 @@ fn the_crossing_line_puts_the_plumb_within_its_target() {
     let corner = c.corner.unwrap();
     within("crossing corner", corner.angle_deg, 90.0, 3.0, 0.0);
 }
+
+/// A chessboard pose for the laser calibration (mode `wall`, each plane in a frame of its own)
+/// is no wall measurement: refused, saying what it is.
+#[test]
+fn a_calibration_board_capture_is_refused_as_a_wall() {
+    let dir = Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../tests/captures/board-pose-02"
+    ));
+    let err = measure_capture(
+        dir,
+        None,
+        &PipelineConfig::default(),
+        &CylinderParams::default(),
+    )
+    .err()
+    .expect("a board pose is refused");
+    let text = err.to_string();
+    assert!(text.contains("laser-calibration capture"), "{text}");
+    assert!(text.contains("tangent calibrate"), "{text}");
+}

@@ -718,11 +718,10 @@ fn segment(
             var += s * s;
             continue;
         }
-        // The plane's stripe is seen up to its last column and not in the next. A column is
-        // seen while the plane covers any useful part of its pixel (the stripe is far above
-        // the threshold), so the edge lies within that pixel, `u_last ± ½`, uniform:
-        // `u_edge = u_last`, σ = 1/√12 px (docs/building.md, "Segment length"; an edge at the
-        // pixel's outer side read 0.3 px long per end on the tuning rooms).
+        // The plane's stripe is seen up to its last column and not in the next: the edge is
+        // within that column's outer half-pixel whatever follows (a deeper surface, a gap of
+        // unlit columns), uniform: σ = 1/√12 px (docs/building.md, "Segment length"; the
+        // pixel's centre instead read every segment 1 px short on the tuning rooms).
         let at_side = if side == 0 {
             u_in < params.edge_margin_px
         } else {
@@ -731,7 +730,8 @@ fn segment(
         if outer.is_none() && at_side {
             kinds[side] = EndKind::FrameSide;
         }
-        let (u_edge, sigma_u) = (u_in, 1.0 / sqrt(12.0));
+        let sign = if side == 0 { -1.0 } else { 1.0 };
+        let (u_edge, sigma_u) = (u_in + 0.5 * sign, 1.0 / sqrt(12.0));
         let at = |u: Real| -> Option<Real> {
             let a = u - params.principal_u;
             let den = params.focal_px * dir.x - a * dir.z;
