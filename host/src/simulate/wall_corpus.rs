@@ -375,7 +375,7 @@ pub fn random_room(
         params.lit_planes.push(2);
     }
     let description = format!(
-        "{} {}{what}, {:.2} m away",
+        "{} {} {what}, {:.2} m away",
         if glossy { "glossy" } else { "matt" },
         m.name,
         z
