@@ -612,7 +612,9 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
     }
 
     /// Lasers to light: one per calibrated plane that the board can drive (all the
-    /// board's lasers when there is no calibration, e.g. when recording raw frames).
+    /// board's lasers when there is no calibration, e.g. when recording raw frames) — except
+    /// a crossing plane (row-wise, the walls' third line, `docs/building.md`): its line would
+    /// merge with the others in one frame, so it is never lit with them.
     fn laser_mask(&self) -> u8 {
         let n = self
             .calibration
@@ -621,7 +623,16 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
             .unwrap_or(u8::MAX)
             .min(self.dev.laser.count())
             .min(8);
-        ((1u16 << n) - 1) as u8
+        let all = ((1u16 << n) - 1) as u8;
+        let crossing = self.calibration.as_ref().map_or(0u8, |c| {
+            c.planes
+                .iter()
+                .take(8)
+                .enumerate()
+                .filter(|(_, p)| p.is_row_wise())
+                .fold(0u8, |m, (i, _)| m | (1 << i))
+        });
+        all & !crossing
     }
 
     /// Exposes the laser-off then the laser-on frame into the frame buffers.

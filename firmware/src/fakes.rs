@@ -82,8 +82,9 @@ impl FakeLaser {
 }
 
 impl Laser for FakeLaser {
+    /// The three-laser head: the parallel pair and the walls' crossing line.
     fn count(&self) -> u8 {
-        2
+        3
     }
     fn set(&mut self, mask: u8) {
         self.switches.borrow_mut().push((self.time.get(), mask));

@@ -16,6 +16,7 @@ pub mod emulator;
 pub mod evaluate;
 pub mod evaluate_road;
 pub mod evaluate_sphere;
+pub mod evaluate_walls;
 pub mod fieldlog;
 pub mod link;
 pub mod measure;

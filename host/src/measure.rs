@@ -46,6 +46,10 @@ pub enum MeasureError {
     /// No frame lit every plane of the calibration.
     #[error("no laser-on frame lights all {0} planes of the calibration")]
     NoFullFrame(usize),
+    /// A wall capture whose laser planes across the image are lit only in frames of their
+    /// own: a laser-calibration capture (a chessboard's stripes), not a wall measurement.
+    #[error("a laser-calibration capture (each laser plane in a frame of its own, as for the chessboard poses of `tangent calibrate`), not a wall measurement: walls are measured from a capture that lights the parallel lines in one frame")]
+    CalibrationCapture,
     /// The off and on frames differ in bit depth.
     #[error("the laser-off and laser-on frames differ in bit depth")]
     MixedDepth,
@@ -534,13 +538,19 @@ pub fn measure_loaded(
             (r, reading, buffers)
         }
         Mode::Wall => {
+            if is_calibration_capture(capture, &calibration) {
+                return Err(MeasureError::CalibrationCapture);
+            }
             let mut params = wall_params(&calibration, params);
             // The vertical reference, when the device recorded one (docs/building.md §6).
             if let Some(a) = &capture.meta.accelerometer {
                 let (g, sigma) = a.gravity_camera().map_err(MeasureError::Accelerometer)?;
                 params.walls.gravity = Some((Vec3::new(g[0], g[1], g[2]), sigma));
             }
-            let (r, buffers) = solve_capture::<Wall>(capture, &calibration, config, &params)?;
+            let (r, buffers) = match crossing_plane(capture, &calibration) {
+                Some(k) => solve_wall_crossing(capture, &calibration, k, config, &params)?,
+                None => solve_capture::<Wall>(capture, &calibration, config, &params)?,
+            };
             let reading = Reading::from_wall(name, r.as_ref(), Some(capture));
             (r.map(|m| Solved::Wall(Box::new(m))), reading, buffers)
         }
@@ -602,6 +612,111 @@ pub fn wall_params(calibration: &Calibration, params: &CylinderParams) -> WallIn
     p.walls.principal_u = calibration.camera.cx;
     p.walls.width_px = calibration.camera.width as f64;
     p
+}
+
+/// Whether a wall capture lights its planes across the image only one by one (the laser
+/// calibration's board poses): the device lights the parallel pair in one frame.
+fn is_calibration_capture(capture: &Capture, calibration: &Calibration) -> bool {
+    let across: Vec<usize> = (0..calibration.planes.len())
+        .filter(|&k| !calibration.planes[k].is_row_wise())
+        .collect();
+    across.len() > 1
+        && !capture
+            .on_frames()
+            .any(|(lit, _)| across.iter().all(|k| lit.contains(k)))
+}
+
+/// The crossing line of a wall capture (`docs/building.md`, "The crossing line"): the last
+/// plane of `calibration`, when it is row-wise and a frame of the capture lit it alone.
+fn crossing_plane(capture: &Capture, calibration: &Calibration) -> Option<usize> {
+    let k = calibration.planes.len().checked_sub(1)?;
+    (k > 0 && calibration.planes[k].is_row_wise() && capture.on_frames().any(|(lit, _)| lit == [k]))
+        .then_some(k)
+}
+
+/// The wall instrument on a three-line capture: the planes across the image from their frame
+/// (or the composite of theirs), the crossing plane `k` from its own, transposed
+/// ([`instrument::wall::measure_with_crossing`]). The plot buffers are the parallel pair's.
+#[allow(clippy::type_complexity)]
+fn solve_wall_crossing(
+    capture: &Capture,
+    calibration: &Calibration,
+    k: usize,
+    config: &PipelineConfig,
+    params: &WallInstrumentParams,
+) -> Result<(Result<WallMeasurement, PipelineError>, PlotBuffers), MeasureError> {
+    let mut across = calibration.clone();
+    across.planes.truncate(k);
+    let (off, on) = frame_pair(capture, k)?;
+    let on_crossing = capture
+        .on_frames()
+        .find(|(lit, _)| *lit == [k])
+        .map(|(_, f)| f)
+        .ok_or(MeasureError::NoFullFrame(k + 1))?;
+    Ok(match (&off.samples, &on.samples, &on_crossing.samples) {
+        (PgmSamples::U8(a), PgmSamples::U8(b), PgmSamples::U8(c)) => {
+            run_crossing(a, b, c, &on, calibration, &across, k, config, params)
+        }
+        (PgmSamples::U16(a), PgmSamples::U16(b), PgmSamples::U16(c)) => {
+            run_crossing(a, b, c, &on, calibration, &across, k, config, params)
+        }
+        _ => return Err(MeasureError::MixedDepth),
+    })
+}
+
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+fn run_crossing<P: Pixel>(
+    off: &[P],
+    on: &[P],
+    on_crossing: &[P],
+    pgm: &Pgm,
+    calibration: &Calibration,
+    across: &Calibration,
+    k: usize,
+    config: &PipelineConfig,
+    params: &WallInstrumentParams,
+) -> (Result<WallMeasurement, PipelineError>, PlotBuffers) {
+    use tangent_core::pipeline::crossing::transpose_frame;
+    let (w, h) = (pgm.width, pgm.height);
+    let mut hw = OwnedBuffers::<P>::for_frame(w, h, pgm.bit_depth(), k);
+    let mut hw_t = OwnedBuffers::<P>::for_frame(h, w, pgm.bit_depth(), 1);
+    let result = (|| {
+        let mut off_t = vec![P::default(); w * h];
+        let mut on_t = vec![P::default(); w * h];
+        transpose_frame(off, w, h, &mut off_t)?;
+        transpose_frame(on_crossing, w, h, &mut on_t)?;
+        let depth = pgm.bit_depth();
+        let off_f = Frame::new(off, w, h, w)?.with_bit_depth(depth)?;
+        let on_f = Frame::new(on, w, h, w)?.with_bit_depth(depth)?;
+        let off_tf = Frame::new(&off_t[..], h, w, h)?.with_bit_depth(depth)?;
+        let on_tf = Frame::new(&on_t[..], h, w, h)?.with_bit_depth(depth)?;
+        instrument::wall::measure_with_crossing(
+            &off_f,
+            &on_f,
+            across,
+            &off_tf,
+            &on_tf,
+            calibration,
+            k,
+            config,
+            params,
+            &mut hw.workspace(),
+            &mut hw_t.workspace(),
+        )
+    })();
+    let diff = hw.diff().iter().map(|&v| v.into() as u16).collect();
+    let mut points = hw.points().to_vec();
+    // The crossing line's points after the others', where the profile says (for plots and
+    // the evaluation's baseline): `profile.points(points, k)` finds them.
+    let result = result.map(|(mut m, (s, e))| {
+        let first = points.len();
+        points.extend_from_slice(&hw_t.points()[s..e]);
+        if let Some(slot) = m.profile.plane_points.get_mut(k) {
+            *slot = (first, points.len());
+        }
+        m
+    });
+    (result, (diff, hw.curve().to_vec(), points))
 }
 
 /// The buffers a plot shows: the difference frame (16-bit), the curve points, the 3-D points.

@@ -406,7 +406,7 @@ pub fn wall_truth(capture: &Capture, s: &WallSolution) -> Option<WallTruth> {
 /// The true length of the run of `object` on laser line `line` between the measured ends:
 /// each end where the line meets the plane of the object beyond the run (a jamb, the next
 /// wall), or, when that object is no plane meeting the line there, where the run's last
-/// truth point is.
+/// truth point is. Clutter in front of the wall (and its shadow) does not end the run.
 fn true_segment(
     curve: &[TruthPoint],
     planes: &[Option<TruePlane>],
@@ -432,16 +432,24 @@ fn true_segment(
             da.total_cmp(&db)
         })?
         .0;
-    let mut lo = centre;
-    while lo > 0 && pts[lo - 1].object == object && pts[lo - 1].column + 1 == pts[lo].column {
-        lo -= 1;
+    // Outwards from there to the last point of `object` before another plane: a cable in
+    // front (another object that is no plane) and its shadow (columns with no truth point)
+    // interrupt the line but not the wall's segment, as they do not the instrument's.
+    let is_plane = |o: usize| planes.get(o).copied().flatten().is_some();
+    let stops = |i: usize| pts[i].object != object && is_plane(pts[i].object);
+    let (mut lo, mut i) = (centre, centre);
+    while i > 0 && !stops(i - 1) {
+        i -= 1;
+        if pts[i].object == object {
+            lo = i;
+        }
     }
-    let mut hi = centre;
-    while hi + 1 < pts.len()
-        && pts[hi + 1].object == object
-        && pts[hi].column + 1 == pts[hi + 1].column
-    {
-        hi += 1;
+    let (mut hi, mut i) = (centre, centre);
+    while i + 1 < pts.len() && !stops(i + 1) {
+        i += 1;
+        if pts[i].object == object {
+            hi = i;
+        }
     }
     let end = |inner: usize, outer: Option<usize>| -> Vec3d {
         let p_in = Vec3d::from(pts[inner].point_m);

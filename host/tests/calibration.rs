@@ -956,3 +956,39 @@ fn repeatability_over_noise_seeds() {
 /// The refusals of `docs/calibration.md` ("When calibration refuses"): degenerate inputs
 /// fail with the reason named, and no file is written.
 mod calibration_refusals;
+
+/// The walls' crossing line runs down the image: the laser calibration finds its stripe row
+/// by row (`laser::stripe_pixels_either_way`), to the same accuracy as a stripe across it,
+/// and a stripe across the image is still found column by column.
+#[test]
+fn stripe_pixels_either_way_finds_a_stripe_down_the_image() {
+    let (w, h) = (120usize, 200usize);
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(6);
+    let noise = Normal::new(0.0, 2.0).unwrap();
+    let centre = |y: usize| 40.3 + 0.21 * y as f64;
+    let down: Vec<f64> = (0..w * h)
+        .map(|k| {
+            let (x, y) = (k % w, k / w);
+            let r = x as f64 - centre(y);
+            200.0 * (-r * r / (2.0 * 1.5 * 1.5)).exp() + noise.sample(&mut rng)
+        })
+        .collect();
+    let px = laser::stripe_pixels_either_way(&down, w, h);
+    assert_eq!(px.len(), h);
+    for p in &px {
+        assert!(
+            (p.x - centre(p.y as usize)).abs() < 0.08,
+            "row {}: {} vs {}",
+            p.y,
+            p.x,
+            centre(p.y as usize)
+        );
+    }
+    // Transposed, the same stripe runs across: found per column, as before.
+    let mut across = vec![0.0; w * h];
+    tangent_core::pipeline::crossing::transpose_frame(&down, w, h, &mut across).unwrap();
+    assert_eq!(
+        laser::stripe_pixels_either_way(&across, h, w),
+        laser::stripe_pixels(&across, h, w)
+    );
+}

@@ -177,3 +177,46 @@ fn bad_input_is_refused_with_its_reason() {
     );
     assert!(one.wall.is_none() && column.wall.is_none());
 }
+
+/// The three-line head (`docs/building.md` §8): the crossing line, fired in its own frame and
+/// extracted row by row, lies on the wall with the parallel pair; the plumb's σ at 2–2.5 m is
+/// about a tenth of a degree (σ_g = 0.066° ⊕ the crossing line's pitch), where two parallel
+/// lines give about a degree (the line-bias term, (B3b)), and the reading is within 3σ of
+/// truth.
+#[test]
+fn the_crossing_line_brings_the_plumb_to_a_tenth_of_a_degree() {
+    for name in ["wall-z250-pitch3-crossing", "wall-corner-z200-crossing"] {
+        let w = wall(name);
+        let t = w.truth.clone().unwrap();
+        let aimed = &w.walls[w.aimed];
+        assert!(aimed.lines.contains(&2), "{name}: {aimed:?}");
+        let plumb = w.plumb_deg.unwrap();
+        assert!(plumb.sigma < 0.15, "{name}: plumb σ {}", plumb.sigma);
+        within(name, plumb, t.plumb_deg.unwrap(), 3.0, 0.0);
+        within(name, aimed.pitch_deg, t.pitch_deg.unwrap(), 3.0, 0.0);
+    }
+    let c = wall("wall-corner-z200-crossing");
+    let corner = c.corner.unwrap();
+    within("crossing corner", corner.angle_deg, 90.0, 3.0, 0.0);
+}
+
+/// A chessboard pose for the laser calibration (mode `wall`, each plane in a frame of its own)
+/// is no wall measurement: refused, saying what it is.
+#[test]
+fn a_calibration_board_capture_is_refused_as_a_wall() {
+    let dir = Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../tests/captures/board-pose-02"
+    ));
+    let err = measure_capture(
+        dir,
+        None,
+        &PipelineConfig::default(),
+        &CylinderParams::default(),
+    )
+    .err()
+    .expect("a board pose is refused");
+    let text = err.to_string();
+    assert!(text.contains("laser-calibration capture"), "{text}");
+    assert!(text.contains("tangent calibrate"), "{text}");
+}

@@ -14,7 +14,7 @@ use crate::laser_plane::{LaserPlane, LaserPlaneError};
 // `Float` supplies sqrt/atan2/… in `no_std`; with `std` the inherent methods win.
 #[allow(unused_imports)]
 use crate::real::Float;
-use crate::real::Real;
+use crate::real::{Real, PI};
 
 /// Most laser planes a calibration holds (the instrument has one or two; four leaves room
 /// for a cross-hair or a multi-line head without changing the wire format).
@@ -158,6 +158,15 @@ pub const REFERENCE_BASELINE: Real = 0.10;
 pub const REFERENCE_AXIS_CROSSING: Real = 1.5;
 /// Extra baseline of plane 1 of [`Calibration::reference_design`] (metres).
 pub const REFERENCE_PLANE_SPACING: Real = 0.05;
+
+/// The reference design's third, crossing laser plane for walls (`docs/building.md`, "The
+/// crossing line"; `docs/hardware.md`): a vertical fan [`REFERENCE_BASELINE`] = 0.10 m to the
+/// right of the camera, tilted to cross the optical axis at [`REFERENCE_AXIS_CROSSING`] =
+/// 1.5 m — plane 0 rolled by −90° about the optical axis, `S = (e, 0, 0)`,
+/// `n = (cos δ, 0, sin δ)`. Its line runs down the image and moves along the rows with depth.
+pub fn reference_crossing_plane() -> Result<LaserPlane, LaserPlaneError> {
+    LaserPlane::from_baseline_tilt_roll(REFERENCE_BASELINE, reference_tilt(), -0.5 * PI)
+}
 
 /// Tilt `δ = atan(e / z0)` of the reference design's planes (radians).
 pub fn reference_tilt() -> Real {

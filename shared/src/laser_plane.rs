@@ -120,6 +120,14 @@ pub struct LaserPlane {
 }
 
 impl LaserPlane {
+    /// The plane's line runs down the image (a vertical fan beside the camera: the crossing
+    /// line of `docs/building.md`): its normal leans more towards the camera's x axis than its
+    /// y axis, so depth moves its stripe along the rows and it is extracted row by row
+    /// (`pipeline::crossing`); every other plane's stripe moves along the columns.
+    pub fn is_row_wise(&self) -> bool {
+        self.normal.x.abs() > self.normal.y.abs()
+    }
+
     /// Builds a plane `normal·X = offset` with emission point `source`.
     ///
     /// Normalises `normal` (dividing `offset` by its length), flips both so that the

@@ -138,7 +138,9 @@ impl NoiseModel {
 }
 
 /// `∂X/∂v`: how the triangulated point `x` (on `plane`, camera frame) moves per pixel of
-/// stripe position along the image column (`docs/error-model.md`, "One point"):
+/// stripe position along the image column (`docs/error-model.md`, "One point"); for a
+/// row-wise plane ([`LaserPlane::is_row_wise`], the crossing line) `∂X/∂u`, the same with
+/// `x ↔ y`:
 ///
 /// ```text
 /// X = d·r/(n·r),  r = (x_n, y_n, 1),  ∂r/∂v = (0, 1/f_y, 0)
@@ -152,8 +154,22 @@ pub fn displacement_per_pixel(
     if !(x.z > 0.0 && x.z.is_finite() && focal_px > 0.0 && plane.offset > 0.0) {
         return Err(NoiseError::InvalidGeometry);
     }
-    let dr = Vec3::new(0.0, 1.0 / focal_px, 0.0);
-    Ok(dr * x.z - x * (x.z / plane.offset * plane.normal.y / focal_px))
+    // A row-wise plane's stripe moves along the rows (∂/∂u, `n_x`): the same formula with
+    // x and y swapped (`pipeline::crossing`).
+    let (axis, n_a) = stripe_axis(plane);
+    let dr = axis / focal_px;
+    Ok(dr * x.z - x * (x.z / plane.offset * n_a / focal_px))
+}
+
+/// The image axis along which depth moves `plane`'s stripe, as a camera-frame unit vector,
+/// and the normal's component along it: `(ŷ, n_y)` for a line across the image, `(x̂, n_x)`
+/// for a row-wise (crossing) line ([`LaserPlane::is_row_wise`]).
+fn stripe_axis(plane: &LaserPlane) -> (Vec3, Real) {
+    if plane.is_row_wise() {
+        (Vec3::new(1.0, 0.0, 0.0), plane.normal.x)
+    } else {
+        (Vec3::new(0.0, 1.0, 0.0), plane.normal.y)
+    }
 }
 
 /// 1σ of the triangulated point `x` (metres, along [`displacement_per_pixel`]) for
@@ -186,8 +202,8 @@ pub struct DisplacementField {
 impl DisplacementField {
     /// The field of `plane`.
     pub fn of(plane: &LaserPlane) -> Self {
-        let offset_y = Vec3::new(0.0, plane.offset, 0.0);
-        let normal_y = plane.normal.y;
+        let (axis, normal_y) = stripe_axis(plane);
+        let offset_y = axis * plane.offset;
         let w = offset_y - plane.source * normal_y;
         let (a, b) = plane.plane_axes();
         DisplacementField {

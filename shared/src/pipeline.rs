@@ -41,6 +41,7 @@ use crate::solvers::road_profile::RoadError;
 use crate::solvers::SolveError;
 
 pub mod buffers;
+pub mod crossing;
 pub mod faint;
 mod planes;
 pub mod profile;

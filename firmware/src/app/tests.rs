@@ -391,3 +391,33 @@ fn a_damaged_store_gives_the_default_mode_reported() {
     let app = rig.app(CameraBehaviour::Works, false);
     assert_eq!(app.mode_store(), ModeStoreState::Loaded(Mode::Cylinder));
 }
+
+#[test]
+fn the_crossing_laser_is_never_lit_with_the_parallel_pair() {
+    // The walls' three-line head (docs/building.md, "The crossing line"): plane 2 runs down
+    // the image and has a frame of its own; the pair's capture lights lasers 0 and 1 only.
+    let mut rig = Rig::new();
+    let switches = rig.switches.clone();
+    let info = {
+        let mut app = rig.app(CameraBehaviour::Works, false);
+        let mut cal = tangent_core::calibration::Calibration::reference_design();
+        let crossing = tangent_core::calibration::reference_crossing_plane()
+            .expect("the reference crossing plane is valid");
+        cal.planes.push(crossing).expect("room for a third plane");
+        // The fake camera's small frame.
+        cal.camera.width = GEOMETRY.width as u32;
+        cal.camera.height = GEOMETRY.height as u32;
+        cal.camera.cx = 0.5 * (GEOMETRY.width as f64 - 1.0);
+        cal.camera.cy = 0.5 * (GEOMETRY.height as f64 - 1.0);
+        app.install_calibration(&tangent_core::protocol::WireCalibration::from(&cal))
+            .expect("a three-plane calibration installs");
+        poll_bounded(app.capture_pair(), POLLS)
+            .expect("a capture is bounded by its guard")
+            .expect("the camera works")
+    };
+    assert_eq!(info.laser_mask, 0b011);
+    let log = switches.borrow();
+    assert!(log.iter().any(|&(_, m)| m == 0b011), "{log:?}");
+    assert!(log.iter().all(|&(_, m)| m & 0b100 == 0), "{log:?}");
+    assert_eq!(longest_lit_us(&log).1, 0, "the lasers end off");
+}

@@ -199,7 +199,7 @@ pub struct QemuLaser {
 }
 
 impl QemuLaser {
-    /// Two lasers, off.
+    /// Three lasers (the parallel pair and the walls' crossing line), off.
     pub const fn new() -> Self {
         QemuLaser { mask: 0 }
     }
@@ -213,10 +213,10 @@ impl Default for QemuLaser {
 
 impl ports::Laser for QemuLaser {
     fn count(&self) -> u8 {
-        2
+        3
     }
     fn set(&mut self, mask: u8) {
-        self.mask = mask & 0b11;
+        self.mask = mask & 0b111;
     }
 }
 

@@ -161,6 +161,32 @@ pub fn stripe_pixels(diff: &[f64], width: usize, height: usize) -> Vec<Vec2> {
     out
 }
 
+/// [`stripe_pixels`] of a stripe of either direction: per column (a line across the image)
+/// and per row (the walls' crossing line, which runs down the image: `docs/building.md`,
+/// "The crossing line"), whichever finds more pixels — a stripe crosses many columns and few
+/// rows, or the reverse. Pixels as `(u, v)` either way.
+pub fn stripe_pixels_either_way(diff: &[f64], width: usize, height: usize) -> Vec<Vec2> {
+    let across = stripe_pixels(diff, width, height);
+    if width == 0 || height == 0 || diff.len() != width * height {
+        return across;
+    }
+    let mut transposed = vec![0.0; diff.len()];
+    if tangent_core::pipeline::crossing::transpose_frame(diff, width, height, &mut transposed)
+        .is_err()
+    {
+        return across;
+    }
+    let down: Vec<Vec2> = stripe_pixels(&transposed, height, width)
+        .into_iter()
+        .map(|p| Vec2::new(p.y, p.x))
+        .collect();
+    if down.len() > across.len() {
+        down
+    } else {
+        across
+    }
+}
+
 /// Back-projects stripe pixels onto the board plane of `pose` and keeps the points that
 /// lie on the board (inner-corner grid plus [`BOARD_MARGIN_SQUARES`]). Camera frame, metres.
 pub fn stripe_points_on_board(
@@ -490,7 +516,10 @@ pub fn board_capture(
             return Err("laser-on and laser-off frames differ in size".into());
         }
         let diff: Vec<f64> = on.iter().zip(&off).map(|(a, b)| a - b).collect();
-        stripes.push((k, stripe_pixels(&diff, frame.width, frame.height)));
+        stripes.push((
+            k,
+            stripe_pixels_either_way(&diff, frame.width, frame.height),
+        ));
     }
     if stripes.is_empty() {
         return Err("no laser-on frame lights a single laser".into());

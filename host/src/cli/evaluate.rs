@@ -60,6 +60,21 @@ pub struct Args {
     /// bad input; `--count` fresh seeds per surface.
     #[arg(long)]
     road: bool,
+    /// Evaluate the wall instrument instead (`docs/accuracy.md`, "Walls"): this many random
+    /// rooms (single walls, corners, niches; 0.5–5 m) from the `--set`'s first wall seed,
+    /// beside the naive baseline (unweighted principal components).
+    #[arg(long, default_value_t = 0)]
+    walls: u64,
+    /// First seed of the rooms (default: the `--set`'s, `evaluate_walls::first_seed`).
+    #[arg(long)]
+    walls_seed: Option<u64>,
+    /// With `--walls`: the head with the third, crossing line (`docs/building.md`, "The
+    /// crossing line"), on the same rooms.
+    #[arg(long)]
+    walls_crossing: bool,
+    /// Also write one line per room and reading here (CSV).
+    #[arg(long)]
+    walls_csv: Option<PathBuf>,
     /// First seed of the road surfaces (`--road`).
     #[arg(long, default_value_t = 1_000_000)]
     road_seed: u64,
@@ -69,6 +84,10 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     if args.spheres_only {
         let doc = sphere_section(&args)?;
+        return write(&args, &doc);
+    }
+    if args.walls > 0 {
+        let doc = walls_section(&args)?;
         return write(&args, &doc);
     }
     if args.road {
@@ -189,6 +208,46 @@ fn sphere_section(args: &Args) -> anyhow::Result<String> {
             first,
             first + args.spheres.saturating_sub(1),
             args.set.name()
+        ),
+        &samples,
+    ))
+}
+
+/// The walls section: `--walls` random rooms from `--walls-seed`.
+fn walls_section(args: &Args) -> anyhow::Result<String> {
+    use tangent_host::evaluate_walls as ev;
+    let first = args.walls_seed.unwrap_or_else(|| ev::first_seed(args.set));
+    let start = Instant::now();
+    let samples = ev::run(first, args.walls, args.walls_crossing)?;
+    eprintln!(
+        "evaluated {} rooms in {:.1} s",
+        samples.len(),
+        start.elapsed().as_secs_f64()
+    );
+    if let Some(path) = &args.walls_csv {
+        std::fs::write(path, ev::csv(&samples))
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(ev::section(
+        &format!(
+            "{} random rooms (seeds {}–{}, set {}): walls, corners and niches 0.5–5 m away, \
+             {}; `tangent evaluate --walls {} --set {}{}`",
+            args.walls,
+            first,
+            first + args.walls.saturating_sub(1),
+            args.set.name(),
+            if args.walls_crossing {
+                "three laser lines (two parallel, one crossing)"
+            } else {
+                "two parallel laser lines"
+            },
+            args.walls,
+            args.set.name(),
+            if args.walls_crossing {
+                " --walls-crossing"
+            } else {
+                ""
+            }
         ),
         &samples,
     ))

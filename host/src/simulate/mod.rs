@@ -297,8 +297,19 @@ pub fn simulate(spec: &SimSpec) -> Result<(Capture, SimReport), SimError> {
             peak_fraction,
             max_s,
         } => {
+            // A row-wise (crossing) plane has its own frame: it does not add to the others'.
+            let row_wise = |i: &&usize| cal.planes.get(**i).is_some_and(|pl| pl.is_row_wise());
             let peak = (0..w * h)
-                .map(|j| on.ambient[j] + p.lit_planes.iter().map(|&i| on.lasers[i][j]).sum::<f64>())
+                .map(|j| {
+                    let across = p.lit_planes.iter().filter(|i| !row_wise(i));
+                    let alone = p.lit_planes.iter().filter(row_wise);
+                    let most_alone = alone.map(|&i| on.lasers[i][j]).fold(0.0, f64::max);
+                    on.ambient[j]
+                        + across
+                            .map(|&i| on.lasers[i][j])
+                            .sum::<f64>()
+                            .max(most_alone)
+                })
                 .fold(0.0, f64::max)
                 * k;
             if peak > 0.0 {
@@ -363,10 +374,27 @@ pub fn simulate(spec: &SimSpec) -> Result<(Capture, SimReport), SimError> {
         })
         .collect();
 
+    // A row-wise plane (the walls' crossing line) is always fired alone, in a frame of its
+    // own after the others' (`docs/building.md`, "The crossing line"), as the device does.
+    let row_wise = |i: usize| cal.planes.get(i).is_some_and(|pl| pl.is_row_wise());
     let frame_sets: Vec<Vec<usize>> = if p.separate_frames {
         p.lit_planes.iter().map(|&i| vec![i]).collect()
     } else {
-        vec![p.lit_planes.clone()]
+        let across: Vec<usize> = p
+            .lit_planes
+            .iter()
+            .copied()
+            .filter(|&i| !row_wise(i))
+            .collect();
+        std::iter::once(across)
+            .filter(|s| !s.is_empty())
+            .chain(
+                p.lit_planes
+                    .iter()
+                    .filter(|&&i| row_wise(i))
+                    .map(|&i| vec![i]),
+            )
+            .collect()
     };
     // Photo-response non-uniformity: one fixed gain per pixel, the same in every frame.
     let prnu: Vec<f64> = if p.sensor.prnu > 0.0 {

@@ -31,6 +31,18 @@ pub fn two_plane_calibration() -> Calibration {
     c
 }
 
+/// The wall head (`docs/building.md`, "The crossing line"): the two-plane reference design
+/// and the third, crossing plane ([`tangent_core::calibration::reference_crossing_plane`]) as
+/// plane 2, id 3.
+pub fn three_plane_calibration() -> Calibration {
+    let mut c = Calibration::reference_design();
+    if let Ok(p) = tangent_core::calibration::reference_crossing_plane() {
+        let _ = c.planes.push(p);
+    }
+    c.id = 3;
+    c
+}
+
 /// Indoor light for calibration: 2 W/m² diffuse in band, so the board is well exposed in
 /// the laser-off frame while the 1 mW stripe (≈ 0.9 W/m² at 1 m) still stands out on the
 /// light squares.

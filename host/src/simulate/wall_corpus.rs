@@ -9,8 +9,11 @@ use rand_pcg::Pcg64;
 use tangent_core::calibration::Calibration;
 
 use super::accelerometer::AccelerometerSim;
+use super::reflectance::Reflectance;
 use super::render::Lighting;
-use super::rig::{lab_light, one_plane_calibration, two_plane_calibration};
+use super::rig::{
+    lab_light, one_plane_calibration, three_plane_calibration, two_plane_calibration,
+};
 use super::{SimParams, SimSpec};
 use crate::capture::Mode;
 use crate::truth::{Cylinder, Object, Plane, Texture};
@@ -198,6 +201,22 @@ pub fn entries() -> Vec<WallEntry> {
                 texture_contrast: PLASTER.contrast,
             })],
         },
+        WallEntry {
+            name: "wall-z250-pitch3-crossing",
+            description: "plaster wall 2.5 m away turned 10° and tilted 3° (lower part nearer), \
+                          seen by the three-line head (the crossing line in its own frame)"
+                .into(),
+            calibration: three_plane_calibration(),
+            objects: vec![turned_wall(2.5, 10.0, 3.0, PLASTER)],
+        },
+        WallEntry {
+            name: "wall-corner-z200-crossing",
+            description: "room corner of 90° in concrete, edge 2.0 m away on the axis, turned \
+                          −5°, seen by the three-line head"
+                .into(),
+            calibration: three_plane_calibration(),
+            objects: corner(0.0, 2.0, 90.0, -5.0, CONCRETE),
+        },
     ]
 }
 
@@ -212,22 +231,66 @@ pub fn wall_params(params: &mut SimParams) {
 /// What a random room shows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RoomKind {
-    /// One wall, turned.
+    /// One wall, turned and tilted (orientation, plumb).
     Wall,
-    /// A room corner.
+    /// A room corner (angle, plumb).
     Corner,
-    /// A niche or door opening (segment and parallel distance).
+    /// A niche (segment and parallel distance).
     Niche,
 }
 
-/// A random room in the instrument's envelope (for `tangent evaluate walls`, not the corpus):
-/// `kind`, distance uniform in `range` (metres), corners of 80–100°, turns up to ±30°, niches
-/// 0.1–1.0 m wide (the segment) and 0.05–0.5 m deep, a random material and light.
-pub fn random_room(seed: u64, kind: RoomKind, range: (f64, f64)) -> SimSpec {
+impl RoomKind {
+    /// The kind of seed `seed` in an evaluation: the three in turn.
+    pub fn of_seed(seed: u64) -> Self {
+        [RoomKind::Wall, RoomKind::Corner, RoomKind::Niche][(seed % 3) as usize]
+    }
+
+    /// Lower-case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            RoomKind::Wall => "wall",
+            RoomKind::Corner => "corner",
+            RoomKind::Niche => "niche",
+        }
+    }
+}
+
+/// What [`random_room`] drew, beside the scene.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RoomDraw {
+    /// What the room shows.
+    pub kind: RoomKind,
+    /// Distance of the wall (the corner's edge, the niche's front) along the axis (m).
+    pub distance_m: f64,
+    /// The surface.
+    pub material: Material,
+    /// Glossy paint or varnish (a specular lobe beside the diffuse part), else matt.
+    pub glossy: bool,
+    /// A cable or pipe hangs in front of the wall.
+    pub clutter: bool,
+    /// The scene, for people.
+    pub description: String,
+}
+
+/// A random room in the instrument's envelope (for `tangent evaluate --walls`, not the
+/// corpus): `kind`, distance uniform in `range` (metres), a random material, matt or glossy
+/// (half each: Blinn–Phong lobe of 5–25 % of the energy, exponent 10–60), corners of 80–100°
+/// turned up to ±15°, single walls turned ±30° and tilted ±10°, niches 0.1–1.0 m wide (the
+/// segment) and 0.05–0.5 m deep, a vertical cable or pipe (6–40 mm) in front of the wall in a
+/// third of the rooms, the camera tilted up to ±5° in pitch and roll (the accelerometer's
+/// gravity), indoor or lab light. `crossing`: the head with the third, crossing line
+/// (fired in its own frame); the draws and the parallel pair's frame are otherwise those of
+/// the two-line head.
+pub fn random_room(
+    seed: u64,
+    kind: RoomKind,
+    range: (f64, f64),
+    crossing: bool,
+) -> (SimSpec, RoomDraw) {
     let mut rng = Pcg64::seed_from_u64(super::scene::splitmix(seed ^ 0x5741_4c4c));
     let z = rng.random_range(range.0..range.1);
     let m = MATERIALS[rng.random_range(0..MATERIALS.len())];
-    let (objects, what) = match kind {
+    let (mut objects, what) = match kind {
         RoomKind::Wall => {
             let yaw = rng.random_range(-30.0..30.0);
             let pitch = rng.random_range(-10.0..10.0);
@@ -259,21 +322,85 @@ pub fn random_room(seed: u64, kind: RoomKind, range: (f64, f64)) -> SimSpec {
             )
         }
     };
+    let glossy = rng.random_bool(0.5);
+    let clutter = rng.random_bool(1.0 / 3.0);
+    let mut what = what;
+    if clutter {
+        // A vertical cable or pipe 10–30 % of the way to the wall, off the aimed column.
+        let radius = rng.random_range(0.003..0.02);
+        let along = rng.random_range(0.7..0.9) * z;
+        let side = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
+        let x = side * rng.random_range(0.12..0.3) * along;
+        objects.push(Object::Cylinder(Cylinder {
+            axis_point_m: [x, 0.0, along],
+            axis_direction: [0.0, 1.0, 0.0],
+            radius_m: Some(radius),
+            semi_axes_m: None,
+            major_axis_direction: None,
+            extent_m: None,
+            albedo: 0.5,
+            texture: Texture::Stone,
+            texture_contrast: 0.1,
+        }));
+        what += &format!(", a {:.0} mm cable at {along:.2} m", 2e3 * radius);
+    }
+    let (tilt, roll): (f64, f64) = (
+        rng.random_range(-5f64..5.0).to_radians(),
+        rng.random_range(-5f64..5.0).to_radians(),
+    );
     let mut params = SimParams {
         seed: seed & ((1 << 62) - 1),
         lit_planes: vec![0, 1],
         ..SimParams::default()
     };
     wall_params(&mut params);
+    if let Some(a) = params.accelerometer.as_mut() {
+        // Camera pitched by `tilt` and rolled by `roll`: gravity leaves the image's +y.
+        a.gravity_camera = [
+            -roll.sin() * tilt.cos(),
+            roll.cos() * tilt.cos(),
+            -tilt.sin(),
+        ];
+    }
+    if glossy {
+        params.reflectance = Reflectance::Glossy {
+            specular_fraction: rng.random_range(0.05..0.25),
+            exponent: rng.random_range(10.0..60.0),
+        };
+    }
     if rng.random_bool(0.3) {
         params.lighting = lab_light();
     }
-    SimSpec {
-        mode: Mode::Wall,
-        description: format!("{} {what}, {:.2} m away", m.name, z),
-        timestamp: "2025-06-02T12:00:00Z".into(),
-        calibration: two_plane_calibration(),
-        objects,
-        params,
+    if crossing {
+        params.lit_planes.push(2);
     }
+    let description = format!(
+        "{} {} {what}, {:.2} m away",
+        if glossy { "glossy" } else { "matt" },
+        m.name,
+        z
+    );
+    let draw = RoomDraw {
+        kind,
+        distance_m: z,
+        material: m,
+        glossy,
+        clutter,
+        description: description.clone(),
+    };
+    (
+        SimSpec {
+            mode: Mode::Wall,
+            description,
+            timestamp: "2025-06-02T12:00:00Z".into(),
+            calibration: if crossing {
+                three_plane_calibration()
+            } else {
+                two_plane_calibration()
+            },
+            objects,
+            params,
+        },
+        draw,
+    )
 }

@@ -3,10 +3,14 @@
 //! readings) on the points of every plane, with the image's quality flags added
 //! (`docs/building.md`).
 
+use crate::calibration::{Calibration, MAX_PLANES};
+use crate::image::{Frame, Pixel};
+use crate::laser_plane::LaserPlane;
 use crate::measurement::{Measurement, Mode, ValueSigma, WallReading};
 use crate::noise::NoiseModel;
-use crate::pipeline::PipelineError;
-use crate::real::Real;
+use crate::pipeline::crossing::{transposed_calibration, untranspose_points};
+use crate::pipeline::{extract_profile, PipelineConfig, PipelineError, Profile, Workspace};
+use crate::real::{Real, Vec3};
 use crate::solvers::plane_pca::Estimate;
 use crate::solvers::result::Method;
 use crate::solvers::walls::{self, WallInput, WallParams, WallSolution};
@@ -57,19 +61,139 @@ impl Instrument for Wall {
         params: &WallInstrumentParams,
         scratch: Scratch<'_>,
     ) -> Result<WallSolution, PipelineError> {
-        let sigmas = points.sigmas(&params.noise, params.focal_px, scratch.sigmas)?;
-        let curves = points.curves();
-        let input = WallInput {
-            curves,
-            sigmas: &sigmas[..curves.len()],
-            planes: points.planes(),
-        };
-        let mut solution = walls::solve(&input, &params.walls)?;
-        solution
-            .flags
-            .insert(points.profile.image_flags(points.full_scale));
-        Ok(solution)
+        solve_walls(points, None, params, scratch)
     }
+}
+
+/// The crossing line's points (`docs/building.md`, "The crossing line"), extracted from its
+/// own frame pair by [`extract_crossing`]: camera frame, ordered down the image.
+#[derive(Debug, Clone, Copy)]
+pub struct Crossing<'a> {
+    /// Its laser plane (camera frame).
+    pub plane: LaserPlane,
+    /// Its points.
+    pub points: &'a [Vec3],
+    /// Each point's 1σ along its noise direction.
+    pub sigmas: &'a [Real],
+}
+
+/// Extracts the crossing line, plane `plane` of `calibration`, from its own frame pair
+/// given **transposed** (`pipeline::crossing::transpose_frame`: its rows are the image's
+/// columns): the column-wise pipeline on the transposed pair with the transposed
+/// calibration, each point's σ, the points brought back to the camera frame. Leaves them in
+/// `ws.points` and their σ in `ws.sigmas` and returns their index range there.
+pub fn extract_crossing<P: Pixel>(
+    off_t: &Frame<P, impl AsRef<[P]>>,
+    on_t: &Frame<P, impl AsRef<[P]>>,
+    calibration: &Calibration,
+    plane: usize,
+    config: &PipelineConfig,
+    params: &WallInstrumentParams,
+    ws: &mut Workspace<'_, P>,
+) -> Result<(usize, usize), PipelineError> {
+    let transposed = transposed_calibration(calibration, plane)?;
+    let profile = extract_profile(off_t, on_t, &transposed, config, ws)?;
+    let (start, end) = profile.plane_points[0];
+    if !(start <= end && end <= ws.points.len() && end <= ws.sigmas.len()) {
+        return Err(PipelineError::NoCurve);
+    }
+    {
+        let points = PlanePoints::new(&profile, on_t.max_value(), &transposed, ws.points)
+            .with_curve(ws.curve);
+        // σ along each point's noise direction: a length, the same in either frame.
+        points.sigmas(&params.noise, params.focal_px, ws.sigmas)?;
+    }
+    untranspose_points(&mut ws.points[start..end]);
+    Ok((start, end))
+}
+
+/// The wall solver on the points of every plane across the image (`points`) and, when the
+/// head has one, the crossing line's (`crossing`, appended as the last curve). The
+/// solution's flags include the [`Profile::image_flags`] of `points`.
+pub fn solve_walls(
+    points: &PlanePoints<'_>,
+    crossing: Option<Crossing<'_>>,
+    params: &WallInstrumentParams,
+    scratch: Scratch<'_>,
+) -> Result<WallSolution, PipelineError> {
+    let sigmas = points.sigmas(&params.noise, params.focal_px, scratch.sigmas)?;
+    let n = points.curves().len();
+    let mut curves: [&[Vec3]; MAX_PLANES] = [&[]; MAX_PLANES];
+    let mut curve_sigmas: [&[Real]; MAX_PLANES] = [&[]; MAX_PLANES];
+    let mut planes: heapless::Vec<LaserPlane, MAX_PLANES> = heapless::Vec::new();
+    for k in 0..n {
+        curves[k] = points.curves()[k];
+        curve_sigmas[k] = sigmas[k];
+        planes
+            .push(points.planes()[k])
+            .map_err(|_| PipelineError::Calibration)?;
+    }
+    let mut count = n;
+    if let Some(c) = crossing {
+        planes
+            .push(c.plane)
+            .map_err(|_| PipelineError::Calibration)?;
+        curves[n] = c.points;
+        curve_sigmas[n] = c.sigmas;
+        count += 1;
+    }
+    let input = WallInput {
+        curves: &curves[..count],
+        sigmas: &curve_sigmas[..count],
+        planes: &planes,
+    };
+    let mut solution = walls::solve(&input, &params.walls)?;
+    solution
+        .flags
+        .insert(points.profile.image_flags(points.full_scale));
+    Ok(solution)
+}
+
+/// Measures a wall capture of the three-line head: the parallel pair's frames (`off`,
+/// `on`, `calibration_across`: the planes across the image) through the pipeline, the
+/// crossing line's transposed pair through [`extract_crossing`] in a workspace of its own
+/// (`crossing_ws`: transposed frame size, one plane), then [`solve_walls`] on all of them.
+/// Also returns where the crossing line's points are in `crossing_ws.points`.
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+pub fn measure_with_crossing<P: Pixel>(
+    off: &Frame<P, impl AsRef<[P]>>,
+    on: &Frame<P, impl AsRef<[P]>>,
+    calibration_across: &Calibration,
+    off_t: &Frame<P, impl AsRef<[P]>>,
+    on_crossing_t: &Frame<P, impl AsRef<[P]>>,
+    calibration: &Calibration,
+    crossing_plane: usize,
+    config: &PipelineConfig,
+    params: &WallInstrumentParams,
+    ws: &mut Workspace<'_, P>,
+    crossing_ws: &mut Workspace<'_, P>,
+) -> Result<(Measured<WallSolution>, (usize, usize)), PipelineError> {
+    let profile: Profile = extract_profile(off, on, calibration_across, config, ws)?;
+    let (s, e) = extract_crossing(
+        off_t,
+        on_crossing_t,
+        calibration,
+        crossing_plane,
+        config,
+        params,
+        crossing_ws,
+    )?;
+    let crossing = Crossing {
+        plane: *calibration
+            .plane(crossing_plane)
+            .map_err(|_| PipelineError::Calibration)?,
+        points: &crossing_ws.points[s..e],
+        sigmas: &crossing_ws.sigmas[s..e],
+    };
+    let points = PlanePoints::new(&profile, on.max_value(), calibration_across, ws.points)
+        .with_curve(ws.curve);
+    let scratch = Scratch {
+        sigmas: ws.sigmas,
+        points: ws.scratch_points,
+        values: ws.scratch_values,
+    };
+    let solution = solve_walls(&points, Some(crossing), params, scratch)?;
+    Ok((Measured { solution, profile }, (s, e)))
 }
 
 fn value_sigma(e: Estimate) -> ValueSigma {

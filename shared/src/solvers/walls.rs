@@ -598,6 +598,10 @@ fn aimed_wall(input: &WallInput<'_>, params: &WallParams, runs: &[Run]) -> usize
     let mut best = (Real::INFINITY, 0usize);
     for r in runs {
         let Some(w) = r.wall else { continue };
+        // The crossing line runs down the image: its column says nothing of the aim.
+        if input.planes[r.curve as usize].is_row_wise() {
+            continue;
+        }
         let pts = &input.curves[r.curve as usize][r.start as usize..r.end as usize];
         for &p in pts {
             let off = (column(p, params) - params.principal_u).abs();
@@ -645,7 +649,8 @@ fn parallel(walls: &[Wall], params: &WallParams) -> Option<Estimate> {
     None
 }
 
-/// The aimed wall's segment along the lowest curve that lights it: its points' first and
+/// The aimed wall's segment along the lowest curve across the image that lights it: its
+/// points' first and
 /// last run, each end at the next wall (corner), at the edge where the line leaves the plane,
 /// or at the frame's side (`docs/building.md`, "Segment length").
 fn segment(
@@ -656,7 +661,9 @@ fn segment(
     aimed: usize,
 ) -> Option<Segment> {
     let wall = &walls[aimed];
-    let curve = (0..8).find(|k| wall.lines & (1 << k) != 0)?;
+    // A line across the image (the column-wise edge below needs one): not the crossing line.
+    let curve = (0..input.planes.len())
+        .find(|&k| wall.lines & (1 << k) != 0 && !input.planes[k].is_row_wise())?;
     let plane = &input.planes[curve];
     let mine = |r: &&Run| r.curve as usize == curve && r.wall == Some(aimed as u8);
     let first = runs.iter().filter(mine).min_by_key(|r| r.start)?;
@@ -680,7 +687,6 @@ fn segment(
                 Some(last.end as usize).filter(|&i| i < pts.len()),
             )
         };
-        let sign = if side == 0 { -1.0 } else { 1.0 };
         let u_in = column(pts[inner], params);
         // The neighbouring run on the same curve, if it is another wall's and adjoins.
         let next = runs.iter().find(|r| {
@@ -714,7 +720,8 @@ fn segment(
         }
         // The plane's stripe is seen up to its last column and not in the next: the edge is
         // within that column's outer half-pixel whatever follows (a deeper surface, a gap of
-        // unlit columns), uniform: σ = 1/√12 px (docs/building.md, "Segment length").
+        // unlit columns), uniform: σ = 1/√12 px (docs/building.md, "Segment length"; the
+        // pixel's centre instead read every segment 1 px short on the tuning rooms).
         let at_side = if side == 0 {
             u_in < params.edge_margin_px
         } else {
@@ -723,6 +730,7 @@ fn segment(
         if outer.is_none() && at_side {
             kinds[side] = EndKind::FrameSide;
         }
+        let sign = if side == 0 { -1.0 } else { 1.0 };
         let (u_edge, sigma_u) = (u_in + 0.5 * sign, 1.0 / sqrt(12.0));
         let at = |u: Real| -> Option<Real> {
             let a = u - params.principal_u;

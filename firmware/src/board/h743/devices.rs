@@ -40,14 +40,15 @@ impl ports::Clock for EmbassyClock {
     }
 }
 
-/// Two lasers on GPIOs (high = on).
+/// The three lasers on GPIOs (high = on): the parallel pair and the walls' crossing line,
+/// each also gated by the sensor's LED_OUT (`docs/hardware.md`).
 pub struct GpioLasers {
-    pins: [Output<'static>; 2],
+    pins: [Output<'static>; 3],
 }
 
 impl GpioLasers {
-    /// Takes the two laser outputs (created low).
-    pub fn new(mut pins: [Output<'static>; 2]) -> Self {
+    /// Takes the three laser outputs (created low).
+    pub fn new(mut pins: [Output<'static>; 3]) -> Self {
         for p in pins.iter_mut() {
             p.set_low();
         }

@@ -106,6 +106,8 @@ pub async fn start() -> Started {
     let lasers = GpioLasers::new([
         Output::new(p.PE2, Level::Low, Speed::Low),
         Output::new(p.PE3, Level::Low, Speed::Low),
+        // The walls' crossing line (docs/hardware.md).
+        Output::new(p.PE7, Level::Low, Speed::Low),
     ]);
     defmt::info!("Tangent firmware {} (H743)", crate::VERSION);
 
