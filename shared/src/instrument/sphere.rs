@@ -6,7 +6,6 @@ use crate::measurement::{Measurement, Mode, Point, SphereReading};
 use crate::noise::NoiseModel;
 use crate::pipeline::PipelineError;
 use crate::real::Real;
-use crate::solvers::result::Flags;
 use crate::solvers::sphere::{self, SphereInput, SphereParams, SphereSolution};
 use crate::solvers::SolveError;
 
@@ -46,14 +45,10 @@ impl Instrument for Sphere {
             points: scratch.points,
             values: scratch.values,
         };
-        let image_flags = points.profile.image_flags(points.full_scale);
-        // Another object as large as the ball across the lines: the pipeline kept one, but
-        // which ball was meant is unknown (`docs/sphere.md`, "Two balls in view").
-        if image_flags.contains(Flags::OTHER_OBJECTS) {
-            return Err(PipelineError::Solve(SolveError::TwoObjects));
-        }
         let mut solution = sphere::solve(&input, params, scratch)?;
-        solution.flags.insert(image_flags);
+        solution
+            .flags
+            .insert(points.profile.image_flags(points.full_scale));
         Ok(solution)
     }
 

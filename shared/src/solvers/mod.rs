@@ -83,9 +83,8 @@ pub enum SolveError {
     /// The sections cannot belong to one sphere: straight, not round, or shapeless (a flat or
     /// elongated object; `docs/sphere.md`, "Is it a sphere?").
     NotSpherical,
-    /// Each laser line lies on a round arc, but the arcs do not share one centre, or another
-    /// object as large as the ball crosses the lines: more than one object in view
-    /// (`docs/sphere.md`, "Two balls in view").
+    /// Each laser line lies on a round arc, but the arcs do not share one centre: the lines
+    /// fall on different objects (`docs/sphere.md`, "Two balls in view").
     TwoObjects,
     /// Every straight run of the lit points lies on one laser line: a plane needs points
     /// off that line (`docs/building.md`, "One line is not a plane").
@@ -118,9 +117,8 @@ impl fmt::Display for SolveError {
                  shapeless sections: a flat or elongated object)"
             }
             SolveError::TwoObjects => {
-                "two objects in view: the laser lines fall on more than one object (round \
-                 sections that do not share a centre, or a second object across the lines); aim \
-                 at one ball with nothing else across the lines"
+                "two objects in view: the laser lines fall on different objects (round sections \
+                 that do not share a centre); aim at one ball with nothing else across the lines"
             }
             SolveError::SingleLine => {
                 "only one laser line lies on the surface: a plane needs two (aim so that both lines cross the wall)"
