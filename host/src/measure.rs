@@ -452,7 +452,7 @@ pub fn truth_sphere_diameter(capture: &Capture) -> Option<f64> {
     objects
         .iter()
         .filter_map(|o| match o {
-            Object::Sphere(s) => Some((s.centre_m[0].hypot(s.centre_m[1]), 2.0 * s.radius_m)),
+            Object::Sphere(s) => Some((s.centre_m[0].hypot(s.centre_m[1]), s.diameter_m()?)),
             _ => None,
         })
         .min_by(|a, b| a.0.total_cmp(&b.0))

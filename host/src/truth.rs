@@ -84,6 +84,35 @@ pub struct Sphere {
     /// Depth of the pattern.
     #[serde(default = "default_contrast")]
     pub texture_contrast: f64,
+    /// A surface reflection besides the body's diffuse one (polished steel); absent = the
+    /// scene's BRDF (`docs/sphere.md`, "Steel balls").
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub specular: Option<SpecularLobe>,
+    /// Factors along the camera's `x, y, z` that stretch the ball into an ellipsoid of
+    /// semi-axes `radius_m·factor` (a non-sphere for the sphere test); absent = a sphere.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stretch: Option<[f64; 3]>,
+}
+
+impl Sphere {
+    /// The true diameter when the object is a sphere (not stretched).
+    pub fn diameter_m(&self) -> Option<f64> {
+        self.stretch
+            .is_none_or(|f| f == [1.0; 3])
+            .then_some(2.0 * self.radius_m)
+    }
+}
+
+/// A specular lobe: `fraction` of the reflected light leaves in a normalised Blinn–Phong
+/// lobe of exponent `exponent` about the mirror direction, the rest is the body's diffuse
+/// reflection of the object's albedo (the simulator's `Reflectance::Glossy` for this object).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SpecularLobe {
+    /// Share of the reflected light in the lobe (steel at 650 nm: ≈ 0.55).
+    pub fraction: f64,
+    /// Blinn–Phong exponent (larger = sharper; a lobe of ≈ `1/√exponent` radians).
+    pub exponent: f64,
 }
 
 /// An infinite plane (a wall, the ground).
@@ -195,6 +224,29 @@ pub enum Object {
     Road(Road),
     /// A chessboard calibration target.
     Board(Board),
+    /// A flat disc (the end face of a finite cylinder).
+    Disc(Disc),
+}
+
+/// A flat disc: the end face that closes a finite cylinder (a cylpeb's end).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Disc {
+    /// Centre (metres).
+    pub centre_m: [f64; 3],
+    /// Normal (normalised on use; either sign).
+    pub normal: [f64; 3],
+    /// Radius (metres).
+    pub radius_m: f64,
+    /// Lambertian albedo at 650 nm.
+    #[serde(default = "default_albedo")]
+    pub albedo: f64,
+    /// Reflectance pattern.
+    #[serde(default)]
+    pub texture: Texture,
+    /// Depth of the pattern.
+    #[serde(default = "default_contrast")]
+    pub texture_contrast: f64,
 }
 
 /// One point of the true laser curve (a row of the capture's `truth-curve.csv`).

@@ -470,6 +470,8 @@ pub fn entries() -> Vec<CorpusEntry> {
             albedo: 0.5,
             texture: Texture::Stone,
             texture_contrast: 0.2,
+            specular: None,
+            stretch: None,
         })
     };
     b.add(

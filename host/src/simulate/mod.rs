@@ -51,6 +51,17 @@ pub enum Exposure {
         /// Longest exposure allowed (hand-held: ≈ 30 ms).
         max_s: f64,
     },
+    /// Automatic exposure that judges the stripe by its typical column rather than its
+    /// brightest pixel: the median, over the columns the laser lights, of each column's
+    /// brightest (noise-free) laser-on pixel reaches `peak_fraction` of full scale, within
+    /// `[20 µs, max_s]`. A glint a few columns long then saturates instead of dimming the
+    /// whole stripe (`docs/sphere.md`, "Steel balls").
+    AutoMedianColumn {
+        /// Target fraction of full scale for the median column's peak.
+        peak_fraction: f64,
+        /// Longest exposure allowed.
+        max_s: f64,
+    },
     /// A fixed exposure time.
     Fixed {
         /// Seconds.
@@ -316,6 +327,30 @@ pub fn simulate(spec: &SimSpec) -> Result<(Capture, SimReport), SimError> {
                 (peak_fraction * p.sensor.full_well_e / (p.gain * peak)).clamp(20e-6, max_s)
             } else {
                 max_s
+            }
+        }
+        Exposure::AutoMedianColumn {
+            peak_fraction,
+            max_s,
+        } => {
+            let mut peaks: Vec<f64> = (0..w)
+                .filter_map(|col| {
+                    let (mut laser, mut total) = (0.0f64, 0.0f64);
+                    for row in 0..h {
+                        let j = row * w + col;
+                        let l: f64 = p.lit_planes.iter().map(|&i| on.lasers[i][j]).sum();
+                        laser = laser.max(l);
+                        total = total.max(on.ambient[j] + l);
+                    }
+                    (laser > 0.0).then_some(total)
+                })
+                .collect();
+            peaks.sort_by(f64::total_cmp);
+            match peaks.get(peaks.len() / 2) {
+                Some(&peak) if peak > 0.0 => {
+                    (peak_fraction * p.sensor.full_well_e / (p.gain * peak * k)).clamp(20e-6, max_s)
+                }
+                _ => max_s,
             }
         }
     };

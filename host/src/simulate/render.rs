@@ -199,14 +199,18 @@ impl RenderSetup<'_> {
         let rho = self.scene.albedo(h.object, h.point);
         let n = h.normal;
         let up = Vec3::new(0.0, -1.0, 0.0);
-        let lambertian = self.reflectance.is_lambertian();
+        let reflectance = self
+            .scene
+            .reflectance(h.object)
+            .unwrap_or(*self.reflectance);
+        let lambertian = reflectance.is_lambertian();
         // Towards the viewer (the camera of this frame).
         let v = -dir.normalize();
         let e_sky = l.diffuse_w_m2 * 0.5 * (1.0 + n.dot(&up));
         // Lambertian: ρ·(E_sky + E_sun) as one product (the reference rendering, bit for bit);
         // other BRDFs weigh the sky and the sun separately.
         let mut e = e_sky;
-        let mut ambient = self.reflectance.diffuse_factor(rho) * e_sky;
+        let mut ambient = reflectance.diffuse_factor(rho) * e_sky;
         if l.sun_w_m2 > 0.0 {
             let sun = Vec3::new(l.sun_direction[0], l.sun_direction[1], l.sun_direction[2]);
             let sn = sun.norm();
@@ -215,7 +219,7 @@ impl RenderSetup<'_> {
                 let cos_sun = n.dot(&sun);
                 if cos_sun > 0.0 && !self.scene.occluded(h.point, h.point + sun * 1e3) {
                     e += l.sun_w_m2 * cos_sun;
-                    ambient += self.reflectance.pi_brdf(rho, n, sun, v) * l.sun_w_m2 * cos_sun;
+                    ambient += reflectance.pi_brdf(rho, n, sun, v) * l.sun_w_m2 * cos_sun;
                 }
             }
         }
@@ -234,7 +238,7 @@ impl RenderSetup<'_> {
                     rho
                 } else {
                     let to_source = (plane.source - h.point).normalize();
-                    self.reflectance.pi_brdf(rho, n, to_source, v)
+                    reflectance.pi_brdf(rho, n, to_source, v)
                 };
                 out.laser[i] = brdf * irr * vig;
             }

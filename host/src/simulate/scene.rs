@@ -8,6 +8,7 @@
 
 use tangent_core::real::Vec3;
 
+use super::reflectance::Reflectance;
 use crate::truth::{Object, Texture, Wave};
 
 /// Why a scene is invalid.
@@ -60,6 +61,8 @@ enum Shape {
     Sphere {
         c: Vec3,
         r: f64,
+        /// Semi-axes relative to `r` along `x, y, z` (an ellipsoid), if stretched.
+        stretch: Option<Vec3>,
     },
     Plane {
         p: Vec3,
@@ -68,6 +71,8 @@ enum Shape {
         w: Vec3,
         /// The box `(min, max)` the plane is cut to, if any.
         bounds: Option<(Vec3, Vec3)>,
+        /// A disc of this radius about `p` (an end face), if any.
+        disc_radius: Option<f64>,
     },
     Road {
         z0: f64,
@@ -96,6 +101,8 @@ struct Prepared {
     texture: Texture,
     contrast: f64,
     seed: u64,
+    /// The object's own BRDF (a steel ball's lobe), overriding the scene's.
+    reflectance: Option<Reflectance>,
 }
 
 /// A validated scene, ready for ray casting.
@@ -125,6 +132,7 @@ impl Scene {
                 Object::Plane(p) => (p.albedo, p.texture, p.texture_contrast),
                 Object::Road(r) => (r.albedo, r.texture, r.texture_contrast),
                 Object::Board(b) => (b.albedo, Texture::None, 0.0),
+                Object::Disc(d) => (d.albedo, d.texture, d.texture_contrast),
             };
             if !(0.0..=1.0).contains(&albedo) || !(0.0..=1.0).contains(&contrast) {
                 return Err(bad("albedo and texture_contrast must be in [0, 1]"));
@@ -174,9 +182,24 @@ impl Scene {
                     if !(s.radius_m.is_finite() && s.radius_m > 0.0) {
                         return Err(bad("radius must be positive"));
                     }
+                    if s.stretch
+                        .is_some_and(|f| !f.iter().all(|x| x.is_finite() && *x > 0.0))
+                    {
+                        return Err(bad("stretch factors must be positive"));
+                    }
+                    if s.specular.is_some_and(|l| {
+                        !((0.0..=1.0).contains(&l.fraction)
+                            && l.exponent.is_finite()
+                            && l.exponent >= 0.0)
+                    }) {
+                        return Err(bad(
+                            "specular fraction must be in [0, 1] and its exponent ≥ 0",
+                        ));
+                    }
                     Shape::Sphere {
                         c: v3(s.centre_m),
                         r: s.radius_m,
+                        stretch: s.stretch.filter(|f| *f != [1.0; 3]).map(v3),
                     }
                 }
                 Object::Plane(p) => {
@@ -194,6 +217,27 @@ impl Scene {
                         u,
                         w,
                         bounds: p.bounds_m.map(|[a, b]| (v3(a), v3(b))),
+                        disc_radius: None,
+                    }
+                }
+                Object::Disc(d) => {
+                    let n = unit(d.normal).ok_or_else(|| bad("zero normal"))?;
+                    if !(d.radius_m.is_finite() && d.radius_m > 0.0) {
+                        return Err(bad("radius must be positive"));
+                    }
+                    let helper = if n.y.abs() < 0.9 {
+                        Vec3::y()
+                    } else {
+                        Vec3::x()
+                    };
+                    let u = helper.cross(&n).normalize();
+                    Shape::Plane {
+                        p: v3(d.centre_m),
+                        n,
+                        u,
+                        w: n.cross(&u),
+                        bounds: None,
+                        disc_radius: Some(d.radius_m),
                     }
                 }
                 Object::Road(r) => {
@@ -266,6 +310,13 @@ impl Scene {
                 texture,
                 contrast,
                 seed: splitmix(seed ^ (index as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)),
+                reflectance: match o {
+                    Object::Sphere(s) => s.specular.map(|l| Reflectance::Glossy {
+                        specular_fraction: l.fraction,
+                        exponent: l.exponent,
+                    }),
+                    _ => None,
+                },
             });
         }
         Ok(Scene {
@@ -360,6 +411,12 @@ impl Scene {
             .and_then(|o| o.shape.board_square(point))
             .map_or(0, |(a, b)| 1 + (a + 1) + (b + 1) * 1_000_003)
     }
+
+    /// The BRDF of object `object` when it has its own (a steel ball), else `None` (the
+    /// scene's applies).
+    pub fn reflectance(&self, object: usize) -> Option<Reflectance> {
+        self.objects.get(object).and_then(|o| o.reflectance)
+    }
 }
 
 fn board_dark(shape: &Shape) -> f64 {
@@ -438,7 +495,39 @@ impl Shape {
                 }
                 None
             }
-            Shape::Sphere { c, r } => {
+            Shape::Sphere {
+                c,
+                r,
+                stretch: Some(f),
+            } => {
+                // The unit sphere in coordinates scaled by the semi-axes `r·f`; the normal is
+                // the gradient of |X'|² in the original frame.
+                let axes = *f * *r;
+                let rel = (o - c).component_div(&axes);
+                let dd = d.component_div(&axes);
+                let qa = dd.dot(&dd);
+                let qb = rel.dot(&dd);
+                let qc = rel.dot(&rel) - 1.0;
+                let disc = qb * qb - qa * qc;
+                if disc < 0.0 {
+                    return None;
+                }
+                let sq = disc.sqrt();
+                let q = -(qb + qb.signum() * sq);
+                let (mut t0, mut t1) = (q / qa, if q != 0.0 { qc / q } else { -qb / qa });
+                if t0 > t1 {
+                    std::mem::swap(&mut t0, &mut t1);
+                }
+                [t0, t1].into_iter().find(|&t| accept(t)).map(|t| {
+                    let x = (rel + dd * t).component_div(&axes);
+                    (t, x.normalize())
+                })
+            }
+            Shape::Sphere {
+                c,
+                r,
+                stretch: None,
+            } => {
                 let rel = o - c;
                 let qa = d.dot(&d);
                 let qb = rel.dot(&d);
@@ -458,7 +547,13 @@ impl Shape {
                     .find(|&t| accept(t))
                     .map(|t| (t, (o + d * t - c) / *r))
             }
-            Shape::Plane { p, n, bounds, .. } => {
+            Shape::Plane {
+                p,
+                n,
+                bounds,
+                disc_radius,
+                ..
+            } => {
                 let den = n.dot(&d);
                 if den.abs() < 1e-15 {
                     return None;
@@ -468,7 +563,11 @@ impl Shape {
                     let x = o + d * t;
                     (0..3).all(|k| x[k] >= lo[k] && x[k] <= hi[k])
                 };
-                (accept(t) && bounds.as_ref().is_none_or(inside)).then_some((t, *n))
+                let in_disc = |r: &f64| (o + d * t - p).norm() <= *r;
+                (accept(t)
+                    && bounds.as_ref().is_none_or(inside)
+                    && disc_radius.as_ref().is_none_or(in_disc))
+                .then_some((t, *n))
             }
             Shape::Road {
                 z0,
@@ -597,7 +696,7 @@ impl Shape {
                 let ang = (rel.dot(k) / b).atan2(rel.dot(m) / a);
                 (rel.dot(axis), ang * 0.5 * (a + b))
             }
-            Shape::Sphere { c, r } => {
+            Shape::Sphere { c, r, .. } => {
                 let rel = (p - c) / *r;
                 (rel.y.clamp(-1.0, 1.0).asin() * r, rel.z.atan2(rel.x) * r)
             }

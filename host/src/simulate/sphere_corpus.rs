@@ -9,19 +9,32 @@
 use rand::{RngExt, SeedableRng};
 use rand_pcg::Pcg64;
 
+use super::render::Lighting;
 use super::rig::{two_plane_calibration, CorpusEntry};
-use super::{SimParams, SimSpec};
+use super::{Exposure, SimParams, SimSpec};
 use crate::capture::Mode;
-use crate::truth::{Cylinder, Object, Plane, Sphere, Texture};
+use crate::truth::{Cylinder, Disc, Object, Plane, SpecularLobe, Sphere, Texture};
 
 /// The finish of a ball.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Finish {
     /// Stone or painted: diffuse, textured.
     Matt,
-    /// Polished steel: bright, untextured, smooth (fully developed speckle).
+    /// Polished steel: a specular lobe (glints) over a weak diffuse reflection, untextured,
+    /// smooth (fully developed speckle); [`STEEL`].
     Shiny,
 }
+
+/// Steel's specular lobe: ≈ 55 % of the light reflected at 650 nm (iron's normal-incidence
+/// reflectance) in a lobe of exponent 500 (≈ 2.5°: a polished ball worn by use).
+pub const STEEL: SpecularLobe = SpecularLobe {
+    fraction: 0.55,
+    exponent: 500.0,
+};
+
+/// Body albedo of steel under its lobe: the scratched surface's diffuse reflection
+/// `(1 − 0.55)·0.3 ≈ 0.14`, against a matt ball's 0.5.
+const STEEL_BODY_ALBEDO: f64 = 0.3;
 
 /// Height `y` (metres, down) midway between the two reference planes at distance `z`.
 pub fn mid_plane_y(z: f64) -> f64 {
@@ -37,9 +50,9 @@ pub fn mid_plane_y(z: f64) -> f64 {
 /// fraction of `R`) below the mid-plane between the lasers.
 pub fn ball(d_mm: f64, z: f64, x: f64, shift: f64, finish: Finish) -> Object {
     let r = d_mm * 5e-4;
-    let (albedo, texture, contrast) = match finish {
-        Finish::Matt => (0.5, Texture::Stone, 0.2),
-        Finish::Shiny => (0.85, Texture::Stone, 0.02),
+    let (albedo, texture, contrast, specular) = match finish {
+        Finish::Matt => (0.5, Texture::Stone, 0.2, None),
+        Finish::Shiny => (STEEL_BODY_ALBEDO, Texture::Stone, 0.02, Some(STEEL)),
     };
     Object::Sphere(Sphere {
         centre_m: [x, mid_plane_y(z) + shift * r, z],
@@ -47,6 +60,8 @@ pub fn ball(d_mm: f64, z: f64, x: f64, shift: f64, finish: Finish) -> Object {
         albedo,
         texture,
         texture_contrast: contrast,
+        specular,
+        stretch: None,
     })
 }
 
@@ -71,6 +86,12 @@ fn params(seed: u64, finish: Finish) -> SimParams {
     if finish == Finish::Shiny {
         // A polished surface: speckle without the spectral averaging of a rough one.
         p.surface_roughness_m = 2e-6;
+        // The glint is hundreds of times the stripe: exposed for the stripe's typical
+        // column, it saturates (a peak-driven exposure would leave the stripe in the noise).
+        p.exposure = Exposure::AutoMedianColumn {
+            peak_fraction: 0.7,
+            max_s: 0.03,
+        };
     }
     p
 }
@@ -192,7 +213,96 @@ pub fn entries() -> Vec<CorpusEntry> {
         ],
         Finish::Matt,
     );
+    // Added later (seeds after the older entries'): glints in the sun, and two more
+    // non-spheres.
+    let mut sunny = entry(
+        "sphere-d100-z080-steel-sun-2p",
+        "steel ball 100 mm in direct sun (a saturated sun glint beside the stripes), centre \
+         0.8 m ahead, two planes",
+        vec![ball(100.0, 0.8, 0.03, 0.2, Finish::Shiny)],
+        3000 + out.len() as u64,
+        Finish::Shiny,
+    );
+    sunny.spec.params.lighting = Lighting {
+        sun_w_m2: 15.0,
+        sun_direction: [0.25, -1.0, -0.6],
+        diffuse_w_m2: 1.5,
+        ..Lighting::shade()
+    };
+    out.push(sunny);
+    // The laser's own glint: a plane passing the ball's specular point (the normal bisecting
+    // the directions to the camera and to the laser) saturates a few columns of its stripe.
+    out.push(entry(
+        "sphere-d300-z100-steel-glint-2p",
+        "steel ball 300 mm, centre 1.0 m ahead midway between the lasers: the upper line \
+         crosses the specular point (a saturated glint on the stripe), two planes",
+        vec![ball(300.0, 1.0, 0.0, 0.0, Finish::Shiny)],
+        3000 + out.len() as u64,
+        Finish::Shiny,
+    ));
+    let mut add = |name: &str, description: &str, objects: Vec<Object>| {
+        let seed = 3000 + out.len() as u64;
+        out.push(entry(name, description, objects, seed, Finish::Matt));
+    };
+    let Object::Sphere(mut egg) = ball(160.0, 1.0, 0.0, 0.2, Finish::Matt) else {
+        unreachable!("ball() makes a sphere")
+    };
+    egg.stretch = Some([1.5, 1.0, 1.0]);
+    add(
+        "notsphere-ellipsoid-z100-2p",
+        "an ellipsoid 240 × 160 × 160 mm (long axis across), 1.0 m ahead, in sphere mode: \
+         its sections are ellipses",
+        vec![Object::Sphere(egg)],
+    );
+    add(
+        "notsphere-cylinder-end-z100-2p",
+        "the end of a cylinder 100 mm across, 100 mm long (a cylpeb), its axis 36° off the line \
+         of sight, 1.0 m ahead, in sphere mode: flat end face and elliptic sides",
+        cylinder_with_ends(0.05, 0.1, [0.0, mid_plane_y(1.0), 1.0], [0.3, -0.5, 0.8]),
+    );
+    add(
+        "two-balls-d120-z100-2p",
+        "two matt balls of 120 mm side by side, 0.2 m apart, 1.0 m ahead, both laser lines \
+         across both",
+        vec![
+            ball(120.0, 1.0, -0.1, 0.2, Finish::Matt),
+            ball(120.0, 1.0, 0.1, 0.2, Finish::Matt),
+        ],
+    );
     out
+}
+
+/// A closed cylinder of radius `r` and length `len` (a cylpeb): its side and two end discs,
+/// the near end centred at `end` and the axis along `axis` (away from that end).
+pub fn cylinder_with_ends(r: f64, len: f64, end: [f64; 3], axis: [f64; 3]) -> Vec<Object> {
+    let n = (axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]).sqrt();
+    let a = axis.map(|x| x / n);
+    let far = [0, 1, 2].map(|k| end[k] + a[k] * len);
+    let disc = |centre_m: [f64; 3]| {
+        Object::Disc(Disc {
+            centre_m,
+            normal: a,
+            radius_m: r,
+            albedo: 0.4,
+            texture: Texture::Stone,
+            texture_contrast: 0.2,
+        })
+    };
+    vec![
+        Object::Cylinder(Cylinder {
+            axis_point_m: end,
+            axis_direction: a,
+            radius_m: Some(r),
+            semi_axes_m: None,
+            major_axis_direction: None,
+            extent_m: Some([0.0, len]),
+            albedo: 0.4,
+            texture: Texture::Stone,
+            texture_contrast: 0.2,
+        }),
+        disc(end),
+        disc(far),
+    ]
 }
 
 /// A random ball for the accuracy evaluation (not the corpus): diameter log-uniform in

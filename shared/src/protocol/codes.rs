@@ -349,6 +349,7 @@ fn solve_error_number(e: SolveError) -> u32 {
         SolveError::NotRound => 9,
         SolveError::OneSection => 10,
         SolveError::NotSpherical => 11,
+        SolveError::TwoObjects => 12,
         // The wall solver's (numbers from 20 keep clear of other instruments').
         SolveError::SingleLine => 20,
         SolveError::NotPlanar => 21,
@@ -370,6 +371,7 @@ fn solve_error_of_number(n: u32) -> Option<SolveError> {
         9 => SolveError::NotRound,
         10 => SolveError::OneSection,
         11 => SolveError::NotSpherical,
+        12 => SolveError::TwoObjects,
         20 => SolveError::SingleLine,
         21 => SolveError::NotPlanar,
         _ => return None,

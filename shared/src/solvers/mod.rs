@@ -80,9 +80,12 @@ pub enum SolveError {
     /// Only one laser plane's curve crosses the object: a sphere's radius is not observable
     /// from one section (`docs/sphere.md`, "One section").
     OneSection,
-    /// The sections cannot belong to one sphere: two objects, or a flat or elongated one
-    /// (`docs/sphere.md`, "Is it a sphere?").
+    /// The sections cannot belong to one sphere: straight, not round, or shapeless (a flat or
+    /// elongated object; `docs/sphere.md`, "Is it a sphere?").
     NotSpherical,
+    /// Each laser line lies on a round arc, but the arcs do not share one centre: the lines
+    /// fall on different objects (`docs/sphere.md`, "Two balls in view").
+    TwoObjects,
     /// Every straight run of the lit points lies on one laser line: a plane needs points
     /// off that line (`docs/building.md`, "One line is not a plane").
     SingleLine,
@@ -110,7 +113,12 @@ impl fmt::Display for SolveError {
                  it (centre the ball between the two lines, 0.6–1.5 m away)"
             }
             SolveError::NotSpherical => {
-                "the laser lines do not lie on one sphere (two objects in view, or not a ball)"
+                "not a ball: the laser lines are not arcs of one sphere (straight, elliptic or \
+                 shapeless sections: a flat or elongated object)"
+            }
+            SolveError::TwoObjects => {
+                "two objects in view: the laser lines fall on different objects (round sections \
+                 that do not share a centre); aim at one ball with nothing else across the lines"
             }
             SolveError::SingleLine => {
                 "only one laser line lies on the surface: a plane needs two (aim so that both lines cross the wall)"

@@ -11,8 +11,9 @@
 //!   with its own noise (`docs/accuracy.md`, "Spheres").
 //!
 //! Refusals ([`SolveError`]): one section only ([`SolveError::OneSection`]: `R` is not
-//! observable), sections that cannot belong to one sphere ([`SolveError::NotSpherical`]: two
-//! objects, a flat or elongated object), a radius outside the plausible range. Flags: a short
+//! observable), round sections that do not share a centre ([`SolveError::TwoObjects`]),
+//! sections that cannot belong to one sphere ([`SolveError::NotSpherical`]: a flat or
+//! elongated object), a radius outside the plausible range. Flags: a short
 //! arc, a section near a pole, a sphere test that fails ([`Flags::NOT_SPHERICAL`]), methods
 //! that disagree, stray points.
 
@@ -62,7 +63,8 @@ pub struct SphereParams {
     /// the relative axis difference above which the section is not round.
     pub not_round: (Real, Real),
     /// Refusal: the sections' centres miss the sphere's axis by more than this fraction of
-    /// `R` ([`SolveError::NotSpherical`]).
+    /// `R` ([`SolveError::TwoObjects`] when every section is a round arc, else
+    /// [`SolveError::NotSpherical`]).
     pub max_misalignment: Real,
     /// Fraction of rejected points above which [`Flags::SEVERAL_OBJECTS`] is set.
     pub max_outlier_fraction: Real,
@@ -177,6 +179,10 @@ fn estimate_of(e: &SphereEstimate) -> Estimate {
     }
 }
 
+/// A section whose arc spans less than this share of [`SphereParams::min_arc_angle`] (20°
+/// of the default 60°) is straight for the two-objects test: a flat surface's "circle".
+const STRAIGHT_ARC_SHARE: Real = 1.0 / 3.0;
+
 /// Median of the positive values of `v` (reorders it); 0 when none.
 fn median(v: &mut [Real]) -> Real {
     if v.is_empty() {
@@ -211,6 +217,9 @@ pub fn solve(
         return Err(SolveError::ScratchTooSmall);
     };
     let mut flags = Flags::default();
+    // Every section is a round arc (no ellipse, not straight): with disjoint sections, what
+    // tells two objects from one object that is not a ball when the sections disagree.
+    let mut round_arcs = true;
 
     // Circle sections (the naive method and the start of the others).
     let mut circles = [None::<Section>; MAX_PLANES];
@@ -237,6 +246,10 @@ pub fn solve(
                 let cutoff = robust.tuning * fit.rms_residual.max(robust.min_scale);
                 if not_round(flat, &fit.circle, cutoff, params) {
                     flags.insert(Flags::NOT_SPHERICAL);
+                    round_arcs = false;
+                }
+                if section.arc < params.min_arc_angle * STRAIGHT_ARC_SHARE {
+                    round_arcs = false;
                 }
                 if section.arc < params.min_arc_angle {
                     flags.insert(Flags::ARC_TOO_SHORT);
@@ -270,7 +283,11 @@ pub fn solve(
             None => initial_sphere(&list[..count])?,
         };
         if misalignment(&list[..count], &sphere) > params.max_misalignment {
-            return Err(SolveError::NotSpherical);
+            return Err(if round_arcs || disjoint(&list[..count]) {
+                SolveError::TwoObjects
+            } else {
+                SolveError::NotSpherical
+            });
         }
     }
 
@@ -315,6 +332,7 @@ pub fn solve(
     let joint = fit_sphere(
         &input.curves[..n],
         &input.sigmas[..n],
+        &input.planes[..n],
         start,
         &params.fit,
         values_all,
@@ -402,6 +420,20 @@ fn compact(sections: &[Option<Section>; MAX_PLANES]) -> ([Section; MAX_PLANES], 
         count += 1;
     }
     (out, count)
+}
+
+/// Two sections whose circles, seen along the planes' normal, do not overlap (their
+/// centres farther apart across the normal than the sum of their radii): no one round object
+/// has such sections, two side by side do.
+fn disjoint(sections: &[Section]) -> bool {
+    sections.iter().enumerate().any(|(i, s)| {
+        sections[i + 1..].iter().any(|t| {
+            let n = s.axes.2;
+            let rel = t.centre_3d() - s.centre_3d();
+            let across = rel - n * rel.dot(&n);
+            norm(&across) > s.radius + t.radius
+        })
+    })
 }
 
 /// Largest distance, relative to `R`, between a section's centre and the sphere centre's

@@ -1,8 +1,10 @@
 //! The joint fit of a sphere to every 3-D point of every laser plane (`docs/sphere.md`,
 //! "Joint fit"; thesis §10.5's "gradient-descent" method, here by the shared
-//! Levenberg–Marquardt): minimises `Σ wⱼ·(|Xⱼ − C| − R)²/σⱼ²` over `(C, R)`, with Tukey
+//! Levenberg–Marquardt): minimises `Σ wⱼ·(|Xⱼ − C| − R)²/σ⊥ⱼ²` over `(C, R)`, with Tukey
 //! weights `wⱼ` re-computed from the previous round's residuals so that a stray object does
-//! not pull the sphere.
+//! not pull the sphere. `σ⊥ⱼ` is the point's σ projected on the sphere's normal: a point
+//! moves along its stripe's displacement direction, and only the normal part of that moves
+//! the residual (`docs/sphere.md`, "Joint fit").
 
 // `!(x > 0.0)` is deliberate throughout: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -18,6 +20,7 @@ use super::correlation::correlation_length;
 use super::lm::{LmParams, NormalEquations};
 use super::sphere_sections::{minimise_sphere, Sphere, SphereCost};
 use super::SolveError;
+use crate::laser_plane::LaserPlane;
 
 /// Settings of [`fit_sphere`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -28,6 +31,9 @@ pub struct SphereFitParams {
     pub tuning: Real,
     /// Reweighting rounds after the first (plain weighted) fit.
     pub rounds: u32,
+    /// Smallest share of a point's σ kept normal to the sphere (`|d̂·n̂|` floor): where the
+    /// displacement runs along the surface, what is left is the model's error, not zero.
+    pub min_normal_share: Real,
 }
 
 impl Default for SphereFitParams {
@@ -36,6 +42,7 @@ impl Default for SphereFitParams {
             lm: LmParams::default(),
             tuning: 4.685,
             rounds: 3,
+            min_normal_share: 0.3,
         }
     }
 }
@@ -69,22 +76,43 @@ impl SphereFit {
 struct Joint<'a> {
     curves: &'a [&'a [Vec3]],
     sigmas: &'a [&'a [Real]],
-    /// Previous round's sphere and Tukey cut (in σ units); `None` in the first round.
-    reference: Option<(Sphere, Real)>,
+    planes: &'a [LaserPlane],
+    /// The sphere whose normals project the σ (the previous round's), fixed within a round.
+    normals_of: Sphere,
+    /// Floor of the projection ([`SphereFitParams::min_normal_share`]).
+    min_share: Real,
+    /// Previous round's Tukey cut (in σ units); `None` in the first round.
+    cut: Option<Real>,
+}
+
+/// Unit direction in which a point `x` of laser plane `plane` moves when its stripe's row
+/// moves: the line the plane shares with the camera's column plane through `x` (the plane of
+/// the rays of one image column, normal `(z, 0, −x)` for a pinhole).
+fn displacement_direction(plane: &LaserPlane, x: Vec3) -> Option<Vec3> {
+    let column_normal = Vec3::new(x.z, 0.0, -x.x);
+    let d = plane.normal.cross(&column_normal);
+    let len = norm(&d);
+    (len > 0.0).then(|| d / len)
 }
 
 impl Joint<'_> {
-    /// Each point with its σ and weight.
+    /// Each point with its σ normal to the sphere and its weight.
     fn each(&self, mut f: impl FnMut(Vec3, Real, Real)) {
-        for (curve, sigmas) in self.curves.iter().zip(self.sigmas) {
+        let reference = self.normals_of;
+        for ((curve, sigmas), plane) in self.curves.iter().zip(self.sigmas).zip(self.planes) {
             for (p, s) in curve.iter().zip(sigmas.iter()) {
-                let w = match self.reference {
-                    None => 1.0,
-                    Some((sphere, cut)) => {
-                        tukey((norm(&(p - sphere.centre)) - sphere.radius) / (s * cut))
-                    }
+                let to_point = p - reference.centre;
+                let distance = norm(&to_point);
+                let share = match displacement_direction(plane, *p) {
+                    Some(d) if distance > 0.0 => (d.dot(&to_point) / distance).abs(),
+                    _ => 1.0,
                 };
-                f(*p, *s, w);
+                let sigma = s * share.max(self.min_share);
+                let w = match self.cut {
+                    None => 1.0,
+                    Some(cut) => tukey((distance - reference.radius) / (sigma * cut)),
+                };
+                f(*p, sigma, w);
             }
         }
     }
@@ -122,8 +150,9 @@ impl SphereCost for Joint<'_> {
     }
 }
 
-/// Fits a sphere to the points of every curve (`curves[k]` with 1σ `sigmas[k]`, same
-/// lengths) from `start` (the sections' sphere): a σ-weighted fit, then `rounds` Tukey
+/// Fits a sphere to the points of every curve (`curves[k]` of plane `planes[k]`, with 1σ
+/// `sigmas[k]` along the stripe's displacement, same lengths) from `start` (the sections'
+/// sphere): a fit weighted by the σ projected on the sphere's normal, then `rounds` Tukey
 /// reweightings at the robust scale of the normalised residuals (at least 1, so that points
 /// as noisy as predicted are all kept). `scratch` (at least the total point count) holds the
 /// residuals for the median.
@@ -133,12 +162,16 @@ impl SphereCost for Joint<'_> {
 pub fn fit_sphere(
     curves: &[&[Vec3]],
     sigmas: &[&[Real]],
+    planes: &[LaserPlane],
     start: Sphere,
     params: &SphereFitParams,
     scratch: &mut [Real],
 ) -> Result<SphereFit, SolveError> {
     params.lm.validate()?;
-    if !(params.tuning > 0.0) || curves.len() != sigmas.len() {
+    if !(params.tuning > 0.0 && params.min_normal_share > 0.0 && params.min_normal_share <= 1.0)
+        || curves.len() != sigmas.len()
+        || curves.len() > planes.len()
+    {
         return Err(SolveError::InvalidParameter);
     }
     let total: usize = curves.iter().map(|c| c.len()).sum();
@@ -154,10 +187,15 @@ pub fn fit_sphere(
     let mut problem = Joint {
         curves,
         sigmas,
-        reference: None,
+        planes,
+        normals_of: start,
+        min_share: params.min_normal_share,
+        cut: None,
     };
     let (mut sphere, mut normal) = minimise_sphere(&problem, start, &params.lm)?;
     for _ in 0..params.rounds {
+        problem.normals_of = sphere;
+        problem.cut = None;
         let mut k = 0;
         problem.each(|x, s, _| {
             buf[k] = ((norm(&(x - sphere.centre)) - sphere.radius) / s).abs();
@@ -166,7 +204,7 @@ pub fn fit_sphere(
         let mid = buf.len() / 2;
         let (_, median, _) = buf.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
         let scale = (1.4826 * *median).max(1.0);
-        problem.reference = Some((sphere, params.tuning * scale));
+        problem.cut = Some(params.tuning * scale);
         (sphere, normal) = minimise_sphere(&problem, sphere, &params.lm)?;
     }
     let (mut weight_sum, mut inliers) = (0.0, 0usize);
@@ -183,20 +221,25 @@ pub fn fit_sphere(
     // Residual correlation along each curve (speckle, smoothing, defocus) over the inliers:
     // curve k's n_k points count as n_k/L_k independent ones, and the fit's variance is
     // that of Σ n_k/L_k points (`docs/sphere.md`, "Uncertainty of the joint fit").
-    let cut = problem.reference.map_or(Real::INFINITY, |(_, c)| c);
+    let cut = problem.cut.unwrap_or(Real::INFINITY);
     let (mut used, mut independent) = (0.0, 0.0);
-    for (curve, sig) in curves.iter().zip(sigmas) {
+    for k in 0..curves.len() {
+        let one = Joint {
+            curves: &curves[k..k + 1],
+            sigmas: &sigmas[k..k + 1],
+            planes: &planes[k..k + 1],
+            ..problem
+        };
         let mut n = 0;
-        for (u, slot) in curve
-            .iter()
-            .zip(sig.iter())
-            .map(|(x, s)| (norm(&(x - sphere.centre)) - sphere.radius) / s)
-            .filter(|u| u.abs() < cut)
-            .zip(buf.iter_mut())
-        {
-            *slot = u;
-            n += 1;
-        }
+        one.each(|x, s, _| {
+            let u = (norm(&(x - sphere.centre)) - sphere.radius) / s;
+            if u.abs() < cut {
+                if let Some(slot) = buf.get_mut(n) {
+                    *slot = u;
+                    n += 1;
+                }
+            }
+        });
         if n > 0 {
             used += n as Real;
             independent += n as Real / correlation_length(&buf[..n]);

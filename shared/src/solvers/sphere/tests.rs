@@ -188,7 +188,7 @@ fn two_balls_and_an_ellipsoid_are_not_one_sphere() {
     let two = [curves[0].clone(), other];
     assert_eq!(
         solve_on(&two, 1e-4).map(|s| s.diameter),
-        Err(SolveError::NotSpherical)
+        Err(SolveError::TwoObjects)
     );
     // An ellipsoid 20 % wider than deep: its sections are ellipses.
     let wide = [
