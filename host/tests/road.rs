@@ -276,7 +276,10 @@ fn a_tilted_head_and_a_profile_mostly_dropouts_are_named() {
     match &o.result {
         Err(e @ PipelineError::Road(RoadError::Tilted { angle })) => {
             assert!((angle.abs().to_degrees() - 10.0).abs() < 0.5, "{angle}");
-            assert!(e.to_string().contains("stand the head flat on the road"), "{e}");
+            assert!(
+                e.to_string().contains("stand the head flat on the road"),
+                "{e}"
+            );
         }
         other => panic!("{other:?}"),
     }

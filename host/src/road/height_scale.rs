@@ -65,16 +65,24 @@ pub fn fit_height_scale(steps: &[f64], measured: &[f64]) -> Option<HeightScaleFi
     })
 }
 
-/// A furrow block's depth from a profile: the profile folded on the block's `pitch`
-/// (detrended first), the furrow found as the lowest `width`-wide stretch of the fold, and
-/// `depth = median(land) − median(floor)` with the floor the furrow's central half-width
-/// and the land the stretch from one width to 1.5 widths either side of its centre.
+/// A furrow block's depth from a profile: the profile folded on the block's pitch as the
+/// instrument sees it (detrended first), the furrow found as the lowest `width`-wide stretch
+/// of the fold, and `depth = median(land) − median(floor)` with the floor the furrow's
+/// central half-width and the land the stretch from one width to 1.5 widths either side of
+/// its centre. The pitch is the block's nominal one rescaled by the instrument's lateral
+/// scale: a unit whose stand-off is off by 1 % reads positions 1 % off, which over 25
+/// furrows drifts the fold by a whole furrow width and smears it; the scale within ±3 % that
+/// gives the sharpest fold (largest variance of its bins) is taken (`docs/road.md`,
+/// "Furrow validation").
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct FurrowDepth {
     /// Depth (metres).
     pub depth_m: f64,
     /// Phase of the furrow centre within the pitch (metres).
     pub centre_m: f64,
+    /// The pitch the profile was folded on (metres): the nominal one in the instrument's
+    /// lateral scale.
+    pub pitch_m: f64,
     /// The folded profile: phase (metres), mean height (metres), in `BIN` steps.
     pub folded: Vec<(f64, f64)>,
 }
@@ -99,25 +107,47 @@ pub fn furrow_depth(profile: &[Vec2], pitch: f64, width: f64) -> Option<FurrowDe
     let sss: f64 = valid.iter().map(|p| (p.x - ms).powi(2)).sum();
     let ssh: f64 = valid.iter().map(|p| (p.x - ms) * (p.y - mh)).sum();
     let slope = if sss > 0.0 { ssh / sss } else { 0.0 };
-    let bins = (pitch / BIN).round() as usize;
-    let (mut sum, mut count) = (vec![0.0; bins], vec![0usize; bins]);
-    for p in &valid {
-        let h = p.y - mh - slope * (p.x - ms);
-        let k = ((p.x.rem_euclid(pitch)) / BIN) as usize % bins;
-        sum[k] += h;
-        count[k] += 1;
-    }
-    if count.contains(&0) {
-        return None;
-    }
-    let folded: Vec<(f64, f64)> = (0..bins)
-        .map(|k| ((k as f64 + 0.5) * BIN, sum[k] / count[k] as f64))
-        .collect();
+    let residual = |p: &Vec2| p.y - mh - slope * (p.x - ms);
+    let fold = |pitch: f64| -> Option<Vec<(f64, f64)>> {
+        let bins = (pitch / BIN).round() as usize;
+        let (mut sum, mut count) = (vec![0.0; bins], vec![0usize; bins]);
+        for p in &valid {
+            let k = ((p.x.rem_euclid(pitch)) / (pitch / bins as f64)) as usize % bins;
+            sum[k] += residual(p);
+            count[k] += 1;
+        }
+        if count.contains(&0) {
+            return None;
+        }
+        Some(
+            (0..bins)
+                .map(|k| {
+                    (
+                        (k as f64 + 0.5) * pitch / bins as f64,
+                        sum[k] / count[k] as f64,
+                    )
+                })
+                .collect(),
+        )
+    };
+    let sharpness = |f: &[(f64, f64)]| {
+        let m = f.iter().map(|b| b.1).sum::<f64>() / f.len() as f64;
+        f.iter().map(|b| (b.1 - m).powi(2)).sum::<f64>() / f.len() as f64
+    };
+    // Lateral scale within ±3 % in 0.05 % steps (a 0.05 % error drifts the fold by 0.025 mm
+    // over the 50 mm half-window).
+    let (pitch, folded) = (-60..=60)
+        .filter_map(|k| {
+            let p = pitch * (1.0 + k as f64 * 5e-4);
+            fold(p).map(|f| (p, f))
+        })
+        .max_by(|a, b| sharpness(&a.1).total_cmp(&sharpness(&b.1)))?;
+    let bins = folded.len();
     // The furrow: the lowest mean over a `width` stretch (circular).
-    let span = ((width / BIN).round() as usize).max(1);
+    let span = ((width / (pitch / bins as f64)).round() as usize).max(1);
     let mean_at = |c: usize| (0..span).map(|j| folded[(c + j) % bins].1).sum::<f64>() / span as f64;
     let start = (0..bins).min_by(|&a, &b| mean_at(a).total_cmp(&mean_at(b)))?;
-    let centre = (start as f64 + span as f64 / 2.0) * BIN;
+    let centre = (start as f64 + span as f64 / 2.0) * pitch / bins as f64;
     let phase_distance = |x: f64| {
         let d = (x - centre).rem_euclid(pitch);
         d.min(pitch - d)
@@ -146,6 +176,7 @@ pub fn furrow_depth(profile: &[Vec2], pitch: f64, width: f64) -> Option<FurrowDe
     Some(FurrowDepth {
         depth_m: land - floor,
         centre_m: centre.rem_euclid(pitch),
+        pitch_m: pitch,
         folded,
     })
 }
@@ -178,5 +209,23 @@ mod tests {
         let f = furrow_depth(&profile, 4e-3, 1e-3).unwrap();
         assert!((f.depth_m - 146e-6).abs() < 1e-6, "{}", f.depth_m);
         assert!((f.centre_m - 2.3e-3).abs() < 0.1e-3, "{}", f.centre_m);
+        assert!((f.pitch_m - 4e-3).abs() < 1e-6, "{}", f.pitch_m);
+    }
+
+    /// A unit reading positions 1 % short (its stand-off 1 % off): folded on the nominal
+    /// pitch the furrows would smear over a furrow's width; the fold finds their pitch.
+    #[test]
+    fn a_furrow_train_read_at_the_wrong_lateral_scale_keeps_its_depth() {
+        let profile: Vec<Vec2> = (0..700)
+            .map(|i| {
+                let x = -0.05 + i as f64 * 0.15e-3;
+                let phase = (x - 0.3e-3).rem_euclid(4e-3);
+                let in_furrow = (phase - 2e-3).abs() < 0.5e-3;
+                Vec2::new(0.99 * x, if in_furrow { -630e-6 } else { 0.0 })
+            })
+            .collect();
+        let f = furrow_depth(&profile, 4e-3, 1e-3).unwrap();
+        assert!((f.depth_m - 630e-6).abs() < 2e-6, "{}", f.depth_m);
+        assert!((f.pitch_m - 3.96e-3).abs() < 4e-6, "{}", f.pitch_m);
     }
 }

@@ -3,8 +3,8 @@
 //! microtexture on its highest macrotexture peak ([`crate::solvers::mpd`]); `docs/road.md`.
 
 use crate::calibration::{Calibration, CalibrationError};
-use crate::curve::MAX_CURVES;
 use crate::camera::Camera;
+use crate::curve::MAX_CURVES;
 use crate::laser_plane::LaserPlane;
 use crate::measurement::{Measurement, Micro, Mode, RoadReading};
 use crate::pipeline::{PipelineConfig, PipelineError};
