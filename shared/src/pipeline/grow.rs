@@ -107,18 +107,28 @@ fn grow_end<P: Pixel>(
     params: &GrowParams,
 ) -> usize {
     let (width, height) = (diff.width(), diff.height());
-    let saturation = extract.saturation.map_or(diff.max_value() as Real, |v| v as Real);
+    let saturation = extract
+        .saturation
+        .map_or(diff.max_value() as Real, |v| v as Real);
     let w = params.half_window_px.max(1) as isize;
     // The last SLOPE_SPAN + 1 points of the track, nearest the end first.
     let mut history = [(0.0 as Real, 0.0 as Real); SLOPE_SPAN + 1];
     let mut known = 0usize;
     let inward = (e - s).min(SLOPE_SPAN + 1);
     for k in 0..inward {
-        let p = if leftward { curve[s + k] } else { curve[e - 1 - k] };
+        let p = if leftward {
+            curve[s + k]
+        } else {
+            curve[e - 1 - k]
+        };
         history[k] = (p.column as Real, p.row);
         known += 1;
     }
-    let id = if leftward { curve[s].curve } else { curve[e - 1].curve };
+    let id = if leftward {
+        curve[s].curve
+    } else {
+        curve[e - 1].curve
+    };
     let mut x = history[0].0 as isize;
     let mut grown = 0usize;
     let mut misses = 0usize;
@@ -135,7 +145,9 @@ fn grow_end<P: Pixel>(
             0.0
         };
         let predicted = r_end + slope * (x as Real - x_end);
-        let accepted = column_point(diff, x as usize, predicted, w, height, extract, saturation, level);
+        let accepted = column_point(
+            diff, x as usize, predicted, w, height, extract, saturation, level,
+        );
         match accepted {
             Some(mut point) => {
                 point.curve = id;

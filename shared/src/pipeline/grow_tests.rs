@@ -48,7 +48,12 @@ fn the_faint_sides_are_grown_onto_the_curve() {
     // ≈ 2.1 DN locates to ≈ 0.1 px; 0.5 px bounds every column (5σ).
     for p in curve {
         let truth = wall_row(&cal, p.column as Real, z);
-        assert!((p.row - truth).abs() < 0.5, "column {}: {} vs {truth}", p.column, p.row);
+        assert!(
+            (p.row - truth).abs() < 0.5,
+            "column {}: {} vs {truth}",
+            p.column,
+            p.row
+        );
     }
 }
 
