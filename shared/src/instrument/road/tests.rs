@@ -193,5 +193,11 @@ fn the_road_instrument_alone_takes_its_curve_unsmoothed_and_in_fragments() {
     // The stem grows its curves along the stripe (`pipeline::grow`) and changes nothing else.
     let stem = pipeline_config(Mode::Cylinder, &base);
     assert!(stem.grow.is_some());
-    assert_eq!(PipelineConfig { grow: base.grow, ..stem }, base);
+    assert_eq!(
+        PipelineConfig {
+            grow: base.grow,
+            ..stem
+        },
+        base
+    );
 }
