@@ -16,6 +16,8 @@
 //! * [`profile`]: the stages after the segmentation and the image summary [`Profile`] with its
 //!   quality flags;
 //! * `planes`: which object is which plane's curve;
+//! * [`grow`]: growing each thresholded curve along its stripe beyond where the threshold
+//!   cut it (a glossy stem's diffuse sides), with a noise-relative threshold;
 //! * [`faint`]: the faint-stripe search (matched filter across the stripe, a track along it)
 //!   that takes over when the thresholded chain finds no stripe — too faint for the darkness
 //!   test, or broken into clutter (`docs/error-model.md` §7);
@@ -43,6 +45,7 @@ use crate::solvers::SolveError;
 pub mod buffers;
 pub mod crossing;
 pub mod faint;
+pub mod grow;
 mod planes;
 pub mod profile;
 pub mod readout_fits;
@@ -53,6 +56,7 @@ pub mod workspace;
 pub use buffers::OwnedBuffers;
 pub use buffers::{Buffers, Objects, RunBuffers, SmallBuffers, NO_OBJECTS};
 pub use faint::FaintParams;
+pub use grow::GrowParams;
 pub use profile::{point_sigmas, Profile, Stage};
 pub use readout_fits::ReadoutBuffers;
 pub use stream::{extract_profile, extract_profile_probed, ProfileStream, BLOCK_ROWS};
@@ -87,6 +91,10 @@ pub struct PipelineConfig {
     /// The faint-stripe search that takes over when the thresholded chain finds no stripe
     /// ([`faint`]); `None` disables it.
     pub faint: Option<FaintParams>,
+    /// Growing each plane's thresholded curve along its stripe with a noise-relative
+    /// threshold ([`grow`]); `None` leaves the curves as the threshold cut them. The stem
+    /// instrument turns it on (`Instrument::pipeline_config`).
+    pub grow: Option<GrowParams>,
 }
 
 impl Default for PipelineConfig {
@@ -103,6 +111,7 @@ impl Default for PipelineConfig {
             min_points: 12,
             edge_margin: 2,
             faint: Some(FaintParams::default()),
+            grow: None,
         }
     }
 }

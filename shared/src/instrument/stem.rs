@@ -3,7 +3,7 @@
 //! data) on the points of every plane, with the image's quality flags added.
 
 use crate::measurement::{Axes, Measurement, Mode, StemReading, TiltAngles};
-use crate::pipeline::PipelineError;
+use crate::pipeline::{GrowParams, PipelineConfig, PipelineError};
 use crate::solvers::stem::{self, CylinderInput, CylinderParams, CylinderSolution};
 
 use super::{Instrument, Measured, PlanePoints, Scratch};
@@ -19,6 +19,15 @@ impl Instrument for Stem {
     const MODE: Mode = Mode::Cylinder;
     type Params = CylinderParams;
     type Solution = CylinderSolution;
+
+    /// The curves are grown along the stripe beyond the threshold's cut
+    /// ([`crate::pipeline::grow`]): a glossy stem's diffuse sides are part of its arc.
+    fn pipeline_config(base: &PipelineConfig) -> PipelineConfig {
+        PipelineConfig {
+            grow: Some(GrowParams::default()),
+            ..*base
+        }
+    }
 
     /// A curve that runs off the frame is [`PipelineError::OutsideFrame`]: the stem's
     /// silhouette is not seen. The solution's flags include the [`Profile::image_flags`].

@@ -644,4 +644,4 @@ fn block_responses<P: Pixel>(
 
 #[cfg(test)]
 #[path = "faint_tests.rs"]
-mod tests;
+pub(super) mod tests;

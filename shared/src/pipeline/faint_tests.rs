@@ -24,7 +24,7 @@ impl Noise {
 }
 
 /// Adds independent Gaussian noise of σ `sigma` (grey levels) to both frames.
-fn add_noise(off: &mut [u8], on: &mut [u8], sigma: Real, seed: u64) {
+pub(crate) fn add_noise(off: &mut [u8], on: &mut [u8], sigma: Real, seed: u64) {
     let mut n = Noise(seed | 1);
     for p in off.iter_mut().chain(on.iter_mut()) {
         let v = *p as Real + sigma * n.gaussian();
@@ -33,7 +33,7 @@ fn add_noise(off: &mut [u8], on: &mut [u8], sigma: Real, seed: u64) {
 }
 
 /// True row of plane 0 on a wall at depth `z` (undistorted reference camera).
-fn wall_row(cal: &Calibration, u: Real, z: Real) -> Real {
+pub(crate) fn wall_row(cal: &Calibration, u: Real, z: Real) -> Real {
     let cam = &cal.camera;
     let p = cal.planes[0];
     let x = (u - cam.cx) * z / cam.fx;

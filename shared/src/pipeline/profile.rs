@@ -215,7 +215,21 @@ pub(super) fn after_segmentation<P: Pixel>(
     need("points", n, ws.points.len())?;
     probe(Stage::Extracted);
 
-    let plane_points = group_by_plane(&mut ws.curve[..n], &used, calibration.planes.len());
+    let mut plane_points = group_by_plane(&mut ws.curve[..n], &used, calibration.planes.len());
+    let n = match &config.grow {
+        Some(grow) => super::grow::grow_curves(
+            &diff,
+            ws.curve,
+            n,
+            &mut plane_points,
+            calibration.planes.len(),
+            &extract_params(config, &diff, &seg.pair.stats),
+            seg.pair.noise,
+            grow,
+        ),
+        None => n,
+    };
+    need("points", n, ws.points.len())?;
     let (saturated_points, touches_edge) = smooth_and_triangulate(
         &mut ws.curve[..n],
         &plane_points,
@@ -265,12 +279,7 @@ fn extract_curves<P: Pixel>(
     out: &mut [CurvePoint],
     known: impl Fn(&curve::ExtractParams, usize, u16, Real) -> Option<Option<CurvePoint>>,
 ) -> Result<usize, PipelineError> {
-    let mut params = config.extract;
-    if params.saturation.is_none() {
-        // A clipped laser-on pixel shows as full scale minus the ambient level (see
-        // ExtractParams).
-        params.saturation = Some(diff.max_value().saturating_sub(stats.off_mean as u32 + 1));
-    }
+    let params = extract_params(config, diff, stats);
     let labels = &used.labels[..used.len];
     let curves = labels.len();
     let (mut x0, mut x1) = (usize::MAX, 0usize);
@@ -323,6 +332,20 @@ fn extract_curves<P: Pixel>(
         out,
         |x, row, saturation| known(&params, x, row, saturation),
     )?)
+}
+
+/// The subpixel extraction's parameters with the saturation level resolved: a clipped
+/// laser-on pixel shows as full scale minus the ambient level (see [`curve::ExtractParams`]).
+fn extract_params<P: Pixel>(
+    config: &PipelineConfig,
+    diff: &Frame<P, &[P]>,
+    stats: &SubtractStats,
+) -> curve::ExtractParams {
+    let mut params = config.extract;
+    if params.saturation.is_none() {
+        params.saturation = Some(diff.max_value().saturating_sub(stats.off_mean as u32 + 1));
+    }
+    params
 }
 
 /// Reorders the curve points in place so that each plane's are contiguous and ordered by

@@ -187,7 +187,17 @@ fn the_road_instrument_alone_takes_its_curve_unsmoothed_and_in_fragments() {
         },
         base
     );
-    for mode in [Mode::Cylinder, Mode::Sphere, Mode::Wall] {
+    for mode in [Mode::Sphere, Mode::Wall] {
         assert_eq!(pipeline_config(mode, &base), base);
     }
+    // The stem grows its curves along the stripe (`pipeline::grow`) and changes nothing else.
+    let stem = pipeline_config(Mode::Cylinder, &base);
+    assert!(stem.grow.is_some());
+    assert_eq!(
+        PipelineConfig {
+            grow: base.grow,
+            ..stem
+        },
+        base
+    );
 }
