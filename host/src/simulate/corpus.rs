@@ -113,6 +113,21 @@ impl Builder {
         f: impl FnOnce(&mut SimParams),
     ) {
         let n = self.entries.len();
+        self.add_at(n, name, mode, description, calibration, objects, f);
+    }
+
+    /// [`Builder::add`] with the capture's index (its seed and timestamp) given.
+    #[allow(clippy::too_many_arguments)]
+    fn add_at(
+        &mut self,
+        n: usize,
+        name: &str,
+        mode: Mode,
+        description: &str,
+        calibration: Calibration,
+        objects: Vec<Object>,
+        f: impl FnOnce(&mut SimParams),
+    ) {
         let mut params = SimParams {
             seed: 1000 + n as u64,
             ..SimParams::default()
@@ -203,6 +218,9 @@ fn branch(from: [f64; 3], dir: [f64; 3], length: f64, d_mm: f64) -> Object {
         texture_contrast: 0.4,
     })
 }
+
+/// The index (seed `1000 + index`, timestamp) of the first room of `wall_corpus`.
+const FIRST_ROOM_INDEX: usize = 73;
 
 /// Every corpus capture, in a fixed order (the order sets each capture's seed).
 pub fn entries() -> Vec<CorpusEntry> {
@@ -574,10 +592,13 @@ pub fn entries() -> Vec<CorpusEntry> {
     b.entries.extend(super::sphere_corpus::entries());
     // --- the road head (`docs/road.md`): own calibration and seeds -------------------------
     b.entries.extend(super::road_corpus::entries());
-    // --- rooms: appended last so that no older capture's seed changes --------------------------
-    for w in super::wall_corpus::entries() {
+    // --- rooms: appended last so that no older capture's seed changes; their indices are
+    // fixed (the first room is index 73), so that a capture added to the sphere or road corpora
+    // does not re-seed them --------------------------------------------------------------------
+    for (i, w) in super::wall_corpus::entries().into_iter().enumerate() {
         let params = super::wall_corpus::wall_params;
-        b.add(
+        b.add_at(
+            FIRST_ROOM_INDEX + i,
             w.name,
             Mode::Wall,
             &w.description,

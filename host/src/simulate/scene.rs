@@ -470,17 +470,7 @@ impl Shape {
                 }
                 let qb = ox * dx + oy * dy;
                 let qc = ox * ox + oy * oy - 1.0;
-                let disc = qb * qb - qa * qc;
-                if disc < 0.0 {
-                    return None;
-                }
-                let sq = disc.sqrt();
-                // Stable roots: q = −(qb + sign(qb)·√disc), t = q/qa and qc/q.
-                let q = -(qb + qb.signum() * sq);
-                let (mut t0, mut t1) = (q / qa, if q != 0.0 { qc / q } else { -qb / qa });
-                if t0 > t1 {
-                    std::mem::swap(&mut t0, &mut t1);
-                }
+                let (t0, t1) = ordered_roots(qa, qb, qc)?;
                 for t in [t0, t1] {
                     if !accept(t) {
                         continue;
@@ -508,16 +498,7 @@ impl Shape {
                 let qa = dd.dot(&dd);
                 let qb = rel.dot(&dd);
                 let qc = rel.dot(&rel) - 1.0;
-                let disc = qb * qb - qa * qc;
-                if disc < 0.0 {
-                    return None;
-                }
-                let sq = disc.sqrt();
-                let q = -(qb + qb.signum() * sq);
-                let (mut t0, mut t1) = (q / qa, if q != 0.0 { qc / q } else { -qb / qa });
-                if t0 > t1 {
-                    std::mem::swap(&mut t0, &mut t1);
-                }
+                let (t0, t1) = ordered_roots(qa, qb, qc)?;
                 [t0, t1].into_iter().find(|&t| accept(t)).map(|t| {
                     let x = (rel + dd * t).component_div(&axes);
                     (t, x.normalize())
@@ -532,16 +513,7 @@ impl Shape {
                 let qa = d.dot(&d);
                 let qb = rel.dot(&d);
                 let qc = rel.dot(&rel) - r * r;
-                let disc = qb * qb - qa * qc;
-                if disc < 0.0 {
-                    return None;
-                }
-                let sq = disc.sqrt();
-                let q = -(qb + qb.signum() * sq);
-                let (mut t0, mut t1) = (q / qa, if q != 0.0 { qc / q } else { -qb / qa });
-                if t0 > t1 {
-                    std::mem::swap(&mut t0, &mut t1);
-                }
+                let (t0, t1) = ordered_roots(qa, qb, qc)?;
                 [t0, t1]
                     .into_iter()
                     .find(|&t| accept(t))
@@ -777,4 +749,17 @@ pub fn fbm(x: f64, y: f64, seed: u64, octaves: u32) -> f64 {
         freq *= 2.0;
     }
     sum / norm
+}
+
+/// The real roots `t0 ≤ t1` of `qa·t² + 2·qb·t + qc = 0` (`qa > 0`), or `None` when the ray
+/// misses. Computed as `q = −(qb + sign(qb)·√disc)`, `t = q/qa` and `qc/q`, which avoids the
+/// cancellation of the textbook formula when one root is near zero.
+fn ordered_roots(qa: f64, qb: f64, qc: f64) -> Option<(f64, f64)> {
+    let disc = qb * qb - qa * qc;
+    if disc < 0.0 {
+        return None;
+    }
+    let q = -(qb + qb.signum() * disc.sqrt());
+    let (t0, t1) = (q / qa, if q != 0.0 { qc / q } else { -qb / qa });
+    Some(if t0 > t1 { (t1, t0) } else { (t0, t1) })
 }
