@@ -10,7 +10,7 @@
 //!   fresh tag) after [`LinkConfig::reply_timeout`]; only idempotent requests are re-sent.
 //!   Readings carry a sequence number: a gap (or an idle link, which could hide a lost
 //!   *last* reading) makes the link ask `History { after_seq }` and the device re-sends what
-//!   it kept (its last [`codes::HISTORY_LEN`] readings). Duplicates (a reading seen twice) are dropped. So the
+//!   it kept (its last [`protocol::codes::HISTORY_LEN`] readings). Duplicates (a reading seen twice) are dropped. So the
 //!   caller of [`Link::next_reading`] sees every reading once, in sequence order.
 //! * **Cable yanked / port gone.** A read or write error closes the port; the link re-opens
 //!   the same path until [`LinkConfig::reconnect_timeout`], repeats the handshake (protocol
@@ -30,12 +30,17 @@ use std::time::{Duration, Instant};
 
 use tangent_core::measurement::Mode;
 use tangent_core::protocol::{
-    self, codes, Board, Decoder, DeviceError, ErrorCode, Feed, FrameEncoder, FrameSel,
-    FrameSetInfo, FromDevice, LinkStats, ModeStoreState, ProtocolError, Reading, Request, Response,
-    SelfTestReport, ToDevice, WireCalibration, FRAME_CHUNK_MAX, MAX_FRAME_LEN, PROTOCOL_VERSION,
-    UNSOLICITED,
+    self, Board, Decoder, DeviceError, ErrorCode, Feed, FrameEncoder, FrameSel, FrameSetInfo,
+    FromDevice, LinkStats, ModeStoreState, ProtocolError, Reading, Request, SelfTestReport,
+    ToDevice, WireCalibration, FRAME_CHUNK_MAX, MAX_FRAME_LEN, PROTOCOL_VERSION, UNSOLICITED,
 };
 use tangent_field::seq::{HistoryOutcome, SeqTracker};
+
+mod ports;
+mod reply;
+
+pub use ports::{device_id, list_ports, usb_serial_number, PortCandidate};
+pub use reply::{DeviceIdentity, Reply};
 
 /// Line rate set on the port. USB CDC-ACM and ptys ignore it; a USB–UART adapter wired to
 /// the board's UART would need it.
@@ -141,112 +146,6 @@ pub enum LinkError {
         /// What came back (debug form).
         got: String,
     },
-}
-
-/// Device identity and health ([`protocol::DeviceInfo`], owned).
-#[derive(Debug, Clone, PartialEq)]
-pub struct DeviceIdentity {
-    /// Protocol version of the firmware.
-    pub protocol_version: u8,
-    /// Firmware version.
-    pub fw_version: String,
-    /// Board.
-    pub board: Board,
-    /// Active calibration id.
-    pub calib_id: Option<u32>,
-    /// Frame width (pixels).
-    pub frame_width: u16,
-    /// Frame height (pixels).
-    pub frame_height: u16,
-    /// Device uptime (ms).
-    pub uptime_ms: u64,
-    /// Highest sequence number issued.
-    pub last_seq: u32,
-    /// The device's receive counters.
-    pub link: LinkStats,
-    /// The instrument the device measures with.
-    pub mode: Mode,
-    /// Whether `mode` was read from the device's mode store, or why it is the default.
-    pub mode_store: ModeStoreState,
-}
-
-/// A device message, owned ([`Response`] borrows from the receive buffer).
-// Replies live briefly on the stack; boxing the calibration would only add an allocation.
-#[allow(clippy::large_enum_variant)]
-#[derive(Debug, Clone, PartialEq)]
-pub enum Reply {
-    /// [`Response::Info`].
-    Info(DeviceIdentity),
-    /// [`Response::Reading`].
-    Reading(Reading),
-    /// [`Response::Error`].
-    Error(DeviceError),
-    /// [`Response::Ack`].
-    Ack,
-    /// [`Response::HistoryEnd`].
-    HistoryEnd {
-        /// Highest sequence number issued.
-        last_seq: u32,
-    },
-    /// [`Response::FramesReady`].
-    FramesReady(FrameSetInfo),
-    /// [`Response::FrameChunk`].
-    FrameChunk {
-        /// Capture number.
-        capture: u32,
-        /// Which frame.
-        frame: FrameSel,
-        /// Offset of `data`.
-        offset: u32,
-        /// Frame size.
-        total: u32,
-        /// Pixels.
-        data: Vec<u8>,
-    },
-    /// [`Response::Calibration`].
-    Calibration(WireCalibration),
-    /// [`Response::SelfTest`].
-    SelfTest(SelfTestReport),
-}
-
-impl From<Response<'_>> for Reply {
-    fn from(r: Response<'_>) -> Self {
-        match r {
-            Response::Info(i) => Reply::Info(DeviceIdentity {
-                protocol_version: i.protocol_version,
-                fw_version: i.fw_version.to_string(),
-                board: i.board,
-                calib_id: i.calib_id,
-                frame_width: i.frame_width,
-                frame_height: i.frame_height,
-                uptime_ms: i.uptime_ms,
-                last_seq: i.last_seq,
-                link: i.link,
-                mode: i.mode,
-                mode_store: i.mode_store,
-            }),
-            Response::Reading(r) => Reply::Reading(r),
-            Response::Error(e) => Reply::Error(e),
-            Response::Ack => Reply::Ack,
-            Response::HistoryEnd { last_seq } => Reply::HistoryEnd { last_seq },
-            Response::FramesReady(f) => Reply::FramesReady(f),
-            Response::FrameChunk {
-                capture,
-                frame,
-                offset,
-                total,
-                data,
-            } => Reply::FrameChunk {
-                capture,
-                frame,
-                offset,
-                total,
-                data: data.to_vec(),
-            },
-            Response::Calibration(c) => Reply::Calibration(c),
-            Response::SelfTest(s) => Reply::SelfTest(s),
-        }
-    }
 }
 
 /// Something the user may want to hear about while the link copes on its own.
@@ -935,62 +834,4 @@ fn open_port(path: &str) -> Result<Box<dyn serialport::SerialPort>, LinkError> {
             path: path.to_string(),
             source,
         })
-}
-
-/// A serial port that may be a Tangent.
-#[derive(Debug, Clone, PartialEq)]
-pub struct PortCandidate {
-    /// Path to open.
-    pub path: String,
-    /// USB vendor/product id, when it is a USB port.
-    pub usb: Option<(u16, u16)>,
-    /// USB serial number (the device id in the field log), when known.
-    pub serial_number: Option<String>,
-    /// USB product string.
-    pub product: Option<String>,
-    /// Whether the VID/PID is the Tangent's.
-    pub is_tangent: bool,
-}
-
-/// Every serial port the system knows, Tangents (by USB VID/PID) first.
-pub fn list_ports() -> Result<Vec<PortCandidate>, serialport::Error> {
-    let mut out: Vec<PortCandidate> = serialport::available_ports()?
-        .into_iter()
-        .map(|p| {
-            let (usb, serial_number, product) = match p.port_type {
-                serialport::SerialPortType::UsbPort(u) => {
-                    (Some((u.vid, u.pid)), u.serial_number, u.product)
-                }
-                _ => (None, None, None),
-            };
-            PortCandidate {
-                is_tangent: usb == Some((codes::USB_VID, codes::USB_PID)),
-                path: p.port_name,
-                usb,
-                serial_number,
-                product,
-            }
-        })
-        .collect();
-    out.sort_by(|a, b| b.is_tangent.cmp(&a.is_tangent).then(a.path.cmp(&b.path)));
-    Ok(out)
-}
-
-/// The USB serial number of the port at `path`, if the system knows one.
-pub fn usb_serial_number(path: &str) -> Option<String> {
-    let canonical = std::fs::canonicalize(path).ok();
-    list_ports().ok()?.into_iter().find_map(|p| {
-        let same = p.path == path || std::fs::canonicalize(&p.path).ok() == canonical;
-        if same {
-            p.serial_number
-        } else {
-            None
-        }
-    })
-}
-
-/// A stable id for the device in the field log: its USB serial number, else the board.
-pub fn device_id(path: &str, identity: &DeviceIdentity) -> String {
-    usb_serial_number(path)
-        .unwrap_or_else(|| tangent_field::record::board_device_id(identity.board).to_string())
 }
