@@ -12,25 +12,15 @@
 
 use tangent_core::error_model::{predict_diameter_sigma, StemGeometry};
 use tangent_core::noise::NoiseModel;
-use tangent_core::pipeline::PipelineConfig;
 use tangent_core::real::{Vec2, Vec3};
-use tangent_core::solvers::stem::CylinderParams;
 use tangent_host::capture::{Capture, Mode};
-use tangent_host::measure::{measure_capture, Reading};
 use tangent_host::truth::Object;
 
 use tangent_corpus::captures as corpus;
 
-fn read(name: &str) -> Reading {
-    measure_capture(
-        &corpus().join(name),
-        None,
-        &PipelineConfig::default(),
-        &CylinderParams::default(),
-    )
-    .unwrap_or_else(|e| panic!("{name}: {e}"))
-    .reading
-}
+#[path = "read.rs"]
+mod read;
+use read::read;
 
 /// The error model's 1σ for the aimed stem of `name` (transversal approximation: in-plane
 /// distance from the source to the front of the stem), the smaller of the two methods.

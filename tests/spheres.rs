@@ -7,22 +7,11 @@
 //! an object that is not one ball is flagged (`not_spherical`) or refused with the error that
 //! names its cause (not a ball; two objects in view; one line on it).
 
-use tangent_core::pipeline::PipelineConfig;
-use tangent_core::solvers::stem::CylinderParams;
-use tangent_host::measure::{measure_capture, Reading};
-
 use tangent_corpus::captures as corpus;
 
-fn read(name: &str) -> Reading {
-    measure_capture(
-        &corpus().join(name),
-        None,
-        &PipelineConfig::default(),
-        &CylinderParams::default(),
-    )
-    .unwrap_or_else(|e| panic!("{name}: {e}"))
-    .reading
-}
+#[path = "read.rs"]
+mod read;
+use read::read;
 
 /// Balls both lines cross: matt, off-centre, on a floor, and polished steel (one with the
 /// laser's own glint saturating its stripe, one with a saturated sun glint beside it).
