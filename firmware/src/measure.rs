@@ -102,9 +102,10 @@ pub struct StageTimes {
     /// The longest of those blocks (µs): the read-out's worst case against the pixel clock.
     pub readout_block_max_us: u64,
     /// After the last pixel: statistics and darkness tests, threshold, segmentation,
-    /// selection, curve extraction, triangulation (for a stored pair the first includes the
-    /// whole subtraction).
-    pub image_us: [u64; 6],
+    /// selection, curve extraction, growing, smoothing and triangulation, the faint search
+    /// (for a stored pair the first includes the whole subtraction; a stage the chain did not
+    /// reach is 0).
+    pub image_us: [u64; 8],
     /// The mode's solver ([`instrument::solve`]).
     pub solver_us: u64,
 }
@@ -151,7 +152,9 @@ fn stage_index(stage: Stage) -> usize {
         Stage::Segmented => 2,
         Stage::Selected => 3,
         Stage::Extracted => 4,
-        Stage::Triangulated => 5,
+        Stage::Grown => 5,
+        Stage::Triangulated => 6,
+        Stage::FaintSearched => 7,
     }
 }
 

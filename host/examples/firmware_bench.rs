@@ -40,13 +40,15 @@ fn readout_s(rows: usize) -> f64 {
     (rows as f64 + VBLANK as f64) * (WIDTH as f64 + HBLANK as f64) / PIXCLK_HZ
 }
 
-const STAGES: [&str; 7] = [
+const STAGES: [&str; 9] = [
     "statistics + darkness tests",
     "threshold",
     "segmentation",
     "selection",
     "curve extraction",
+    "growing",
     "smoothing + triangulation",
+    "faint search",
     "cylinder solver",
 ];
 

@@ -159,14 +159,18 @@ fn search<P: Pixel>(
     // The responses' noise σ from their mean absolute value over every searched cell
     // (Gaussian: σ = √(π/2)·mean|r|; the stripe's few cells barely move it).
     // The responses are integers (below 2²⁴, exact in `f32`): summed as integers, the device
-    // and the host find the same σ.
+    // and the host find the same σ. The same pass finds the first plane's seed, the strongest
+    // response (nothing is excluded yet): one pass over the band instead of two.
     let (mut abs_sum, mut count) = (0u64, 0u64);
+    let mut strongest = Seed::NONE;
     for blk in 0..blocks {
         let rows = band(blk);
         block_responses(&diff, blk * b, b, &rows, taps, sums, responses);
-        for r in &responses[rows] {
+        for v in rows {
+            let r = responses[v];
             abs_sum += r.abs() as u64;
             count += 1;
+            strongest.offer(r, blk, v);
         }
     }
     if count == 0 || abs_sum == 0 {
@@ -185,8 +189,9 @@ fn search<P: Pixel>(
                 row != NO_ROW && (v as isize - row as isize).unsigned_abs() <= EXCLUDE_PX
             })
         };
+        let seed = if k == 0 { Some(strongest) } else { None };
         let Some(t) = find_track(
-            &diff, &params, taps, sigma, blocks, &band, &excluded, sums, responses, track,
+            &diff, &params, taps, sigma, blocks, &band, &excluded, seed, sums, responses, track,
         ) else {
             break;
         };
@@ -234,9 +239,38 @@ impl Track {
     };
 }
 
-/// The strongest track outside `excluded`: seed at the strongest response, followed block
-/// by block both ways, cut to its best-scoring stretch. Writes its row per block to `track`
-/// (`NO_ROW` outside the stretch).
+/// The strongest response found so far: `(response, block, row)`.
+#[derive(Debug, Clone, Copy)]
+struct Seed {
+    response: Real,
+    block: usize,
+    row: usize,
+}
+
+impl Seed {
+    /// No response yet (a seed must be positive).
+    const NONE: Seed = Seed {
+        response: 0.0,
+        block: 0,
+        row: 0,
+    };
+
+    /// Takes `(response, block, row)` if it is stronger (the first of equals stays).
+    fn offer(&mut self, response: Real, block: usize, row: usize) {
+        if response > self.response {
+            *self = Seed {
+                response,
+                block,
+                row,
+            };
+        }
+    }
+}
+
+/// The strongest track outside `excluded`: seed at the strongest response (`seed`, when the
+/// caller found it already with nothing excluded), followed block by block both ways, cut to
+/// its best-scoring stretch. Writes its row per block to `track` (`NO_ROW` outside the
+/// stretch).
 #[allow(clippy::too_many_arguments)]
 fn find_track<P: Pixel>(
     diff: &Frame<P, &[P]>,
@@ -246,29 +280,33 @@ fn find_track<P: Pixel>(
     blocks: usize,
     band: &impl Fn(usize) -> Range<usize>,
     excluded: &impl Fn(usize, usize) -> bool,
+    seed: Option<Seed>,
     sums: &mut [Real],
     responses: &mut [Real],
     track: &mut [u16],
 ) -> Option<Track> {
     let b = params.block_columns.max(1);
-    // Seed: the strongest response anywhere.
-    let mut seed = (0.0 as Real, 0usize, 0usize);
-    for blk in 0..blocks {
-        let rows = band(blk);
-        block_responses(diff, blk * b, b, &rows, taps, sums, responses);
-        for v in rows {
-            if responses[v] > seed.0 && !excluded(blk, v) {
-                seed = (responses[v], blk, v);
+    // Seed: the strongest response anywhere outside `excluded`.
+    let seed = seed.unwrap_or_else(|| {
+        let mut seed = Seed::NONE;
+        for blk in 0..blocks {
+            let rows = band(blk);
+            block_responses(diff, blk * b, b, &rows, taps, sums, responses);
+            for v in rows {
+                if !excluded(blk, v) {
+                    seed.offer(responses[v], blk, v);
+                }
             }
         }
-    }
-    if !(seed.0 > 0.0) {
+        seed
+    });
+    if !(seed.response > 0.0) {
         return None;
     }
     track.fill(NO_ROW);
     // Gains q − β per block, kept in the track's sign: the tracks rows go to `track`, the
     // gains are recomputed for the stretch below.
-    let (_, b0, v0) = seed;
+    let (b0, v0) = (seed.block, seed.row);
     track[b0] = v0 as u16;
     for dir in [1isize, -1] {
         let (mut v, mut misses) = (v0, 0usize);
@@ -598,6 +636,13 @@ fn kernel(sigma_px: Real) -> ([i64; MAX_KERNEL], usize) {
 /// `responses[rows]`: the column sums correlated with `taps`, minus the imbalance of the two
 /// rings (a stripe is a ridge with both rings near the floor; the edge of something that
 /// moved between the two frames is a step, and gets no credit).
+///
+/// Rows beyond the frame's edges read the edge row. Every value is an integer (the column
+/// sums of integer samples, the integer taps): below 2²⁴ for frames up to 8 bits, so exact in
+/// `f32` whatever the order of the additions — the device and the host get the same
+/// responses. `sums[j]` holds the column sum of row `rows.start + j − half` (clamped to the
+/// frame), so that each response reads `taps.len()` consecutive sums without index
+/// arithmetic (the search's cost is this loop: `docs/performance.md`, "Faint search").
 fn block_responses<P: Pixel>(
     diff: &Frame<P, &[P]>,
     x0: usize,
@@ -608,37 +653,39 @@ fn block_responses<P: Pixel>(
     responses: &mut [Real],
 ) {
     let (width, height) = (diff.width(), diff.height());
-    let half = taps.len() / 2;
+    let len = taps.len();
+    let half = len / 2;
     let x1 = (x0 + b).min(width);
-    if rows.is_empty() || x0 >= x1 {
+    if rows.is_empty() || x0 >= x1 || height == 0 || len == 0 {
         return;
     }
-    let lo = rows.start.saturating_sub(half);
-    let hi = (rows.end + half).min(height);
-    for (i, y) in (lo..hi).enumerate() {
-        if let Some(s) = sums.get_mut(i) {
-            let row = diff.row(y);
-            *s = row[x0..x1]
-                .iter()
-                .map(|&p| Into::<u32>::into(p) as Real)
-                .sum();
-        }
+    let extended = rows.len() + len - 1;
+    let Some(sums) = sums.get_mut(..extended) else {
+        return;
+    };
+    for (j, s) in sums.iter_mut().enumerate() {
+        let y = (rows.start + j).saturating_sub(half).min(height - 1);
+        let total: u32 = diff.row(y)[x0..x1].iter().map(|&p| Into::<u32>::into(p)).sum();
+        *s = total as Real;
     }
     let ring = taps.iter().take_while(|&&w| w == taps[0]).count().min(RING);
-    for v in rows.clone() {
-        let at = |k: usize| {
-            let y = (v + k).saturating_sub(half).clamp(lo, hi - 1);
-            sums.get(y - lo).copied().unwrap_or(0.0)
-        };
+    let mut weights = [0.0 as Real; MAX_KERNEL];
+    for (w, &t) in weights.iter_mut().zip(taps) {
+        *w = t as Real;
+    }
+    let weights = &weights[..len];
+    let ring_weight = taps[0].unsigned_abs() as Real;
+    let Some(out) = responses.get_mut(rows.clone()) else {
+        return;
+    };
+    for (out, window) in out.iter_mut().zip(sums.windows(len)) {
         let mut r = 0.0 as Real;
-        for (k, &w) in taps.iter().enumerate() {
-            r += w as Real * at(k);
+        for (&w, &s) in weights.iter().zip(window) {
+            r += w * s;
         }
-        let upper: Real = (0..ring).map(at).sum();
-        let lower: Real = (taps.len() - ring..taps.len()).map(at).sum();
-        if let Some(out) = responses.get_mut(v) {
-            *out = r - (taps[0].unsigned_abs() as Real) * (upper - lower).abs();
-        }
+        let upper: Real = window[..ring].iter().sum();
+        let lower: Real = window[len - ring..].iter().sum();
+        *out = r - ring_weight * (upper - lower).abs();
     }
 }
 

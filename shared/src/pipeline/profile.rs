@@ -144,8 +144,14 @@ pub enum Stage {
     Selected,
     /// Subpixel curve extracted.
     Extracted,
+    /// Curves grown along their stripes (`grow`; immediate when the configuration does not
+    /// grow them).
+    Grown,
     /// Curves smoothed and triangulated: the profile is complete.
     Triangulated,
+    /// The faint-stripe search (`faint`) ran after the thresholded chain found no stripe
+    /// (probed only when it ran; it follows whichever stage the thresholded chain reached).
+    FaintSearched,
 }
 
 /// What the streaming front end knows of the pair once the laser-on frame is subtracted: the
@@ -229,6 +235,7 @@ pub(super) fn after_segmentation<P: Pixel>(
         ),
         None => n,
     };
+    probe(Stage::Grown);
     need("points", n, ws.points.len())?;
     let (saturated_points, touches_edge) = smooth_and_triangulate(
         &mut ws.curve[..n],

@@ -321,10 +321,15 @@ impl ProfileStream {
                 },
                 calibration,
                 config,
-                probe,
+                &mut probe,
             )
         })();
-        faint::or_search(read, ws, pair, calibration, config)
+        let searched = matches!(&read, Err(e) if faint::takes_over(e, config));
+        let result = faint::or_search(read, ws, pair, calibration, config);
+        if searched {
+            probe(Stage::FaintSearched);
+        }
+        result
     }
 }
 
