@@ -168,7 +168,9 @@ fn search<P: Pixel>(
         block_responses(&diff, blk * b, b, &rows, taps, sums, responses);
         for v in rows {
             let r = responses[v];
-            abs_sum += r.abs() as u64;
+            // |r| < 2³² for frames up to 16 bits: through `u32`, one conversion instruction
+            // on the device (`as u64` from `f32` is a library call there).
+            abs_sum += u64::from(r.abs() as u32);
             count += 1;
             strongest.offer(r, blk, v);
         }
