@@ -667,7 +667,10 @@ fn block_responses<P: Pixel>(
     };
     for (j, s) in sums.iter_mut().enumerate() {
         let y = (rows.start + j).saturating_sub(half).min(height - 1);
-        let total: u32 = diff.row(y)[x0..x1].iter().map(|&p| Into::<u32>::into(p)).sum();
+        let total: u32 = diff.row(y)[x0..x1]
+            .iter()
+            .map(|&p| Into::<u32>::into(p))
+            .sum();
         *s = total as Real;
     }
     let ring = taps.iter().take_while(|&&w| w == taps[0]).count().min(RING);

@@ -176,3 +176,54 @@ fn kernel_is_zero_sum_and_peaks_at_its_centre() {
         assert_eq!(w[..len].iter().max(), Some(&w[len / 2]));
     }
 }
+
+/// The response at row `v` as defined (`docs/image-processing.md`, "Faint stripes"): the column
+/// sum over the block, rows beyond the frame read at its edge, correlated with the taps, minus
+/// the rings' imbalance — computed the plain way, tap by tap.
+fn plain_response(diff: &Frame<u8, &[u8]>, x0: usize, b: usize, v: usize, taps: &[i64]) -> Real {
+    let (width, height) = (diff.width(), diff.height());
+    let half = taps.len() / 2;
+    let sum = |k: usize| -> i64 {
+        let y = (v + k).saturating_sub(half).min(height - 1);
+        diff.row(y)[x0..(x0 + b).min(width)]
+            .iter()
+            .map(|&p| p as i64)
+            .sum()
+    };
+    let r: i64 = taps.iter().enumerate().map(|(k, &w)| w * sum(k)).sum();
+    let ring = RING;
+    let upper: i64 = (0..ring).map(sum).sum();
+    let lower: i64 = (taps.len() - ring..taps.len()).map(sum).sum();
+    (r - taps[0].abs() * (upper - lower).abs()) as Real
+}
+
+#[test]
+fn block_responses_are_the_plain_correlation_at_every_row_and_edge() {
+    let (width, height) = (37usize, 29usize);
+    let mut pixels = std::vec![0u8; width * height];
+    let mut n = Noise(12345);
+    for p in pixels.iter_mut() {
+        *p = (n.uniform() * 256.0).min(255.0) as u8;
+    }
+    let diff = Frame::new(&pixels[..], width, height, width).unwrap();
+    let mut sums = std::vec![0.0 as Real; height + MAX_KERNEL];
+    let mut responses = std::vec![Real::NAN; height];
+    for sigma in [0.6 as Real, 1.0, 2.0] {
+        let (taps, len) = kernel(sigma);
+        let taps = &taps[..len];
+        // The frame's top and bottom (kernel beyond the edges), an inner band, all rows; a
+        // block cut by the frame's right edge.
+        for rows in [0..3, 3..12, 20..height, 0..height] {
+            for x0 in [0usize, 8, 32] {
+                block_responses(&diff, x0, 8, &rows, taps, &mut sums, &mut responses);
+                for v in rows.clone() {
+                    assert_eq!(
+                        responses[v],
+                        plain_response(&diff, x0, 8, v, taps),
+                        "σ {sigma}, rows {rows:?}, block at {x0}, row {v}"
+                    );
+                }
+            }
+        }
+    }
+}
