@@ -644,7 +644,8 @@ fn kernel(sigma_px: Real) -> ([i64; MAX_KERNEL], usize) {
 /// `f32` whatever the order of the additions — the device and the host get the same
 /// responses. `sums[j]` holds the column sum of row `rows.start + j − half` (clamped to the
 /// frame), so that each response reads `taps.len()` consecutive sums without index
-/// arithmetic (the search's cost is this loop: `docs/performance.md`, "Faint search").
+/// arithmetic (the search's cost is this loop: `docs/performance.md`, "The faint search's
+/// cost"). `taps` is a kernel of [`kernel`]: symmetric, its outer taps the ring's.
 fn block_responses<P: Pixel>(
     diff: &Frame<P, &[P]>,
     x0: usize,
@@ -674,22 +675,26 @@ fn block_responses<P: Pixel>(
         *s = total as Real;
     }
     let ring = taps.iter().take_while(|&&w| w == taps[0]).count().min(RING);
+    // The taps of [`kernel`] are symmetric, so both rings' taps are `w₀`:
+    // `Σ w_k·s_k = w₀·(upper + lower) + Σ_core w_k·s_k` — the ring sums the imbalance needs
+    // anyway, and only the core's multiplications. Exact integers either way (above).
+    let ring_tap = taps[0] as Real;
     let mut weights = [0.0 as Real; MAX_KERNEL];
     for (w, &t) in weights.iter_mut().zip(taps) {
         *w = t as Real;
     }
-    let weights = &weights[..len];
+    let core = &weights[ring..len - ring];
     let ring_weight = taps[0].unsigned_abs() as Real;
     let Some(out) = responses.get_mut(rows.clone()) else {
         return;
     };
     for (out, window) in out.iter_mut().zip(sums.windows(len)) {
-        let mut r = 0.0 as Real;
-        for (&w, &s) in weights.iter().zip(window) {
-            r += w * s;
-        }
         let upper: Real = window[..ring].iter().sum();
         let lower: Real = window[len - ring..].iter().sum();
+        let mut r = ring_tap * (upper + lower);
+        for (&w, &s) in core.iter().zip(&window[ring..]) {
+            r += w * s;
+        }
         *out = r - ring_weight * (upper - lower).abs();
     }
 }
