@@ -198,7 +198,9 @@ pub(super) fn expected_bias(arc: &FittedArc<'_>) -> Option<Vec3> {
     let mut total = Vec3::zeros();
     let mut s = Mat3::zeros();
     for i in 0..n {
-        let Some(li) = arc.local(i, kappa) else { continue };
+        let Some(li) = arc.local(i, kappa) else {
+            continue;
+        };
         let theta_i = response(&li);
         // mᵢ = Σⱼ Cᵢⱼ θⱼ over the correlated neighbours (and i itself, ρ₀ = 1).
         let mut m = theta_i * li.variance;
@@ -220,7 +222,9 @@ pub(super) fn expected_bias(arc: &FittedArc<'_>) -> Option<Vec3> {
     }
     // F_θθ contracted with S (symmetric in expectation).
     for i in 0..n {
-        let Some(l) = arc.local(i, kappa) else { continue };
+        let Some(l) = arc.local(i, kappa) else {
+            continue;
+        };
         let sj = s * l.j;
         let tst = l.tangent.dot(&(s * l.tangent));
         total += l.j * (2.0 * l.dw_dtheta.dot(&sj) + l.w * tst / r)

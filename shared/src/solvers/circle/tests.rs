@@ -428,7 +428,11 @@ fn weighted_fit_states_its_line_of_sight_pull() {
             let raw: std::vec::Vec<Real> = (0..n + 6).map(|_| rng.gauss() as Real).collect();
             for (i, p) in pts.iter_mut().enumerate() {
                 let e = if smoothed {
-                    raw[i..i + 7].iter().zip(&sg).map(|(x, w)| x * w).sum::<Real>()
+                    raw[i..i + 7]
+                        .iter()
+                        .zip(&sg)
+                        .map(|(x, w)| x * w)
+                        .sum::<Real>()
                 } else {
                     raw[i]
                 };
@@ -438,8 +442,8 @@ fn weighted_fit_states_its_line_of_sight_pull() {
             let init = fit_hyper(&pts).unwrap();
             // The stated σ is the raw per-column σ, as the pipeline's points carry.
             let noise = |i: usize| pts[i] / crate::real::norm(&pts[i]) * sigma;
-            let w = fit_weighted(&pts, noise, init, &RobustParams::default(), &mut scratch)
-                .unwrap();
+            let w =
+                fit_weighted(&pts, noise, init, &RobustParams::default(), &mut scratch).unwrap();
             err.push((w.fit.circle.radius - c.radius) as f64);
             pull.push(w.radius_pull as f64);
         }
@@ -447,12 +451,17 @@ fn weighted_fit_states_its_line_of_sight_pull() {
         let bias = err.iter().sum::<f64>() / k;
         let sd = (err.iter().map(|e| (e - bias).powi(2)).sum::<f64>() / (k - 1.0)).sqrt();
         let stated = pull.iter().sum::<f64>() / k;
-        std::println!("smoothed {smoothed}: bias {bias:.2e} ± {:.1e}, pull {stated:.2e}", sd / k.sqrt());
+        std::println!(
+            "smoothed {smoothed}: bias {bias:.2e} ± {:.1e}, pull {stated:.2e}",
+            sd / k.sqrt()
+        );
         // The pull is there (several standard errors below zero) …
         assert!(bias < -4.0 * sd / k.sqrt(), "bias {bias} sd {sd}");
         // … and the stated pull accounts for it.
         let tolerance = (3.0 * sd / k.sqrt()).max(0.2 * bias.abs());
-        assert!((stated - bias).abs() < tolerance, "stated {stated} measured {bias}");
+        assert!(
+            (stated - bias).abs() < tolerance,
+            "stated {stated} measured {bias}"
+        );
     }
 }
-
