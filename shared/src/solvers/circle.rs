@@ -37,6 +37,7 @@ use crate::real::{self, sqrt, Mat3, Real, Vec2, Vec3};
 use super::lm::{self, Evaluated, LeastSquares, LmParams, NormalEquations};
 use super::SolveError;
 
+mod pull;
 pub mod weighted;
 pub use weighted::{fit_weighted, weighted_radius_sigma, WeightedFit, WEIGHTED_SCRATCH_PER_POINT};
 

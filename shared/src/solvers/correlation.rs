@@ -16,21 +16,34 @@ pub const MAX_CORRELATION_LAG: usize = 64;
 /// `k < n/4`; 1 for fewer than 8 residuals or all zero. A least-squares fit over `n ≫ L`
 /// such points has the variance of one over `n/L` independent points.
 pub fn correlation_length(u: &[Real]) -> Real {
+    let mut rho = [0.0; MAX_CORRELATION_LAG + 1];
+    let kept = autocorrelation(u, &mut rho);
+    // Summed in lag order, as the reading has always been computed.
+    rho[1..kept].iter().fold(1.0, |length, r| length + 2.0 * r)
+}
+
+/// The autocorrelation `ρ_k` of residuals `u` in curve order that [`correlation_length`]
+/// sums: `rho[0] = 1`, then `ρ_k` for `k = 1, 2, …` while `ρ_k > 0`, `k ≤`
+/// [`MAX_CORRELATION_LAG`] and `k < n/4`. Returns how many entries of `rho` are set (at least
+/// 1: fewer than 8 residuals or all zero count as uncorrelated).
+pub fn autocorrelation(u: &[Real], rho: &mut [Real; MAX_CORRELATION_LAG + 1]) -> usize {
+    rho[0] = 1.0;
     let n = u.len();
     let c0: Real = u.iter().map(|x| x * x).sum();
     if !(c0 > 0.0) || n < 8 {
-        return 1.0;
+        return 1;
     }
-    let mut length = 1.0;
+    let mut kept = 1;
     for k in 1..=MAX_CORRELATION_LAG.min(n / 4) {
         let ck: Real = u.iter().zip(&u[k..]).map(|(a, b)| a * b).sum();
-        let rho = ck / c0;
-        if !(rho > 0.0) {
+        let r = ck / c0;
+        if !(r > 0.0) {
             break;
         }
-        length += 2.0 * rho;
+        rho[k] = r;
+        kept = k + 1;
     }
-    length
+    kept
 }
 
 /// Variance inflation `(1 + ρ₁)/(1 − ρ₁)` (at least 1, at most 24) for residuals with lag-one

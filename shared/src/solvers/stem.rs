@@ -241,7 +241,7 @@ fn solve_plane(
         |i: usize| level.to_level(field.direction_in_plane(level.to_plane(pts[i])) * sigmas[i]);
     let near_sigma = |q: Vec2| norm(&noise_at(q));
     let fit = robust_circle(pts, near_sigma, noise_of, params, values).map(|rc| {
-        let f = rc.fit;
+        let mut f = rc.fit;
         // The whole-arc fit's σ: the points' own σ, inflated by χ² and the residuals'
         // correlation along the stripe (docs/error-model.md, "Correlation along the stripe").
         let random = rc.data_sigma.hypot(rc.bending);
@@ -258,6 +258,10 @@ fn solve_plane(
             flags.insert(Flags::ARC_TOO_SHORT);
         }
         ellipse = non_round(pts, &f, rc.cutoff, params);
+        // The normal-residual pull of noise along the line of sight, removed to second order
+        // (docs/error-model.md §5e, "The pull to second order"); the tests above judged the
+        // fitted circle itself.
+        f.circle.radius -= rc.pull;
         (f, s, arc)
     });
     if fit.is_none() {

@@ -10,7 +10,9 @@
 #[allow(unused_imports)]
 use crate::real::Float;
 use crate::real::{self, sqrt, Mat3, Real, Vec2, Vec3};
+use crate::solvers::correlation::autocorrelation;
 
+use super::pull::{expected_bias, FittedArc};
 use super::{accumulate, finish, lm, normalised_start, tukey, Circle, CircleFit, Normalisation};
 use super::{RobustParams, SolveError};
 
@@ -46,6 +48,12 @@ pub struct WeightedFit {
     /// Radius σ: `model_sigma_radius · √max(χ²_ν·L, 1)` (`docs/error-model.md`,
     /// "Correlation along the stripe").
     pub sigma_radius: Real,
+    /// Expected bias of `fit.circle.radius` under the points' own noise along their noise
+    /// directions, to second order (`docs/error-model.md` §5e, "The pull to second order"):
+    /// `E[r̂] − r`, evaluated at the fitted circle with the residuals' own variance and autocorrelation;
+    /// 0 when it cannot be evaluated. The fit's radius is not corrected here: subtracting it
+    /// is the caller's choice.
+    pub radius_pull: Real,
 }
 
 /// σ of point `i`'s orthogonal residual (normalised units) about a circle centred at `centre`.
@@ -196,7 +204,22 @@ pub fn fit_weighted(
         sqrt(fit.covariance[(1, 1)].max(0.0)),
         sqrt(fit.covariance[(2, 2)].max(0.0)),
     );
-    let correlation = correlation_length(points, &norm, theta, buf);
+    let mut rho = [0.0; MAX_CORRELATION_LAG + 1];
+    let correlation = correlation_length(points, &norm, theta, buf, &mut rho);
+    // The weights again (the correlation overwrote them) for the pull's expansion.
+    points_noise.weights(points, &norm, theta, cs, buf);
+    let arc = FittedArc {
+        points,
+        norm: &norm,
+        theta,
+        sigmas: points_noise.sigmas,
+        dir_x: points_noise.dir_x,
+        dir_y: points_noise.dir_y,
+        weights: buf,
+        rho: &rho[..correlation.1],
+    };
+    let radius_pull = expected_bias(&arc).map_or(0.0, |b| b.z * norm.scale);
+    let correlation = correlation.0;
     let factor = (chi2_dof * correlation).max(1.0);
     let sigma_radius = model * sqrt(factor);
     if !(sigma_radius.is_finite() && fit.circle.radius.is_finite()) {
@@ -208,6 +231,7 @@ pub fn fit_weighted(
         chi2_dof,
         correlation_length: correlation,
         sigma_radius,
+        radius_pull,
     })
 }
 
@@ -254,15 +278,17 @@ impl PointNoise<'_> {
 
 /// Correlation length of the inliers' normalised residuals `uᵢ = dᵢ·√wᵢ` in curve order
 /// (`docs/error-model.md`, "Correlation along the stripe"): `1 + 2 Σ_{k≥1} ρ_k` while
-/// `ρ_k > 0`, `k ≤` [`MAX_CORRELATION_LAG`] and `k < n/4`; at least 1. `buf` holds the
-/// weights `wᵢ` on entry and is overwritten with the `uᵢ` (the `n`-th inlier's `u` goes to
-/// `buf[n]`, `n ≤ i`: each weight is read before its entry is reused).
+/// `ρ_k > 0`, `k ≤` [`MAX_CORRELATION_LAG`] and `k < n/4`; at least 1; with the number of
+/// `ρ_k` kept in `rho` (`rho[0] = 1`). `buf` holds the weights `wᵢ` on entry and is
+/// overwritten with the `uᵢ` (the `n`-th inlier's `u` goes to `buf[n]`, `n ≤ i`: each weight
+/// is read before its entry is reused).
 fn correlation_length(
     points: &[Vec2],
     norm: &Normalisation,
     theta: Vec3,
     buf: &mut [Real],
-) -> Real {
+    rho: &mut [Real; MAX_CORRELATION_LAG + 1],
+) -> (Real, usize) {
     let centre = Vec2::new(theta.x, theta.y);
     let mut n = 0;
     for (i, p) in points.iter().enumerate() {
@@ -273,7 +299,10 @@ fn correlation_length(
             n += 1;
         }
     }
-    crate::solvers::correlation::correlation_length(&buf[..n])
+    let kept = autocorrelation(&buf[..n], rho);
+    // Summed in lag order, as `solvers::correlation::correlation_length`.
+    let length = rho[1..kept].iter().fold(1.0, |l, r| l + 2.0 * r);
+    (length, kept)
 }
 
 /// Radius σ of a circle fit with per-point σ along directions, as [`fit_weighted`] weighs

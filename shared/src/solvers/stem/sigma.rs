@@ -210,6 +210,9 @@ pub(super) struct RobustCircle {
     pub(super) data_sigma: Real,
     /// Radius σ from a coherent bending of the curve ([`bending_sigma`]).
     pub(super) bending: Real,
+    /// Expected bias of the fit's radius from the noise along the line of sight
+    /// ([`circle::WeightedFit::radius_pull`]).
+    pub(super) pull: Real,
 }
 
 /// [`RobustCircle`] of `pts`: Hyper start, robust fit with the scale floor `near_sigma` of the
@@ -245,6 +248,7 @@ pub(super) fn robust_circle(
         cutoff,
         data_sigma,
         bending,
+        pull: wf.radius_pull,
     })
 }
 
