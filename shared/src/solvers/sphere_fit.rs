@@ -321,3 +321,86 @@ pub fn fit_sphere(
         points: total,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use super::*;
+    use crate::calibration::Calibration;
+    use std::vec::Vec;
+
+    /// Points of both reference planes' sections of a ball of radius `r` at `z`, facing the
+    /// camera, each moved along the ball's normal by a deterministic ±`noise` pattern.
+    fn sections(z: Real, r: Real, noise: Real) -> (Calibration, [Vec<Vec3>; 2], Sphere) {
+        let cal = Calibration::reference_design();
+        let y = |p: &LaserPlane| (p.offset - p.normal.z * z) / p.normal.y;
+        let centre = Vec3::new(0.0, 0.5 * (y(&cal.planes[0]) + y(&cal.planes[1])), z);
+        let mut out = [Vec::new(), Vec::new()];
+        for (k, plane) in cal.planes.iter().enumerate() {
+            let (a, b) = plane.plane_axes();
+            let h = (centre - plane.source).dot(&plane.normal);
+            let rho = sqrt(r * r - h * h);
+            let foot = centre - plane.normal * h;
+            for i in 0..400 {
+                let t = i as Real / 400.0 * 2.0 * crate::real::PI;
+                let x = foot + (a * t.cos() + b * t.sin()) * rho;
+                if (x - centre).dot(&(-x)) <= 0.0 || (x - centre).dot(&(plane.source - x)) <= 0.0 {
+                    continue;
+                }
+                let n = (x - centre) / r;
+                let wiggle = [1.0, -0.6, 0.3, -1.2, 0.8, -0.4, 0.1][i % 7];
+                out[k].push(x + n * (noise * wiggle));
+            }
+        }
+        (cal, out, Sphere { centre, radius: r })
+    }
+
+    fn fit(scale: Real, params: &SphereFitParams) -> SphereFit {
+        let (cal, curves, truth) = sections(1.0, 0.1, 2e-4);
+        let sig: Vec<Vec<Real>> = curves
+            .iter()
+            .map(|c| std::vec![1e-3 * scale; c.len()])
+            .collect();
+        let refs: [&[Vec3]; 2] = [&curves[0], &curves[1]];
+        let sigs: [&[Real]; 2] = [&sig[0], &sig[1]];
+        let mut scratch = std::vec![0.0; curves[0].len() + curves[1].len()];
+        let start = Sphere {
+            centre: truth.centre + Vec3::new(0.002, -0.001, 0.003),
+            radius: truth.radius * 1.02,
+        };
+        fit_sphere(&refs, &sigs, &cal.planes, start, params, &mut scratch).expect("fits")
+    }
+
+    /// The stated covariance comes from the residuals: the points' σ set only their relative
+    /// errors, so scaling every σ leaves the sphere and its covariance unchanged (without the
+    /// Tukey rounds, whose cut is floored at one σ).
+    #[test]
+    fn the_covariance_is_the_datas_not_the_sigmas_scale() {
+        let params = SphereFitParams {
+            rounds: 0,
+            ..SphereFitParams::default()
+        };
+        let (a, b) = (fit(1.0, &params), fit(10.0, &params));
+        assert!((a.sphere.radius - b.sphere.radius).abs() < 1e-5 * a.sphere.radius);
+        let (sa, sb) = (a.sigma_radius(), b.sigma_radius());
+        assert!(sa > 0.0 && ((sa - sb) / sa).abs() < 1e-4, "{sa} vs {sb}");
+    }
+
+    /// The weights do not depend on `κ`, so neither does the sphere; the stated σ does (it
+    /// is the errors' model).
+    #[test]
+    fn kappa_changes_the_sigma_not_the_sphere() {
+        let small = SphereFitParams {
+            direction_free_share: 0.0,
+            ..SphereFitParams::default()
+        };
+        let large = SphereFitParams {
+            direction_free_share: 2.0,
+            ..SphereFitParams::default()
+        };
+        let (a, b) = (fit(1.0, &small), fit(1.0, &large));
+        assert_eq!(a.sphere, b.sphere);
+        assert!(b.sigma_radius() != a.sigma_radius());
+        assert!(a.sigma_radius() > 0.0 && b.sigma_radius() > 0.0);
+    }
+}
