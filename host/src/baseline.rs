@@ -91,11 +91,14 @@ pub struct BaselineReading {
     pub points: usize,
 }
 
-/// Runs the naive pipeline on `capture` with `calibration` (its own when `None`).
-pub fn measure(
+/// Steps 1–4 of the naive pipeline on `capture` with `calibration` (its own when `None`):
+/// each plane's stripe points in its in-plane coordinates ([`LaserPlane::to_plane_coords`]).
+///
+/// [`LaserPlane::to_plane_coords`]: tangent_core::laser_plane::LaserPlane::to_plane_coords
+pub fn stripe_points(
     capture: &Capture,
     calibration: Option<&Calibration>,
-) -> Result<BaselineReading, BaselineError> {
+) -> Result<Vec<Vec<Vec2>>, BaselineError> {
     let cal = calibration.unwrap_or(&capture.calibration);
     let planes = cal.planes.len();
     let off = capture.off_frame();
@@ -190,6 +193,16 @@ pub fn measure(
             }
         }
     }
+    Ok(per_plane)
+}
+
+/// Runs the naive pipeline on `capture` with `calibration` (its own when `None`).
+pub fn measure(
+    capture: &Capture,
+    calibration: Option<&Calibration>,
+) -> Result<BaselineReading, BaselineError> {
+    let per_plane = stripe_points(capture, calibration)?;
+    let planes = per_plane.len();
     let mut sum = 0.0;
     let mut points = 0;
     for (plane, pts) in per_plane.iter().enumerate() {

@@ -55,6 +55,10 @@ pub struct Args {
     /// Report the spheres only (no stems).
     #[arg(long)]
     spheres_only: bool,
+    /// Keep the simulated balls' captures here (`<dir>/<seed>/`) and read them back on the
+    /// next run: re-measuring a set after a solver change without simulating it again.
+    #[arg(long)]
+    sphere_cache: Option<PathBuf>,
     /// Evaluate the road instrument instead (`docs/road.md`): MPD per surface type, furrow
     /// depths, piezo height-scale calibration, vertical resolution, captif-slp cross-check,
     /// bad input; `--count` fresh seeds per surface.
@@ -195,7 +199,8 @@ fn sphere_section(args: &Args) -> anyhow::Result<String> {
     let first = args
         .sphere_seed
         .unwrap_or_else(|| args.set.first_sphere_seed());
-    let samples = tangent_host::evaluate_sphere::run(first, args.spheres)?;
+    let samples =
+        tangent_host::evaluate_sphere::run(first, args.spheres, args.sphere_cache.as_deref())?;
     if let Some(path) = &args.sphere_csv {
         std::fs::write(path, tangent_host::evaluate_sphere::csv(&samples))
             .with_context(|| format!("writing {}", path.display()))?;

@@ -2,9 +2,10 @@
 //! "Joint fit"; thesis §10.5's "gradient-descent" method, here by the shared
 //! Levenberg–Marquardt): minimises `Σ wⱼ·(|Xⱼ − C| − R)²/σ⊥ⱼ²` over `(C, R)`, with Tukey
 //! weights `wⱼ` re-computed from the previous round's residuals so that a stray object does
-//! not pull the sphere. `σ⊥ⱼ` is the point's σ projected on the sphere's normal: a point
+//! not pull the sphere. `σ⊥ⱼ` is the point's σ projected on the sphere's normal (a point
 //! moves along its stripe's displacement direction, and only the normal part of that moves
-//! the residual (`docs/sphere.md`, "Joint fit").
+//! the residual); the covariance uses the errors' σ, which add a direction-free part
+//! (`docs/sphere.md`, "Joint fit").
 
 // `!(x > 0.0)` is deliberate throughout: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -22,6 +23,10 @@ use super::sphere_sections::{minimise_sphere, Sphere, SphereCost};
 use super::SolveError;
 use crate::laser_plane::LaserPlane;
 
+/// [`SphereFitParams::direction_free_share`]'s default, from the tuning balls
+/// (`docs/sphere.md`, "Joint fit").
+pub const KAPPA: Real = 0.5;
+
 /// Settings of [`fit_sphere`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SphereFitParams {
@@ -31,9 +36,16 @@ pub struct SphereFitParams {
     pub tuning: Real,
     /// Reweighting rounds after the first (plain weighted) fit.
     pub rounds: u32,
-    /// Smallest share of a point's σ kept normal to the sphere (`|d̂·n̂|` floor): where the
-    /// displacement runs along the surface, what is left is the model's error, not zero.
+    /// Smallest share of a point's σ its *weight* keeps normal to the sphere (`|d̂·n̂|`
+    /// floor of the weights' `σ·max(|d̂·n̂|, floor)`).
     pub min_normal_share: Real,
+    /// `κ`: the direction-free share of a point's *error*, `σ⊥ = σ·√((d̂·n̂)² + κ²)`, which
+    /// the covariance uses. Only part of a stripe centre's error is a shift along the image
+    /// column (which moves the point along `d̂`): the smoothing along the curve and the
+    /// cross profile's change on a curved surface move it in any direction, and where `d̂`
+    /// runs along the surface (the limbs) that part is what is left. Calibrated on the
+    /// tuning balls (`docs/sphere.md`, "Joint fit"; `docs/error-model.md`, "5d. Sphere").
+    pub direction_free_share: Real,
 }
 
 impl Default for SphereFitParams {
@@ -43,6 +55,7 @@ impl Default for SphereFitParams {
             tuning: 4.685,
             rounds: 3,
             min_normal_share: 0.3,
+            direction_free_share: KAPPA,
         }
     }
 }
@@ -52,10 +65,11 @@ impl Default for SphereFitParams {
 pub struct SphereFit {
     /// The sphere.
     pub sphere: Sphere,
-    /// Covariance of `(Cx, Cy, Cz, R)` (m²): `(JᵀWJ)⁻¹` scaled by the residuals' own variance
-    /// (`χ²/ν`: the σ-weights set the points' relative weights, the data their scale) and by
-    /// the residuals' correlation length along the curves (`docs/sphere.md`, "Uncertainty of
-    /// the joint fit").
+    /// Covariance of `(Cx, Cy, Cz, R)` (m²): the sandwich `A⁻¹BA⁻¹` of the weights and the
+    /// errors' σ, scaled by the residuals' own variance against the errors' σ (the σ model
+    /// sets the points' relative errors, the data their scale) and by the residuals'
+    /// correlation length along the curves (`docs/sphere.md`, "Uncertainty of the joint
+    /// fit").
     pub covariance: SMatrix<Real, 4, 4>,
     /// `Σw·(d/σ)² / (Σw − 4)`: 1 when the residuals are as large as the points' σ predict.
     pub reduced_chi2: Real,
@@ -79,8 +93,10 @@ struct Joint<'a> {
     planes: &'a [LaserPlane],
     /// The sphere whose normals project the σ (the previous round's), fixed within a round.
     normals_of: Sphere,
-    /// Floor of the projection ([`SphereFitParams::min_normal_share`]).
+    /// Floor of the weights' projection ([`SphereFitParams::min_normal_share`]).
     min_share: Real,
+    /// The errors' direction-free share ([`SphereFitParams::direction_free_share`]).
+    kappa: Real,
     /// Previous round's Tukey cut (in σ units); `None` in the first round.
     cut: Option<Real>,
 }
@@ -95,9 +111,22 @@ fn displacement_direction(plane: &LaserPlane, x: Vec3) -> Option<Vec3> {
     (len > 0.0).then(|| d / len)
 }
 
+/// One point as the fit sees it.
+#[derive(Debug, Clone, Copy)]
+struct Term {
+    /// The point.
+    x: Vec3,
+    /// The σ its weight uses: `σ·max(|d̂·n̂|, floor)`.
+    weight_sigma: Real,
+    /// The σ of its error normal to the ball: `σ·√((d̂·n̂)² + κ²)`.
+    error_sigma: Real,
+    /// Its Tukey weight.
+    w: Real,
+}
+
 impl Joint<'_> {
     /// Each point with its σ normal to the sphere and its weight.
-    fn each(&self, mut f: impl FnMut(Vec3, Real, Real)) {
+    fn each(&self, mut f: impl FnMut(Term)) {
         let reference = self.normals_of;
         for ((curve, sigmas), plane) in self.curves.iter().zip(self.sigmas).zip(self.planes) {
             for (p, s) in curve.iter().zip(sigmas.iter()) {
@@ -112,7 +141,12 @@ impl Joint<'_> {
                     None => 1.0,
                     Some(cut) => tukey((distance - reference.radius) / (sigma * cut)),
                 };
-                f(*p, sigma, w);
+                f(Term {
+                    x: *p,
+                    weight_sigma: sigma,
+                    error_sigma: s * sqrt(share * share + self.kappa * self.kappa),
+                    w,
+                });
             }
         }
     }
@@ -125,24 +159,31 @@ impl SphereCost for Joint<'_> {
         let mut jtr = SVector::<Real, 4>::zeros();
         let mut cost = 0.0;
         let mut bad = false;
-        self.each(|x, sigma, w| {
-            if !(w > 0.0) {
-                return;
-            }
-            let d = x - centre;
-            let len = norm(&d);
-            if !(len > 0.0 && sigma > 0.0) {
-                bad = true;
-                return;
-            }
-            let inv = 1.0 / sigma;
-            let e = (len - radius) * inv;
-            let u = d / len;
-            let j = SVector::<Real, 4>::new(-u.x * inv, -u.y * inv, -u.z * inv, -inv);
-            jtj += j * j.transpose() * w;
-            jtr += j * (w * e);
-            cost += w * e * e;
-        });
+        self.each(
+            |Term {
+                 x,
+                 weight_sigma: sigma,
+                 w,
+                 ..
+             }| {
+                if !(w > 0.0) {
+                    return;
+                }
+                let d = x - centre;
+                let len = norm(&d);
+                if !(len > 0.0 && sigma > 0.0) {
+                    bad = true;
+                    return;
+                }
+                let inv = 1.0 / sigma;
+                let e = (len - radius) * inv;
+                let u = d / len;
+                let j = SVector::<Real, 4>::new(-u.x * inv, -u.y * inv, -u.z * inv, -inv);
+                jtj += j * j.transpose() * w;
+                jtr += j * (w * e);
+                cost += w * e * e;
+            },
+        );
         if bad || !cost.is_finite() || !(radius > 0.0) {
             return Err(SolveError::Degenerate);
         }
@@ -152,7 +193,7 @@ impl SphereCost for Joint<'_> {
 
 /// Fits a sphere to the points of every curve (`curves[k]` of plane `planes[k]`, with 1σ
 /// `sigmas[k]` along the stripe's displacement, same lengths) from `start` (the sections'
-/// sphere): a fit weighted by the σ projected on the sphere's normal, then `rounds` Tukey
+/// sphere): a fit weighted by each point's σ projected on the sphere's normal, then `rounds` Tukey
 /// reweightings at the robust scale of the normalised residuals (at least 1, so that points
 /// as noisy as predicted are all kept). `scratch` (at least the total point count) holds the
 /// residuals for the median.
@@ -168,7 +209,11 @@ pub fn fit_sphere(
     scratch: &mut [Real],
 ) -> Result<SphereFit, SolveError> {
     params.lm.validate()?;
-    if !(params.tuning > 0.0 && params.min_normal_share > 0.0 && params.min_normal_share <= 1.0)
+    if !(params.tuning > 0.0
+        && params.min_normal_share > 0.0
+        && params.min_normal_share <= 1.0
+        && params.direction_free_share >= 0.0
+        && params.direction_free_share.is_finite())
         || curves.len() != sigmas.len()
         || curves.len() > planes.len()
     {
@@ -190,6 +235,7 @@ pub fn fit_sphere(
         planes,
         normals_of: start,
         min_share: params.min_normal_share,
+        kappa: params.direction_free_share,
         cut: None,
     };
     let (mut sphere, mut normal) = minimise_sphere(&problem, start, &params.lm)?;
@@ -197,8 +243,8 @@ pub fn fit_sphere(
         problem.normals_of = sphere;
         problem.cut = None;
         let mut k = 0;
-        problem.each(|x, s, _| {
-            buf[k] = ((norm(&(x - sphere.centre)) - sphere.radius) / s).abs();
+        problem.each(|t| {
+            buf[k] = ((norm(&(t.x - sphere.centre)) - sphere.radius) / t.weight_sigma).abs();
             k += 1;
         });
         let mid = buf.len() / 2;
@@ -207,21 +253,37 @@ pub fn fit_sphere(
         problem.cut = Some(params.tuning * scale);
         (sphere, normal) = minimise_sphere(&problem, sphere, &params.lm)?;
     }
-    let (mut weight_sum, mut inliers) = (0.0, 0usize);
-    problem.each(|_, _, w| {
-        weight_sum += w;
-        if w > 0.0 {
+    // The covariance (`docs/sphere.md`, "Uncertainty of the joint fit"): the weights are
+    // `1/σ_w²` (projected), the errors' variances `σ_e²` (projected and direction-free), so
+    // the estimator's covariance is the sandwich `A⁻¹ B A⁻¹` with `A = Σ w jjᵀ/σ_w²` (the
+    // normal matrix) and `B = Σ w² jjᵀ σ_e²/σ_w⁴`, its scale the residuals' own against
+    // `σ_e` (`Σ w e²/σ_e² / (Σw − 4)`).
+    let (mut weight_sum, mut inliers, mut error_chi2) = (0.0, 0usize, 0.0);
+    let mut meat = SMatrix::<Real, 4, 4>::zeros();
+    problem.each(|t| {
+        weight_sum += t.w;
+        if t.w > 0.0 {
             inliers += 1;
+            let d = t.x - sphere.centre;
+            let len = norm(&d);
+            let e = len - sphere.radius;
+            error_chi2 += t.w * e * e / (t.error_sigma * t.error_sigma);
+            if len > 0.0 {
+                let u = d / len;
+                let j = SVector::<Real, 4>::new(-u.x, -u.y, -u.z, -1.0);
+                let v = t.error_sigma / (t.weight_sigma * t.weight_sigma);
+                meat += j * j.transpose() * (t.w * t.w * v * v);
+            }
         }
     });
     if !(weight_sum > 4.0) {
         return Err(SolveError::TooFewPoints);
     }
     let reduced_chi2 = normal.cost / (weight_sum - 4.0);
+    let error_scale = error_chi2 / (weight_sum - 4.0);
     // Residual correlation along each curve (speckle, smoothing, defocus) over the inliers:
     // curve k's n_k points count as n_k/L_k independent ones, and the fit's variance is
     // that of Σ n_k/L_k points (`docs/sphere.md`, "Uncertainty of the joint fit").
-    let cut = problem.cut.unwrap_or(Real::INFINITY);
     let (mut used, mut independent) = (0.0, 0.0);
     for k in 0..curves.len() {
         let one = Joint {
@@ -231,11 +293,10 @@ pub fn fit_sphere(
             ..problem
         };
         let mut n = 0;
-        one.each(|x, s, _| {
-            let u = (norm(&(x - sphere.centre)) - sphere.radius) / s;
-            if u.abs() < cut {
+        one.each(|t| {
+            if t.w > 0.0 {
                 if let Some(slot) = buf.get_mut(n) {
-                    *slot = u;
+                    *slot = (norm(&(t.x - sphere.centre)) - sphere.radius) / t.error_sigma;
                     n += 1;
                 }
             }
@@ -250,8 +311,8 @@ pub fn fit_sphere(
     } else {
         1.0
     };
-    let covariance =
-        normal.jtj.try_inverse().ok_or(SolveError::Degenerate)? * (reduced_chi2 * inflation);
+    let bread = normal.jtj.try_inverse().ok_or(SolveError::Degenerate)?;
+    let covariance = bread * meat * bread * (error_scale * inflation);
     Ok(SphereFit {
         sphere,
         covariance,
@@ -259,4 +320,87 @@ pub fn fit_sphere(
         inliers,
         points: total,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use super::*;
+    use crate::calibration::Calibration;
+    use std::vec::Vec;
+
+    /// Points of both reference planes' sections of a ball of radius `r` at `z`, facing the
+    /// camera, each moved along the ball's normal by a deterministic ±`noise` pattern.
+    fn sections(z: Real, r: Real, noise: Real) -> (Calibration, [Vec<Vec3>; 2], Sphere) {
+        let cal = Calibration::reference_design();
+        let y = |p: &LaserPlane| (p.offset - p.normal.z * z) / p.normal.y;
+        let centre = Vec3::new(0.0, 0.5 * (y(&cal.planes[0]) + y(&cal.planes[1])), z);
+        let mut out = [Vec::new(), Vec::new()];
+        for (k, plane) in cal.planes.iter().enumerate() {
+            let (a, b) = plane.plane_axes();
+            let h = (centre - plane.source).dot(&plane.normal);
+            let rho = sqrt(r * r - h * h);
+            let foot = centre - plane.normal * h;
+            for i in 0..400 {
+                let t = i as Real / 400.0 * 2.0 * crate::real::PI;
+                let x = foot + (a * t.cos() + b * t.sin()) * rho;
+                if (x - centre).dot(&(-x)) <= 0.0 || (x - centre).dot(&(plane.source - x)) <= 0.0 {
+                    continue;
+                }
+                let n = (x - centre) / r;
+                let wiggle = [1.0, -0.6, 0.3, -1.2, 0.8, -0.4, 0.1][i % 7];
+                out[k].push(x + n * (noise * wiggle));
+            }
+        }
+        (cal, out, Sphere { centre, radius: r })
+    }
+
+    fn fit(scale: Real, params: &SphereFitParams) -> SphereFit {
+        let (cal, curves, truth) = sections(1.0, 0.1, 2e-4);
+        let sig: Vec<Vec<Real>> = curves
+            .iter()
+            .map(|c| std::vec![1e-3 * scale; c.len()])
+            .collect();
+        let refs: [&[Vec3]; 2] = [&curves[0], &curves[1]];
+        let sigs: [&[Real]; 2] = [&sig[0], &sig[1]];
+        let mut scratch = std::vec![0.0; curves[0].len() + curves[1].len()];
+        let start = Sphere {
+            centre: truth.centre + Vec3::new(0.002, -0.001, 0.003),
+            radius: truth.radius * 1.02,
+        };
+        fit_sphere(&refs, &sigs, &cal.planes, start, params, &mut scratch).expect("fits")
+    }
+
+    /// The stated covariance comes from the residuals: the points' σ set only their relative
+    /// errors, so scaling every σ leaves the sphere and its covariance unchanged (without the
+    /// Tukey rounds, whose cut is floored at one σ).
+    #[test]
+    fn the_covariance_is_the_datas_not_the_sigmas_scale() {
+        let params = SphereFitParams {
+            rounds: 0,
+            ..SphereFitParams::default()
+        };
+        let (a, b) = (fit(1.0, &params), fit(10.0, &params));
+        assert!((a.sphere.radius - b.sphere.radius).abs() < 1e-5 * a.sphere.radius);
+        let (sa, sb) = (a.sigma_radius(), b.sigma_radius());
+        assert!(sa > 0.0 && ((sa - sb) / sa).abs() < 1e-4, "{sa} vs {sb}");
+    }
+
+    /// The weights do not depend on `κ`, so neither does the sphere; the stated σ does (it
+    /// is the errors' model).
+    #[test]
+    fn kappa_changes_the_sigma_not_the_sphere() {
+        let small = SphereFitParams {
+            direction_free_share: 0.0,
+            ..SphereFitParams::default()
+        };
+        let large = SphereFitParams {
+            direction_free_share: 2.0,
+            ..SphereFitParams::default()
+        };
+        let (a, b) = (fit(1.0, &small), fit(1.0, &large));
+        assert_eq!(a.sphere, b.sphere);
+        assert!(b.sigma_radius() != a.sigma_radius());
+        assert!(a.sigma_radius() > 0.0 && b.sigma_radius() > 0.0);
+    }
 }
