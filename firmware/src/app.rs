@@ -24,16 +24,16 @@ use tangent_core::measurement::{Measurement, Mode};
 use tangent_core::protocol::codes::Failure;
 use tangent_core::protocol::codes::HISTORY_LEN;
 use tangent_core::protocol::{
-    self, AccelReading, DeviceError, DeviceInfo, ErrorCode, Feed, FrameEncoder, FrameSel, FrameSetInfo,
-    FromDevice, LinkStats, ModeStoreState, Reading, Request, Response, SelfTestReport, ToDevice,
-    WireCalibration, FRAME_CHUNK_MAX, PROTOCOL_VERSION, UNSOLICITED,
+    self, AccelReading, DeviceError, DeviceInfo, ErrorCode, Feed, FrameEncoder, FrameSel,
+    FrameSetInfo, FromDevice, LinkStats, ModeStoreState, Reading, Request, Response,
+    SelfTestReport, ToDevice, WireCalibration, FRAME_CHUNK_MAX, PROTOCOL_VERSION, UNSOLICITED,
 };
 
 use crate::exposure::{self, Exposure};
 use crate::measure::{FramePair, Measurer, StreamMeasurer};
 use crate::ports::{
-    AccelError, Accelerometer, Board, CalibrationStore, Camera, CameraError, Clock, Devices, Geometry, Laser, Link, ModeStore,
-    RowSink, Strobe, Trigger, Watchdog,
+    AccelError, Accelerometer, Board, CalibrationStore, Camera, CameraError, Clock, Devices,
+    Geometry, Laser, Link, ModeStore, RowSink, Strobe, Trigger, Watchdog,
 };
 use crate::stats::Welford;
 

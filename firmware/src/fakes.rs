@@ -11,11 +11,11 @@ use std::task::{Context, Poll, Waker};
 
 use tangent_core::calibration::Calibration;
 use tangent_core::measurement::{Measurement, Mode, StemReading};
+use tangent_core::protocol::codes::Failure;
 use tangent_core::protocol::Method;
+use tangent_core::protocol::{self, WireCalibration};
 use tangent_core::real::{Real, Vec3};
 use tangent_core::solvers::result::Flags;
-use tangent_core::protocol::codes::Failure;
-use tangent_core::protocol::{self, WireCalibration};
 
 use embedded_hal_async::i2c::{ErrorKind, ErrorType, I2c, Operation};
 

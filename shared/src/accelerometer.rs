@@ -322,9 +322,8 @@ pub fn vertical(reading: &MeanReading, alignment: &Alignment) -> Result<Vertical
     let down = -(r * up) / g;
     let noise2 = alignment.bias_sigma_m_s2 * alignment.bias_sigma_m_s2
         + reading.sample_sigma_m_s2 * reading.sample_sigma_m_s2 / reading.samples as Real;
-    let sigma_rad = sqrt(
-        noise2 / (g * g) + alignment.alignment_sigma_rad * alignment.alignment_sigma_rad,
-    );
+    let sigma_rad =
+        sqrt(noise2 / (g * g) + alignment.alignment_sigma_rad * alignment.alignment_sigma_rad);
     Ok(Vertical { down, sigma_rad })
 }
 

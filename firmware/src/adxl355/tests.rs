@@ -82,7 +82,10 @@ fn set_up_is_the_documented_sequence() {
     // The part took it: measuring at ±2 g, 62.5 Hz.
     let part = s.i2c.target();
     assert!(part.is_measuring());
-    assert_eq!((part.lsb_per_g(), part.filter()), (LSB_PER_G_2G, FILTER_ODR_62HZ5));
+    assert_eq!(
+        (part.lsb_per_g(), part.filter()),
+        (LSB_PER_G_2G, FILTER_ODR_62HZ5)
+    );
 }
 
 #[test]
@@ -193,7 +196,10 @@ fn the_mean_of_noisy_samples_scatters_as_sigma_over_root_n() {
         let rms = (s2 / trials as f64).sqrt();
         // 400 trials: the rms is within ±10 % of σ/√n at ≈ 3σ (its relative σ is 1/√800);
         // the 1-count quantisation (3.8e-5 m/s²) adds ≈ 1 % here.
-        assert!((rms / want - 1.0).abs() < 0.1, "axis {axis}: rms {rms:e}, σ/√n {want:e}");
+        assert!(
+            (rms / want - 1.0).abs() < 0.1,
+            "axis {axis}: rms {rms:e}, σ/√n {want:e}"
+        );
     }
     assert_eq!(s.sample_sigma_m_s2(), SAMPLE_SIGMA_M_S2);
 }

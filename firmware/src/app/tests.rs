@@ -9,12 +9,12 @@ use std::rc::Rc;
 use tangent_core::protocol::{ErrorCode, Request, MAX_FRAME_LEN};
 
 use super::*;
+use crate::adxl355::model::Adxl355Model;
+use crate::adxl355::{Adxl355, SAMPLE_SIGMA_M_S2};
 use crate::fakes::{
     longest_lit_us, poll_bounded, CameraBehaviour, FailingMeasurer, FakeBoard, FakeCamera,
     FakeClock, FakeLaser, FakeWatchdog, NoTrigger, QuietLink, RamSector, RefStore, Time, GEOMETRY,
 };
-use crate::adxl355::model::Adxl355Model;
-use crate::adxl355::{Adxl355, SAMPLE_SIGMA_M_S2};
 use crate::fakes::{VerticalMeasurer, Verticals};
 use crate::i2c_target::TargetBus;
 use crate::measure::Measurer;
@@ -506,7 +506,10 @@ fn a_wall_reading_carries_the_accelerometer_and_the_plumb_gets_its_gravity() {
     else {
         panic!("{:?}", reading.accelerometer)
     };
-    assert_eq!((samples, sample_sigma_m_s2), (ACCEL_SAMPLES, SAMPLE_SIGMA_M_S2));
+    assert_eq!(
+        (samples, sample_sigma_m_s2),
+        (ACCEL_SAMPLES, SAMPLE_SIGMA_M_S2)
+    );
     // The mean of 16 samples: within 4σ/√16 of the sensed force on every axis.
     let g = crate::adxl355::STANDARD_GRAVITY;
     for (got, want) in m_s2.iter().zip([0.0, -g, 0.0]) {

@@ -36,7 +36,11 @@ impl Target for Registers {
         Ok(())
     }
     fn read(&mut self, buf: &mut [u8]) -> Result<(), ErrorKind> {
-        assert_eq!(self.pointer, reg::CHIP_VERSION, "only the chip version is read");
+        assert_eq!(
+            self.pointer,
+            reg::CHIP_VERSION,
+            "only the chip version is read"
+        );
         buf.copy_from_slice(&self.chip_version.to_be_bytes());
         Ok(())
     }
@@ -173,7 +177,10 @@ fn shutter_width_is_written_when_the_exposure_changes() {
     block_on(s.prepare(1000)).unwrap();
     let set_up = s.i2c.transfers.len();
     assert_eq!(set_up, 15 + 1, "the first exposure sets the sensor up");
-    assert_eq!(accesses(&s.i2c.transfers).last().cloned(), Some(Access::Write(0x0B, 32)));
+    assert_eq!(
+        accesses(&s.i2c.transfers).last().cloned(),
+        Some(Access::Write(0x0B, 32))
+    );
     block_on(s.prepare(1000)).unwrap();
     assert_eq!(
         s.i2c.transfers.len(),
@@ -181,7 +188,10 @@ fn shutter_width_is_written_when_the_exposure_changes() {
         "same exposure, nothing written"
     );
     block_on(s.prepare(2000)).unwrap();
-    assert_eq!(accesses(&s.i2c.transfers).last().cloned(), Some(Access::Write(0x0B, 64)));
+    assert_eq!(
+        accesses(&s.i2c.transfers).last().cloned(),
+        Some(Access::Write(0x0B, 64))
+    );
     assert_eq!(s.shutter_rows_for(0), 1);
     assert_eq!(s.shutter_rows_for(u32::MAX), MAX_SHUTTER_ROWS);
 }

@@ -52,9 +52,9 @@ pub use framing::{
     ProtocolError,
 };
 pub use messages::{
-    self_test, AccelReading, Board, DeviceError, DeviceInfo, ErrorCode, FrameSel, FrameSetInfo, FromDevice,
-    LinkStats, Method, ModeStoreState, Reading, Request, Response, RunningStats, SelfTestReport,
-    ToDevice, WireAccelerometer, WireCalibration, WirePlane, UNSOLICITED,
+    self_test, AccelReading, Board, DeviceError, DeviceInfo, ErrorCode, FrameSel, FrameSetInfo,
+    FromDevice, LinkStats, Method, ModeStoreState, Reading, Request, Response, RunningStats,
+    SelfTestReport, ToDevice, WireAccelerometer, WireCalibration, WirePlane, UNSOLICITED,
 };
 
 /// Version of this protocol, the first byte of every raw frame. Bump it on any change to

@@ -576,7 +576,10 @@ fn a_reading_carries_the_accelerometer_and_both_ends_read_it_alike() {
     assert_eq!(WireAccelerometer::from(&a).to_alignment(), Some(a));
     let v = crate::accelerometer::vertical(&m, &a).unwrap();
     assert!((v.down.norm() - 1.0).abs() < 1e-5, "{v:?}");
-    assert!(v.down.y > 0.99, "the sensor reads up along −y: gravity is +y: {v:?}");
+    assert!(
+        v.down.y > 0.99,
+        "the sensor reads up along −y: gravity is +y: {v:?}"
+    );
     let mut bad = wire_accelerometer();
     bad.alignment_sigma_rad = -1.0;
     assert_eq!(bad.to_alignment(), None);

@@ -4,8 +4,6 @@ use core::cell::RefCell;
 
 use embassy_embedded_hal::adapter::BlockingAsync;
 use embassy_embedded_hal::shared_bus::asynch::i2c::I2cDevice;
-use embassy_sync::blocking_mutex::raw::NoopRawMutex;
-use embassy_sync::mutex::Mutex;
 use embassy_stm32::dcmi::Dcmi;
 use embassy_stm32::dma::ReadableRingBuffer;
 use embassy_stm32::exti::ExtiInput;
@@ -18,6 +16,8 @@ use embassy_stm32::peripherals::DCMI;
 use embassy_stm32::peripherals::USB_OTG_FS;
 use embassy_stm32::usb::Driver;
 use embassy_stm32::wdg::IndependentWatchdog;
+use embassy_sync::blocking_mutex::raw::NoopRawMutex;
+use embassy_sync::mutex::Mutex;
 use embassy_time::{Duration, Instant, Timer};
 use embassy_usb::class::cdc_acm::CdcAcmClass;
 use embassy_usb::driver::EndpointError;

@@ -24,15 +24,15 @@ use super::devices::{
     Button, EmbassyClock, FlashModes, FlashStore, GpioLasers, Iwdg, ModeSector, Mt9v034Dcmi,
     SharedI2c1, UsbLink, H743,
 };
+use super::{FRAME_BYTES, POINTS, USB_PID, USB_VID, WATCHDOG_US};
 use crate::adxl355::Adxl355;
+use crate::app::Buffers;
+use crate::buffers::FrameBuffer;
 use crate::ports::AccelError;
+use crate::ports::Devices;
 use embassy_embedded_hal::adapter::BlockingAsync;
 use embassy_embedded_hal::shared_bus::asynch::i2c::I2cDevice;
 use embassy_sync::mutex::Mutex;
-use super::{FRAME_BYTES, POINTS, USB_PID, USB_VID, WATCHDOG_US};
-use crate::app::Buffers;
-use crate::buffers::FrameBuffer;
-use crate::ports::Devices;
 
 bind_interrupts!(struct Irqs {
     OTG_FS => usb::InterruptHandler<peripherals::USB_OTG_FS>;
@@ -124,10 +124,7 @@ pub async fn start() -> Started {
     i2c_config.frequency = Hertz(400_000);
     static I2C1: StaticCell<SharedI2c1> = StaticCell::new();
     let i2c1: &'static SharedI2c1 = I2C1.init(Mutex::new(BlockingAsync::new(I2c::new_blocking(
-        p.I2C1,
-        p.PB8,
-        p.PB9,
-        i2c_config,
+        p.I2C1, p.PB8, p.PB9, i2c_config,
     ))));
     // Camera: DCMI 8-bit on D9..D2 of the sensor.
     let mut dcmi_config = dcmi::Config::default();
