@@ -246,8 +246,11 @@ impl Measurer for FailingMeasurer {
     }
 }
 
-/// Gravity a measurer was given for each measurement ([`Measurer::set_vertical`]).
-pub type Verticals = Rc<RefCell<Vec<Option<(Vec3, Real)>>>>;
+/// Gravity (down, 1σ) a measurer is given for one measurement ([`Measurer::set_vertical`]).
+pub type Gravity = Option<(Vec3, Real)>;
+
+/// The gravity a measurer was given for each measurement.
+pub type Verticals = Rc<RefCell<Vec<Gravity>>>;
 
 /// A measurer that records the vertical it is given and reads a fixed stem (the app's
 /// handling of the accelerometer is what these tests are about, not the pipeline).

@@ -461,7 +461,7 @@ fn measure_in(
     wire: Option<WireCalibration>,
 ) -> (
     Result<Reading, DeviceError>,
-    Vec<Option<(tangent_core::real::Vec3, tangent_core::real::Real)>>,
+    Vec<crate::fakes::Gravity>,
     bool,
 ) {
     let mut rig = Rig::new();
