@@ -195,6 +195,7 @@ mod tests {
                 flags: Flags::default(),
             }),
             stats: None,
+            accelerometer: None,
         }
     }
 

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Runs the emulated Tangent firmware under QEMU (mps2-an500, Cortex-M7).
 #
-#   firmware/qemu/run.sh [--build] [--icount] [--serial SPEC] -- [--calib FILE] [--mode-store FILE] [--bench] OFF.pgm ON.pgm [...]
+#   firmware/qemu/run.sh [--build] [--icount] [--serial SPEC] -- [--calib FILE] [--mode-store FILE] [--bench] [--accel FX,FY,FZ [--accel-noise SIGMA]] OFF.pgm ON.pgm [...]
 #
 #   --build        build the ELF first (release, --no-default-features --features qemu)
 #   --icount       deterministic instruction counting: 1 ns of virtual time per instruction
@@ -14,6 +14,8 @@
 # are binary PGMs (8-bit, or 16-bit reduced to the top 8 bits); paths must not contain
 # spaces. The calibration is a calibration record (docs/protocol.md); the mode store is the
 # file of the mode log (docs/hardware.md, "The instrument mode"), created on the first SetMode.
+# --accel fits the emulated ADXL355, sensing that specific force (sensor axes, m/s²; e.g.
+# 0,-9.80665,0 for a level device) with the part's noise or --accel-noise (m/s² per sample).
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
 fw=$(dirname "$here")

@@ -4,7 +4,7 @@
 //! [`embedded_hal_async::i2c::I2c`], so the sequence is unit-tested on the host against the
 //! datasheet values tabled in `docs/hardware.md` ("ADXL355 set-up"), as the MT9V034's is.
 
-use embedded_hal_async::i2c::I2c;
+use embedded_hal_async::i2c::{Error as _, ErrorKind, I2c};
 
 use crate::ports::{AccelError, Acceleration, Accelerometer};
 
@@ -32,8 +32,13 @@ pub const LSB_PER_G_2G: f32 = 256_000.0;
 pub const STANDARD_GRAVITY: f32 = 9.806_65;
 /// Status register: bit 0 DATA_RDY (a new X, Y, Z sample is ready).
 pub const STATUS_DATA_RDY: u8 = 0x01;
-/// Status polls before a sample is declared late (62.5 Hz: 16 ms per sample).
+/// Status polls before a sample is declared late (62.5 Hz: 16 ms per sample; a poll is
+/// ≈ 0.1 ms at 400 kHz, so 1000 polls are six sample periods).
 pub const MAX_STATUS_POLLS: u32 = 1000;
+/// 1σ of one sample on each axis at [`FILTER_ODR_62HZ5`] (m/s²): the datasheet's noise
+/// density, 22.5 µg/√Hz, over the low-pass's noise bandwidth ≈ 1.6 × 15.625 Hz
+/// (0.1125 mg; the simulator's reference sensor, `docs/building.md` §6).
+pub const SAMPLE_SIGMA_M_S2: f32 = 22.5e-6 * 5.0 * STANDARD_GRAVITY;
 
 /// ADXL355 registers used (datasheet register map). Multi-byte reads auto-increment.
 pub mod reg {
@@ -104,10 +109,16 @@ impl<I: I2c> Adxl355<I> {
     pub async fn init(&mut self) -> Result<(), AccelError> {
         self.ready = false;
         let mut id = [0u8; 3];
+        // The first transaction tells an unfitted part from a failing one: a fitted part
+        // acknowledges its address and the register pointer, so any missing acknowledge
+        // here is no part (the STM32's I²C does not say which byte went unanswered).
         self.i2c
             .write_read(ADDRESS, &[reg::DEVID_AD], &mut id)
             .await
-            .map_err(|_| AccelError::Bus)?;
+            .map_err(|e| match e.kind() {
+                ErrorKind::NoAcknowledge(_) => AccelError::Absent,
+                _ => AccelError::Bus,
+            })?;
         if id != [DEVID_AD, DEVID_MST, PARTID] {
             return Err(AccelError::WrongPart);
         }
@@ -163,7 +174,13 @@ impl<I: I2c> Accelerometer for Adxl355<I> {
             m_s2: [c[0] as f32 * k, c[1] as f32 * k, c[2] as f32 * k],
         })
     }
+
+    fn sample_sigma_m_s2(&self) -> f32 {
+        SAMPLE_SIGMA_M_S2
+    }
 }
+
+pub mod model;
 
 #[cfg(test)]
 mod tests;

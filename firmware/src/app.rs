@@ -17,22 +17,23 @@
 
 use embassy_futures::select::{select, select3, Either, Either3};
 use heapless::Deque;
+use tangent_core::accelerometer::{self, Alignment};
 use tangent_core::calibration::Calibration;
 use tangent_core::instrument;
 use tangent_core::measurement::{Measurement, Mode};
 use tangent_core::protocol::codes::Failure;
 use tangent_core::protocol::codes::HISTORY_LEN;
 use tangent_core::protocol::{
-    self, DeviceError, DeviceInfo, ErrorCode, Feed, FrameEncoder, FrameSel, FrameSetInfo,
-    FromDevice, LinkStats, ModeStoreState, Reading, Request, Response, SelfTestReport, ToDevice,
-    WireCalibration, FRAME_CHUNK_MAX, PROTOCOL_VERSION, UNSOLICITED,
+    self, AccelReading, DeviceError, DeviceInfo, ErrorCode, Feed, FrameEncoder, FrameSel,
+    FrameSetInfo, FromDevice, LinkStats, ModeStoreState, Reading, Request, Response,
+    SelfTestReport, ToDevice, WireCalibration, FRAME_CHUNK_MAX, PROTOCOL_VERSION, UNSOLICITED,
 };
 
 use crate::exposure::{self, Exposure};
 use crate::measure::{FramePair, Measurer, StreamMeasurer};
 use crate::ports::{
-    Board, CalibrationStore, Camera, CameraError, Clock, Devices, Geometry, Laser, Link, ModeStore,
-    RowSink, Strobe, Trigger, Watchdog,
+    AccelError, Accelerometer, Board, CalibrationStore, Camera, CameraError, Clock, Devices,
+    Geometry, Laser, Link, ModeStore, RowSink, Strobe, Trigger, Watchdog,
 };
 use crate::stats::Welford;
 
@@ -49,6 +50,15 @@ const GUARD_POLL_US: u32 = 500;
 const IDLE_TICK_US: u32 = 100_000;
 /// Every `PEAK_ROW_STEP`-th row is sampled for auto-exposure.
 const PEAK_ROW_STEP: usize = 4;
+/// Accelerometer samples averaged for a reading that uses the vertical: 16 at 62.5 Hz,
+/// 0.26 s (the simulator's reference, `docs/building.md` §6).
+pub const ACCEL_SAMPLES: u16 = 16;
+
+/// True for the instruments whose reading uses the vertical (the wall's plumb): only they
+/// read the accelerometer, so the others measure as fast as before.
+pub fn uses_vertical(mode: Mode) -> bool {
+    mode == Mode::Wall
+}
 
 /// The firmware's buffers, allocated by the board (frames in DMA-reachable RAM).
 pub struct Buffers<'b> {
@@ -72,6 +82,9 @@ pub struct App<'b, B: Board, M: Measurer> {
     calibration: Option<Calibration>,
     /// The calibration as received (f64), returned unchanged by `ReadCalibration`.
     calibration_wire: Option<WireCalibration>,
+    /// The accelerometer's part of the calibration, when it has one: turns the
+    /// accelerometer's mean into gravity in the camera frame.
+    alignment: Option<Alignment>,
     seq: u32,
     capture_no: u32,
     frames: Option<FrameSetInfo>,
@@ -108,6 +121,10 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
             },
             None => (None, None),
         };
+        let alignment = calibration_wire
+            .as_ref()
+            .and_then(|w| w.accelerometer)
+            .and_then(|a| a.to_alignment());
         let mode_store = dev.modes.load();
         let mode = match mode_store {
             ModeStoreState::Loaded(mode) => mode,
@@ -125,6 +142,7 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
             enc: FrameEncoder::new(),
             calibration,
             calibration_wire,
+            alignment,
             seq: 0,
             capture_no: 0,
             frames: None,
@@ -378,6 +396,10 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
             detail,
         };
         let cal = wire.to_calibration().map_err(|_| invalid(1))?;
+        let alignment = match &wire.accelerometer {
+            Some(a) => Some(a.to_alignment().ok_or(invalid(3))?),
+            None => None,
+        };
         let g = self.dev.camera.geometry();
         // The calibration describes the full sensor; the frames must lie inside it.
         if cal.camera.width != g.width as u32
@@ -391,6 +413,7 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
         })?;
         self.calibration = Some(cal);
         self.calibration_wire = Some(wire.clone());
+        self.alignment = alignment;
         Ok(())
     }
 
@@ -503,6 +526,20 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
         if self.calibration.is_none() {
             return Err(no_calibration);
         }
+        // The vertical first: the mean of the samples while the user holds the device on
+        // the target, and before the frames, so the reading's time stays the laser-on
+        // exposure's (`docs/firmware.md`, "The vertical").
+        let accelerometer = if uses_vertical(self.mode) {
+            Some(self.read_accelerometer().await)
+        } else {
+            None
+        };
+        let gravity = accelerometer
+            .and_then(|a| a.mean())
+            .zip(self.alignment)
+            .and_then(|(mean, alignment)| accelerometer::vertical(&mean, &alignment).ok());
+        self.measurer
+            .set_vertical(gravity.map(|v| (v.down, v.sigma_rad)));
         let (info, result) = if self.measurer.streaming().is_some() {
             self.measure_streamed().await?
         } else {
@@ -535,7 +572,27 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
             exposure_us: info.exposure_us,
             measurement,
             stats: None,
+            accelerometer,
         })
+    }
+
+    /// The accelerometer's mean over [`ACCEL_SAMPLES`] samples, or why there is none (an
+    /// unfitted part is [`AccelReading::Absent`], a failing one its code; never a panic,
+    /// and the measurement goes on without the vertical).
+    pub async fn read_accelerometer(&mut self) -> AccelReading {
+        let sensor = &mut self.dev.accelerometer;
+        match sensor.mean(ACCEL_SAMPLES).await {
+            Ok(a) => AccelReading::Mean {
+                m_s2: a.m_s2,
+                samples: ACCEL_SAMPLES,
+                sample_sigma_m_s2: sensor.sample_sigma_m_s2(),
+            },
+            Err(AccelError::Absent) => AccelReading::Absent,
+            Err(e) => {
+                B::log(format_args!("accelerometer failed: {:?}", e));
+                AccelReading::Failed(e.code())
+            }
+        }
     }
 
     /// The streamed measurement: the laser-off frame into the measurer, the laser-on frame's

@@ -10,10 +10,18 @@ use std::rc::Rc;
 use std::task::{Context, Poll, Waker};
 
 use tangent_core::calibration::Calibration;
-use tangent_core::measurement::{Measurement, Mode};
+use tangent_core::measurement::{Measurement, Mode, StemReading};
 use tangent_core::protocol::codes::Failure;
+use tangent_core::protocol::Method;
 use tangent_core::protocol::{self, WireCalibration};
+use tangent_core::real::{Real, Vec3};
+use tangent_core::solvers::result::Flags;
 
+use embedded_hal_async::i2c::{ErrorKind, ErrorType, I2c, Operation};
+
+use crate::adxl355::model::Adxl355Model;
+use crate::adxl355::Adxl355;
+use crate::i2c_target::{Target, TargetBus};
 use crate::measure::{FramePair, Measurer};
 use crate::mode_log::{FlashWords, ModeLog, ERASED, WORD};
 use crate::ports::{
@@ -238,6 +246,38 @@ impl Measurer for FailingMeasurer {
     }
 }
 
+/// Gravity (down, 1σ) a measurer is given for one measurement ([`Measurer::set_vertical`]).
+pub type Gravity = Option<(Vec3, Real)>;
+
+/// The gravity a measurer was given for each measurement.
+pub type Verticals = Rc<RefCell<Vec<Gravity>>>;
+
+/// A measurer that records the vertical it is given and reads a fixed stem (the app's
+/// handling of the accelerometer is what these tests are about, not the pipeline).
+pub struct VerticalMeasurer(pub Verticals);
+
+impl Measurer for VerticalMeasurer {
+    fn measure(
+        &mut self,
+        _: Mode,
+        _: &FramePair<'_>,
+        _: &Calibration,
+    ) -> Result<Measurement, Failure> {
+        Ok(Measurement::Stem(StemReading {
+            diameter: 0.3,
+            uncertainty: 0.001,
+            method: Method::CircleFit,
+            distance: 1.0,
+            tilt: None,
+            axes: None,
+            flags: Flags::default(),
+        }))
+    }
+    fn set_vertical(&mut self, gravity: Option<(Vec3, Real)>) {
+        self.0.borrow_mut().push(gravity);
+    }
+}
+
 /// A flash sector in RAM, shared (`Rc`) so a test can build the application again on the
 /// same contents — a power cycle — and with the faults of real flash on demand.
 #[derive(Clone)]
@@ -326,6 +366,72 @@ impl Board for FakeBoard {
     type Store = RefStore;
     type ModeStore = ModeLog<RamSector>;
     type Watchdog = FakeWatchdog;
+    type Accelerometer = Adxl355<TargetBus<Adxl355Model>>;
     const KIND: protocol::Board = protocol::Board::Emulated;
     fn log(_args: core::fmt::Arguments<'_>) {}
+}
+
+/// One I²C transaction as the target saw it: the bytes written (register pointer first) and
+/// how many were read.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Transfer {
+    /// Bytes written.
+    pub write: Vec<u8>,
+    /// Bytes read.
+    pub read: usize,
+}
+
+/// An I²C bus of one emulated target ([`Target`]) that records every transaction and fails
+/// every one after the first `fail_after` (a bus error): the drivers' set-up tests.
+pub struct RecordingBus<T> {
+    /// The bus and its target.
+    pub bus: TargetBus<T>,
+    /// The transactions so far.
+    pub transfers: Vec<Transfer>,
+    /// Transactions that succeed before the bus fails.
+    pub fail_after: usize,
+}
+
+impl<T> RecordingBus<T> {
+    /// A working bus with `target` on it.
+    pub fn new(target: T) -> Self {
+        RecordingBus {
+            bus: TargetBus::new(Some(target)),
+            transfers: Vec::new(),
+            fail_after: usize::MAX,
+        }
+    }
+
+    /// The target.
+    pub fn target(&mut self) -> &mut T {
+        self.bus.target.as_mut().expect("the bus has its target")
+    }
+}
+
+impl<T> ErrorType for RecordingBus<T> {
+    type Error = ErrorKind;
+}
+
+impl<T: Target> I2c for RecordingBus<T> {
+    async fn transaction(
+        &mut self,
+        address: u8,
+        operations: &mut [Operation<'_>],
+    ) -> Result<(), ErrorKind> {
+        if self.transfers.len() >= self.fail_after {
+            return Err(ErrorKind::Bus);
+        }
+        let mut transfer = Transfer {
+            write: Vec::new(),
+            read: 0,
+        };
+        for op in operations.iter() {
+            match op {
+                Operation::Write(bytes) => transfer.write.extend_from_slice(bytes),
+                Operation::Read(buf) => transfer.read += buf.len(),
+            }
+        }
+        self.transfers.push(transfer);
+        self.bus.transaction(address, operations).await
+    }
 }

@@ -1,14 +1,16 @@
 //! Tangent firmware: the portable application and its two boards.
 //!
 //! * [`ports`] — the application's ports: one trait per device it uses (camera, laser,
-//!   trigger, link, clock, calibration store, mode store, watchdog);
+//!   trigger, link, clock, calibration store, mode store, watchdog, accelerometer);
 //! * [`app`] — the state machine over them (trigger → exposures → pipeline → report,
 //!   protocol commands);
 //! * [`measure`] — the seam to the shared pipeline;
 //! * [`mode_log`] — the instrument mode remembered across power cycles (an append-only log
 //!   in flash words, the [`ports::ModeStore`] of both boards);
 //! * [`mt9v034`] — the image sensor's set-up over any `embedded-hal-async` I²C bus;
-//! * [`adxl355`] — the accelerometer (the wall instrument's vertical reference) over I²C;
+//! * [`adxl355`] — the accelerometer (the wall instrument's vertical reference) over I²C,
+//!   and its register model (the emulated board's part, the driver tests');
+//! * [`i2c_target`] — emulated I²C targets on an `embedded-hal-async` bus;
 //! * [`exposure`], [`stats`], [`pgm`] — small pure pieces;
 //! * [`board`] — the boards: `board::h743` (drivers with feature `h743`) and `board::qemu`
 //!   (feature `qemu`), each with its clocks, pins and buffers (one `board_buffers!` per
@@ -30,6 +32,7 @@ pub mod app;
 pub mod board;
 mod buffers;
 pub mod exposure;
+pub mod i2c_target;
 pub mod measure;
 pub mod mode_log;
 pub mod mt9v034;

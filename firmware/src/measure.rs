@@ -16,7 +16,7 @@ use tangent_core::pipeline::{
     self, PipelineConfig, PipelineError, ProfileStream, Stage, Workspace,
 };
 use tangent_core::protocol::codes::Failure;
-use tangent_core::real::Real;
+use tangent_core::real::{Real, Vec3};
 
 use crate::ports::{Geometry, RowSink};
 
@@ -55,6 +55,11 @@ pub trait Measurer {
     fn streaming(&mut self) -> Option<&mut dyn StreamMeasurer> {
         None
     }
+
+    /// Gravity in the camera frame (unit, down) and the 1σ of its direction (radians) for
+    /// the next measurements, or `None` when the device has no vertical: the wall's plumb
+    /// (`tangent_core::accelerometer::vertical`). A measurer without a use for it ignores it.
+    fn set_vertical(&mut self, _gravity: Option<(Vec3, Real)>) {}
 }
 
 /// A measurer fed as the frames are read out: [`StreamMeasurer::begin`] gives the buffer the
@@ -208,6 +213,10 @@ impl Measurer for PipelineMeasurer<'_> {
 
     fn streaming(&mut self) -> Option<&mut dyn StreamMeasurer> {
         Some(self)
+    }
+
+    fn set_vertical(&mut self, gravity: Option<(Vec3, Real)>) {
+        self.params.wall.walls.gravity = gravity;
     }
 }
 

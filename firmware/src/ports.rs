@@ -1,5 +1,5 @@
 //! The application's ports: one small trait per device the application uses (camera,
-//! lasers, trigger, host link, clock, calibration store, mode store, watchdog) and [`Board`] that
+//! lasers, trigger, host link, clock, calibration store, mode store, watchdog, accelerometer) and [`Board`] that
 //! bundles them. Not a HAL: they say what the application needs, not what the chip offers.
 //!
 //! Each board (`board::h743`, `board::qemu`, and the host tests' test board) implements
@@ -157,7 +157,10 @@ pub trait Camera {
 /// Why an accelerometer read failed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum AccelError {
-    /// An I²C transaction failed (no acknowledge, bus error).
+    /// Nothing acknowledges the part's address: none is fitted, or it is disconnected. The
+    /// device measures on without a vertical ([`protocol::AccelReading::Absent`]).
+    Absent,
+    /// An I²C transaction failed (bus error, a lost acknowledge after the address).
     Bus,
     /// The identity registers do not name the expected part.
     WrongPart,
@@ -166,12 +169,16 @@ pub enum AccelError {
 }
 
 impl AccelError {
-    /// Detail code of the failure (board-specific numbering, as [`CameraError::code`]).
+    /// Detail code of the failure ([`protocol::AccelReading::Failed`]; the numbers are the
+    /// protocol's, `tangent_core::protocol::codes::ACCEL_*`). `Absent` is no failure code:
+    /// it travels as [`protocol::AccelReading::Absent`].
     pub fn code(self) -> u32 {
+        use tangent_core::protocol::codes;
         match self {
-            AccelError::Bus => 1,
-            AccelError::WrongPart => 2,
-            AccelError::Timeout => 3,
+            AccelError::Absent => 0,
+            AccelError::Bus => codes::ACCEL_BUS,
+            AccelError::WrongPart => codes::ACCEL_WRONG_PART,
+            AccelError::Timeout => codes::ACCEL_TIMEOUT,
         }
     }
 }
@@ -189,6 +196,10 @@ pub struct Acceleration {
 pub trait Accelerometer {
     /// The next sample.
     async fn sample(&mut self) -> Result<Acceleration, AccelError>;
+
+    /// 1σ of one sample's noise on each axis (m/s²) at the sensor's set-up: what the
+    /// reading's σ of gravity is computed with.
+    fn sample_sigma_m_s2(&self) -> f32;
 
     /// The mean of `n` (≥ 1) consecutive samples: at rest the noise falls as `1/√n`.
     async fn mean(&mut self, n: u16) -> Result<Acceleration, AccelError> {
@@ -248,6 +259,9 @@ pub trait Board {
     type ModeStore: ModeStore;
     /// The watchdog.
     type Watchdog: Watchdog;
+    /// The accelerometer (the wall instrument's vertical; a board without one fitted
+    /// reports [`AccelError::Absent`]).
+    type Accelerometer: Accelerometer;
     /// What the board reports in [`protocol::DeviceInfo::board`].
     const KIND: protocol::Board;
     /// Writes a diagnostic line (defmt on the H743, semihosting on QEMU).
@@ -273,6 +287,8 @@ pub struct Devices<B: Board> {
     pub modes: B::ModeStore,
     /// The watchdog.
     pub watchdog: B::Watchdog,
+    /// The accelerometer.
+    pub accelerometer: B::Accelerometer,
 }
 
 /// Lights the lasers of one exposure, for the camera driver, and keeps account of how

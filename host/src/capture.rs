@@ -13,6 +13,7 @@
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
+use tangent_core::accelerometer;
 use tangent_core::calibration::Calibration;
 
 use crate::calibration_file::{self, CalibrationFileError};
@@ -143,41 +144,28 @@ impl AccelerometerRecord {
     /// `σ² = (σ_b² + σ_a²/N)/|a − b|² + σ_R²` (`docs/building.md`, eq. (B9)). `Err` names the
     /// field that makes it unusable.
     pub fn gravity_camera(&self) -> Result<([f64; 3], f64), String> {
+        let (reading, alignment) = self.to_core();
+        let v = accelerometer::vertical(&reading, &alignment).map_err(|e| e.to_string())?;
+        Ok(([v.down.x, v.down.y, v.down.z], v.sigma_rad))
+    }
+
+    /// The record as the core's mean reading and alignment (the device's own types, so
+    /// the host's gravity is computed as the device's: [`accelerometer::vertical`]).
+    pub fn to_core(&self) -> (accelerometer::MeanReading, accelerometer::Alignment) {
         let v = |a: [f64; 3]| nalgebra::Vector3::new(a[0], a[1], a[2]);
-        let finite = |a: [f64; 3]| a.iter().all(|x| x.is_finite());
-        if !finite(self.mean_m_s2) || !finite(self.bias_m_s2) {
-            return Err("accelerometer.mean_m_s2 or bias_m_s2 is not finite".into());
-        }
-        if !finite(self.camera_from_sensor_rad) {
-            return Err("accelerometer.camera_from_sensor_rad is not finite".into());
-        }
-        for (name, x) in [
-            ("sample_sigma_m_s2", self.sample_sigma_m_s2),
-            ("bias_sigma_m_s2", self.bias_sigma_m_s2),
-            ("alignment_sigma_rad", self.alignment_sigma_rad),
-        ] {
-            if !(x >= 0.0 && x.is_finite()) {
-                return Err(format!("accelerometer.{name} = {x}: must be ≥ 0"));
-            }
-        }
-        if self.samples == 0 {
-            return Err("accelerometer.samples = 0: at least one".into());
-        }
-        let up = v(self.mean_m_s2) - v(self.bias_m_s2);
-        let g = up.norm();
-        // A device at rest reads 1 g; far from it the device was moving (or the part is
-        // broken): no vertical reference.
-        if !(g > 0.5 * STANDARD_GRAVITY && g < 1.5 * STANDARD_GRAVITY) {
-            return Err(format!(
-                "accelerometer.mean_m_s2 less bias is {g:.2} m/s², not ≈ 9.81: the device was not at rest"
-            ));
-        }
-        let r = nalgebra::Rotation3::new(v(self.camera_from_sensor_rad));
-        let down = -(r * up) / g;
-        let noise2 =
-            self.bias_sigma_m_s2.powi(2) + self.sample_sigma_m_s2.powi(2) / self.samples as f64;
-        let sigma = (noise2 / (g * g) + self.alignment_sigma_rad.powi(2)).sqrt();
-        Ok(([down.x, down.y, down.z], sigma))
+        (
+            accelerometer::MeanReading {
+                mean_m_s2: v(self.mean_m_s2),
+                samples: self.samples,
+                sample_sigma_m_s2: self.sample_sigma_m_s2,
+            },
+            accelerometer::Alignment {
+                bias_m_s2: v(self.bias_m_s2),
+                bias_sigma_m_s2: self.bias_sigma_m_s2,
+                camera_from_sensor_rad: v(self.camera_from_sensor_rad),
+                alignment_sigma_rad: self.alignment_sigma_rad,
+            },
+        )
     }
 }
 

@@ -219,6 +219,114 @@ pub fn gravity_camera(reading_m_s2: Vec3, calibration: &AccelCalibration) -> Opt
     Some(-(r * up) / len)
 }
 
+/// What the device knows of its accelerometer to turn a mean reading into gravity in the
+/// camera frame: the calibration's bias and rotation, each with one 1σ for every axis (the
+/// record a capture and the device's calibration carry; `docs/building.md` §6).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Alignment {
+    /// The calibrated bias subtracted from the mean (sensor axes, m/s²).
+    pub bias_m_s2: Vec3,
+    /// 1σ of that bias on each axis (m/s²).
+    pub bias_sigma_m_s2: Real,
+    /// The calibrated rotation from the sensor's axes into the camera frame (rotation
+    /// vector, radians).
+    pub camera_from_sensor_rad: Vec3,
+    /// 1σ of that rotation about each axis (radians).
+    pub alignment_sigma_rad: Real,
+}
+
+/// The accelerometer's mean over one capture.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MeanReading {
+    /// Mean specific force (sensor axes, m/s²; at rest it points up).
+    pub mean_m_s2: Vec3,
+    /// Samples averaged.
+    pub samples: u32,
+    /// 1σ of one sample on each axis (m/s²; the sensor's noise at its filter setting).
+    pub sample_sigma_m_s2: Real,
+}
+
+/// Gravity in the camera frame from one capture's mean reading.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Vertical {
+    /// Gravity's direction (unit, pointing down, camera frame).
+    pub down: Vec3,
+    /// 1σ of that direction about any axis across it (radians).
+    pub sigma_rad: Real,
+}
+
+/// Why a reading gives no vertical reference.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum VerticalError {
+    /// A value is not finite (its field's name).
+    NonFinite(&'static str),
+    /// A σ is negative or not finite (its field's name and value).
+    BadSigma(&'static str, Real),
+    /// No samples were averaged.
+    NoSamples,
+    /// The mean less the bias is not ≈ 1 g (its magnitude, m/s²): the device was moving
+    /// (or the part is broken).
+    NotAtRest(Real),
+}
+
+impl core::fmt::Display for VerticalError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            VerticalError::NonFinite(name) => write!(f, "accelerometer.{name} is not finite"),
+            VerticalError::BadSigma(name, x) => {
+                write!(f, "accelerometer.{name} = {x}: must be ≥ 0")
+            }
+            VerticalError::NoSamples => write!(f, "accelerometer.samples = 0: at least one"),
+            VerticalError::NotAtRest(g) => write!(
+                f,
+                "accelerometer.mean_m_s2 less bias is {g:.2} m/s², not ≈ 9.81: the device was not at rest"
+            ),
+        }
+    }
+}
+
+/// Gravity in the camera frame and the 1σ of its direction from a mean reading, (B9) of
+/// `docs/building.md`: `ĝ = −R (a − b)/|a − b|`, `σ² = (σ_b² + σ_a²/N)/|a − b|² + σ_R²`.
+/// The one computation of it: the device's plumb and the host's (from a capture's record or
+/// a device's reading) both come from here. `|a − b|` outside 0.5–1.5 g is
+/// [`VerticalError::NotAtRest`].
+pub fn vertical(reading: &MeanReading, alignment: &Alignment) -> Result<Vertical, VerticalError> {
+    let finite = |v: &Vec3| v.iter().all(|x| x.is_finite());
+    if !finite(&reading.mean_m_s2) {
+        return Err(VerticalError::NonFinite("mean_m_s2"));
+    }
+    if !finite(&alignment.bias_m_s2) {
+        return Err(VerticalError::NonFinite("bias_m_s2"));
+    }
+    if !finite(&alignment.camera_from_sensor_rad) {
+        return Err(VerticalError::NonFinite("camera_from_sensor_rad"));
+    }
+    for (name, x) in [
+        ("sample_sigma_m_s2", reading.sample_sigma_m_s2),
+        ("bias_sigma_m_s2", alignment.bias_sigma_m_s2),
+        ("alignment_sigma_rad", alignment.alignment_sigma_rad),
+    ] {
+        if !(x >= 0.0 && x.is_finite()) {
+            return Err(VerticalError::BadSigma(name, x));
+        }
+    }
+    if reading.samples == 0 {
+        return Err(VerticalError::NoSamples);
+    }
+    let up = reading.mean_m_s2 - alignment.bias_m_s2;
+    let g = up.norm();
+    if !(g > 0.5 * STANDARD_GRAVITY && g < 1.5 * STANDARD_GRAVITY) {
+        return Err(VerticalError::NotAtRest(g));
+    }
+    let r = Rotation3::new(alignment.camera_from_sensor_rad);
+    let down = -(r * up) / g;
+    let noise2 = alignment.bias_sigma_m_s2 * alignment.bias_sigma_m_s2
+        + reading.sample_sigma_m_s2 * reading.sample_sigma_m_s2 / reading.samples as Real;
+    let sigma_rad =
+        sqrt(noise2 / (g * g) + alignment.alignment_sigma_rad * alignment.alignment_sigma_rad);
+    Ok(Vertical { down, sigma_rad })
+}
+
 /// The parameters of (A1): bias, `M = Rᵀ` (camera → sensor) and scale.
 #[derive(Debug, Clone, Copy)]
 struct Params {

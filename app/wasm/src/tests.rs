@@ -21,6 +21,7 @@ fn reading(seq: u32, flags: u32) -> Reading {
             flags: Flags(flags),
         }),
         stats: None,
+        accelerometer: None,
     }
 }
 

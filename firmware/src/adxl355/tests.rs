@@ -4,9 +4,11 @@
 use std::vec::Vec;
 
 use embassy_futures::block_on;
-use embedded_hal_async::i2c::{ErrorKind, ErrorType, I2c, Operation};
 
+use super::model::Adxl355Model;
 use super::*;
+use crate::fakes::{self, Transfer};
+use crate::i2c_target::TargetBus;
 
 /// One I²C transaction as the sensor sees it.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -17,65 +19,23 @@ enum Access {
     Read(u8, usize),
 }
 
-/// An ADXL355 on a bus that records what is sent: answers the identity read with `id`, the
-/// status with DATA_RDY after `not_ready` polls, the data with `data`; fails every
-/// transaction after the first `fail_after`.
-struct RecordingBus {
-    accesses: Vec<Access>,
-    id: [u8; 3],
-    not_ready: usize,
-    data: [u8; 9],
-    fail_after: usize,
+type RecordingBus = fakes::RecordingBus<Adxl355Model>;
+
+/// The register model of the part, sensing `force` without noise, on a recording bus.
+fn bus(force: [f32; 3]) -> RecordingBus {
+    fakes::RecordingBus::new(Adxl355Model::new(force, 0.0, 1))
 }
 
-impl RecordingBus {
-    fn new() -> Self {
-        RecordingBus {
-            accesses: Vec::new(),
-            id: [DEVID_AD, DEVID_MST, PARTID],
-            not_ready: 0,
-            data: [0; 9],
-            fail_after: usize::MAX,
-        }
-    }
-}
-
-impl ErrorType for RecordingBus {
-    type Error = ErrorKind;
-}
-
-impl I2c for RecordingBus {
-    async fn transaction(
-        &mut self,
-        address: u8,
-        ops: &mut [Operation<'_>],
-    ) -> Result<(), ErrorKind> {
-        assert_eq!(address, 0x1D, "the accelerometer's address (ASEL low)");
-        if self.accesses.len() >= self.fail_after {
-            return Err(ErrorKind::Bus);
-        }
-        match ops {
-            [Operation::Write(&[r, v])] => self.accesses.push(Access::Write(r, v)),
-            [Operation::Write(&[r]), Operation::Read(buf)] => {
-                self.accesses.push(Access::Read(r, buf.len()));
-                match (r, buf.len()) {
-                    (reg::DEVID_AD, 3) => buf.copy_from_slice(&self.id),
-                    (reg::STATUS, 1) => {
-                        buf[0] = if self.not_ready == 0 {
-                            STATUS_DATA_RDY
-                        } else {
-                            self.not_ready -= 1;
-                            0
-                        }
-                    }
-                    (reg::XDATA3, 9) => buf.copy_from_slice(&self.data),
-                    other => panic!("unexpected read {other:?}"),
-                }
-            }
+/// The register accesses of a transaction log.
+fn accesses(transfers: &[Transfer]) -> Vec<Access> {
+    transfers
+        .iter()
+        .map(|t| match (t.write.as_slice(), t.read) {
+            (&[r, v], 0) => Access::Write(r, v),
+            (&[r], n) if n > 0 => Access::Read(r, n),
             other => panic!("not a register access: {other:?}"),
-        }
-        Ok(())
-    }
+        })
+        .collect()
 }
 
 /// The rows of the "ADXL355 set-up" table of `docs/hardware.md`, in order: register, name
@@ -104,7 +64,7 @@ fn documented_setup() -> Vec<(u8, &'static str, u8)> {
 fn set_up_is_the_documented_sequence() {
     let doc = documented_setup();
     assert_eq!(doc.len(), 5, "{doc:?}");
-    let mut s = Adxl355::new(RecordingBus::new());
+    let mut s = Adxl355::new(bus([0.0; 3]));
     block_on(s.init()).unwrap();
     assert!(s.is_ready());
     let want: Vec<Access> = doc
@@ -118,7 +78,14 @@ fn set_up_is_the_documented_sequence() {
             }
         })
         .collect();
-    assert_eq!(s.i2c.accesses, want);
+    assert_eq!(accesses(&s.i2c.transfers), want);
+    // The part took it: measuring at ±2 g, 62.5 Hz.
+    let part = s.i2c.target();
+    assert!(part.is_measuring());
+    assert_eq!(
+        (part.lsb_per_g(), part.filter()),
+        (LSB_PER_G_2G, FILTER_ODR_62HZ5)
+    );
 }
 
 #[test]
@@ -145,17 +112,21 @@ fn datasheet_register_addresses() {
 }
 
 #[test]
-fn a_wrong_part_or_a_silent_bus_is_refused() {
-    let mut bus = RecordingBus::new();
-    bus.id = [0xAD, 0x1D, 0xE5]; // an ADXL345-like part ID
-    let mut s = Adxl355::new(bus);
+fn a_wrong_part_a_failing_bus_and_no_part_are_told_apart() {
+    let mut b = bus([0.0; 3]);
+    b.target().id = [0xAD, 0x1D, 0xE5]; // an ADXL345-like part ID
+    let mut s = Adxl355::new(b);
     assert_eq!(block_on(s.init()), Err(AccelError::WrongPart));
     assert!(!s.is_ready());
-    let mut bus = RecordingBus::new();
-    bus.fail_after = 2;
-    let mut s = Adxl355::new(bus);
+    let mut b = bus([0.0; 3]);
+    b.fail_after = 2;
+    let mut s = Adxl355::new(b);
     assert_eq!(block_on(s.init()), Err(AccelError::Bus));
     assert!(!s.is_ready());
+    // Nothing answers the address: an unfitted part, reported as such (not a failure).
+    let mut s = Adxl355::new(TargetBus::<Adxl355Model>::new(None));
+    assert_eq!(block_on(s.init()), Err(AccelError::Absent));
+    assert_eq!(block_on(s.mean(16)).map(|_| ()), Err(AccelError::Absent));
 }
 
 #[test]
@@ -171,27 +142,17 @@ fn twenty_bit_samples_decode_with_their_sign() {
 
 #[test]
 fn a_sample_waits_for_data_ready_and_reads_one_g() {
-    let g = LSB_PER_G_2G as i32; // +1 g on z, −1 g on x, 0 on y
-    let enc = |c: i32| {
-        let raw = (c as u32) & 0xFFFFF;
-        [
-            (raw >> 12) as u8,
-            (raw >> 4) as u8,
-            ((raw & 0xF) << 4) as u8,
-        ]
-    };
-    let mut bus = RecordingBus::new();
-    bus.not_ready = 2;
-    let (x, y, z) = (enc(-g), enc(0), enc(g));
-    bus.data = [x[0], x[1], x[2], y[0], y[1], y[2], z[0], z[1], z[2]];
-    let mut s = Adxl355::new(bus);
+    // −1 g on x, 0 on y, +1 g on z: whole counts at ±2 g.
+    let mut b = bus([-STANDARD_GRAVITY, 0.0, STANDARD_GRAVITY]);
+    b.target().conversion_polls = 2;
+    let mut s = Adxl355::new(b);
     let a = block_on(s.sample()).unwrap();
     let close = |a: f32, b: f32| (a - b).abs() < 1e-4;
     assert!(close(a.m_s2[0], -STANDARD_GRAVITY), "{a:?}");
     assert!(close(a.m_s2[1], 0.0), "{a:?}");
     assert!(close(a.m_s2[2], STANDARD_GRAVITY), "{a:?}");
     // Set-up (1 read + 4 writes), then three status polls and the data read.
-    let tail: Vec<Access> = s.i2c.accesses[5..].to_vec();
+    let tail: Vec<Access> = accesses(&s.i2c.transfers)[5..].to_vec();
     assert_eq!(
         tail,
         [
@@ -204,9 +165,41 @@ fn a_sample_waits_for_data_ready_and_reads_one_g() {
 }
 
 #[test]
-fn a_sensor_that_never_becomes_ready_times_out() {
-    let mut bus = RecordingBus::new();
-    bus.not_ready = usize::MAX;
-    let mut s = Adxl355::new(bus);
+fn a_sensor_left_in_standby_times_out() {
+    // A part whose POWER_CTL write is lost stays in standby: DATA_RDY never rises.
+    let mut s = Adxl355::new(bus([0.0, 0.0, STANDARD_GRAVITY]));
+    s.ready = true;
     assert_eq!(block_on(s.read_counts()), Err(AccelError::Timeout));
+}
+
+/// The mean of n noisy samples scatters as σ/√n about the sensed force: the averaging the
+/// application does with every wall reading, through the whole driver, on the model the
+/// emulated board uses.
+#[test]
+fn the_mean_of_noisy_samples_scatters_as_sigma_over_root_n() {
+    let force = [0.3, -STANDARD_GRAVITY, 0.1];
+    let (n, trials) = (16u16, 400);
+    let mut s = Adxl355::new(TargetBus::new(Some(Adxl355Model::new(
+        force,
+        SAMPLE_SIGMA_M_S2,
+        7,
+    ))));
+    let mut sum2 = [0.0f64; 3];
+    for _ in 0..trials {
+        let m = block_on(s.mean(n)).unwrap();
+        for axis in 0..3 {
+            sum2[axis] += ((m.m_s2[axis] - force[axis]) as f64).powi(2);
+        }
+    }
+    let want = SAMPLE_SIGMA_M_S2 as f64 / (n as f64).sqrt();
+    for (axis, s2) in sum2.iter().enumerate() {
+        let rms = (s2 / trials as f64).sqrt();
+        // 400 trials: the rms is within ±10 % of σ/√n at ≈ 3σ (its relative σ is 1/√800);
+        // the 1-count quantisation (3.8e-5 m/s²) adds ≈ 1 % here.
+        assert!(
+            (rms / want - 1.0).abs() < 0.1,
+            "axis {axis}: rms {rms:e}, σ/√n {want:e}"
+        );
+    }
+    assert_eq!(s.sample_sigma_m_s2(), SAMPLE_SIGMA_M_S2);
 }

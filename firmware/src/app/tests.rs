@@ -9,10 +9,15 @@ use std::rc::Rc;
 use tangent_core::protocol::{ErrorCode, Request, MAX_FRAME_LEN};
 
 use super::*;
+use crate::adxl355::model::Adxl355Model;
+use crate::adxl355::{Adxl355, SAMPLE_SIGMA_M_S2};
 use crate::fakes::{
     longest_lit_us, poll_bounded, CameraBehaviour, FailingMeasurer, FakeBoard, FakeCamera,
     FakeClock, FakeLaser, FakeWatchdog, NoTrigger, QuietLink, RamSector, RefStore, Time, GEOMETRY,
 };
+use crate::fakes::{VerticalMeasurer, Verticals};
+use crate::i2c_target::TargetBus;
+use crate::measure::Measurer;
 use crate::mode_log::ModeLog;
 
 /// Polls enough for any bounded capture here (each poll advances the time by ≥ one guard
@@ -35,6 +40,8 @@ struct Rig {
     rx: Vec<u8>,
     /// The mode store's flash: kept across [`Rig::app`] calls, as across power cycles.
     sector: RamSector,
+    /// The accelerometer on the board's bus (`None`: not fitted).
+    accelerometer: Option<Adxl355Model>,
 }
 
 impl Rig {
@@ -48,6 +55,7 @@ impl Rig {
             on: vec![0; GEOMETRY.frame_len()],
             rx: vec![0; MAX_FRAME_LEN],
             sector: RamSector::new(16),
+            accelerometer: None,
         }
     }
 
@@ -56,6 +64,15 @@ impl Rig {
         camera: CameraBehaviour,
         writes_hang: bool,
     ) -> App<'_, FakeBoard, FailingMeasurer> {
+        self.app_with(camera, writes_hang, FailingMeasurer)
+    }
+
+    fn app_with<M: Measurer>(
+        &mut self,
+        camera: CameraBehaviour,
+        writes_hang: bool,
+        measurer: M,
+    ) -> App<'_, FakeBoard, M> {
         let clock = FakeClock(self.time.clone());
         let devices = Devices::<FakeBoard> {
             camera: FakeCamera {
@@ -78,13 +95,14 @@ impl Rig {
                 time: self.time.clone(),
                 feeds: self.feeds.clone(),
             },
+            accelerometer: Adxl355::new(TargetBus::new(self.accelerometer.clone())),
         };
         let buffers = Buffers {
             off: &mut self.off,
             on: &mut self.on,
             rx: &mut self.rx,
         };
-        App::new(devices, FailingMeasurer, buffers)
+        App::new(devices, measurer, buffers)
     }
 }
 
@@ -420,4 +438,164 @@ fn the_crossing_laser_is_never_lit_with_the_parallel_pair() {
     assert!(log.iter().any(|&(_, m)| m == 0b011), "{log:?}");
     assert!(log.iter().all(|&(_, m)| m & 0b100 == 0), "{log:?}");
     assert_eq!(longest_lit_us(&log).1, 0, "the lasers end off");
+}
+
+/// The reference calibration with an accelerometer aligned with the camera and no bias.
+fn calibration_with_accelerometer() -> WireCalibration {
+    let mut wire = WireCalibration::from(&Calibration::reference_design());
+    wire.accelerometer = Some(protocol::WireAccelerometer {
+        bias_m_s2: [0.0; 3],
+        bias_sigma_m_s2: 0.0074,
+        camera_from_sensor_rad: [0.0; 3],
+        alignment_sigma_rad: 0.00087,
+    });
+    wire
+}
+
+/// One measurement in `mode` on a rig whose accelerometer is `part`, with `wire` installed
+/// when given: the reading (or error), the vertical the measurer was given, and whether the
+/// accelerometer was set up at all.
+fn measure_in(
+    mode: Mode,
+    part: Option<Adxl355Model>,
+    wire: Option<WireCalibration>,
+) -> (
+    Result<Reading, DeviceError>,
+    Vec<crate::fakes::Gravity>,
+    bool,
+) {
+    let mut rig = Rig::new();
+    rig.accelerometer = part;
+    let verticals = Verticals::default();
+    let mut app = rig.app_with(
+        CameraBehaviour::Works,
+        false,
+        VerticalMeasurer(verticals.clone()),
+    );
+    // The fake camera's frames are not the reference sensor's, which `install_calibration`
+    // refuses: the accelerometer's part is put in place as it would install it.
+    app.alignment = wire
+        .and_then(|w| w.accelerometer)
+        .and_then(|a| a.to_alignment());
+    app.set_mode(mode).unwrap();
+    let reading = poll_bounded(app.measure_once(), POLLS).expect("bounded");
+    let set_up = app.dev.accelerometer.is_ready();
+    let v = verticals.borrow().clone();
+    (reading, v, set_up)
+}
+
+/// A level device: the sensor (aligned with the camera) feels 1 g up, along the camera's −y.
+fn level_part() -> Adxl355Model {
+    let g = crate::adxl355::STANDARD_GRAVITY;
+    Adxl355Model::new([0.0, -g, 0.0], SAMPLE_SIGMA_M_S2, 3)
+}
+
+#[test]
+fn a_wall_reading_carries_the_accelerometer_and_the_plumb_gets_its_gravity() {
+    let (reading, verticals, _) = measure_in(
+        Mode::Wall,
+        Some(level_part()),
+        Some(calibration_with_accelerometer()),
+    );
+    let reading = reading.unwrap();
+    let Some(AccelReading::Mean {
+        m_s2,
+        samples,
+        sample_sigma_m_s2,
+    }) = reading.accelerometer
+    else {
+        panic!("{:?}", reading.accelerometer)
+    };
+    assert_eq!(
+        (samples, sample_sigma_m_s2),
+        (ACCEL_SAMPLES, SAMPLE_SIGMA_M_S2)
+    );
+    // The mean of 16 samples: within 4σ/√16 of the sensed force on every axis.
+    let g = crate::adxl355::STANDARD_GRAVITY;
+    for (got, want) in m_s2.iter().zip([0.0, -g, 0.0]) {
+        assert!((got - want).abs() < SAMPLE_SIGMA_M_S2, "{m_s2:?}");
+    }
+    // The measurer got gravity as the core computes it from the reading: down the image.
+    let alignment = calibration_with_accelerometer()
+        .accelerometer
+        .and_then(|a| a.to_alignment())
+        .unwrap();
+    let want = accelerometer::vertical(&reading.accelerometer.unwrap().mean().unwrap(), &alignment)
+        .unwrap();
+    assert_eq!(verticals, [Some((want.down, want.sigma_rad))]);
+    assert!(want.down.y > 0.9999, "{want:?}");
+}
+
+#[test]
+fn without_an_accelerometer_or_its_calibration_a_wall_reading_says_why_and_has_no_plumb() {
+    // Not fitted: the reading is made, without the vertical, and says so.
+    let (reading, verticals, _) =
+        measure_in(Mode::Wall, None, Some(calibration_with_accelerometer()));
+    assert_eq!(reading.unwrap().accelerometer, Some(AccelReading::Absent));
+    assert_eq!(verticals, [None]);
+    // The wrong part: a failure with its code, still a reading.
+    let mut part = level_part();
+    part.id[2] = 0xE5;
+    let (reading, verticals, _) = measure_in(
+        Mode::Wall,
+        Some(part),
+        Some(calibration_with_accelerometer()),
+    );
+    assert_eq!(
+        reading.unwrap().accelerometer,
+        Some(AccelReading::Failed(
+            tangent_core::protocol::codes::ACCEL_WRONG_PART
+        ))
+    );
+    assert_eq!(verticals, [None]);
+    // A part that never leaves standby: a timeout, not a hang.
+    let mut part = level_part();
+    part.conversion_polls = u32::MAX;
+    let (reading, _, _) = measure_in(
+        Mode::Wall,
+        Some(part),
+        Some(calibration_with_accelerometer()),
+    );
+    assert_eq!(
+        reading.unwrap().accelerometer,
+        Some(AccelReading::Failed(
+            tangent_core::protocol::codes::ACCEL_TIMEOUT
+        ))
+    );
+    // No accelerometer calibration: the mean travels, the plumb does not.
+    let (reading, verticals, _) = measure_in(Mode::Wall, Some(level_part()), None);
+    assert!(reading.unwrap().accelerometer.unwrap().mean().is_some());
+    assert_eq!(verticals, [None]);
+}
+
+#[test]
+fn instruments_without_a_plumb_do_not_read_the_accelerometer() {
+    for mode in [Mode::Cylinder, Mode::Sphere, Mode::Road] {
+        let (reading, verticals, set_up) = measure_in(
+            mode,
+            Some(level_part()),
+            Some(calibration_with_accelerometer()),
+        );
+        assert_eq!(reading.unwrap().accelerometer, None, "{mode:?}");
+        assert_eq!(verticals, [None], "{mode:?}");
+        assert!(!set_up, "{mode:?}: the accelerometer was not touched");
+    }
+}
+
+#[test]
+fn an_accelerometer_calibration_that_is_not_finite_is_refused() {
+    let mut rig = Rig::new();
+    let mut app = rig.app(CameraBehaviour::Works, false);
+    let mut wire = calibration_with_accelerometer();
+    if let Some(a) = wire.accelerometer.as_mut() {
+        a.camera_from_sensor_rad[0] = f64::INFINITY;
+    }
+    assert_eq!(
+        app.install_calibration(&wire),
+        Err(DeviceError {
+            code: ErrorCode::InvalidCalibration,
+            detail: 3
+        })
+    );
+    assert_eq!(app.alignment, None);
 }

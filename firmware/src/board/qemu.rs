@@ -13,13 +13,19 @@
 //! * lasers: a bitmask in RAM (no hardware), trigger: none, watchdog: none (QEMU's
 //!   CMSDK watchdog is not wired to reset on this machine model);
 //! * calibration store: RAM, initialised from a calibration record file (`--calib`);
+//! * accelerometer: the ADXL355 driver on an emulated I²C bus holding the part's register
+//!   model ([`crate::adxl355::model`]) — the same driver path as the H743's — sensing the
+//!   fixed specific force of `--accel FX,FY,FZ` (sensor axes, m/s²: a device held still)
+//!   with Gaussian noise of `--accel-noise SIGMA` per sample (default: the part's,
+//!   [`crate::adxl355::SAMPLE_SIGMA_M_S2`]); without `--accel` no part answers the bus
+//!   (an instrument without one);
 //! * mode store: the mode log ([`crate::mode_log`]) in a host file that stands for the
 //!   H743's flash sector (`--mode-store FILE`, [`MODE_WORDS`] flash words, created when the
 //!   first mode is stored), so a restarted emulator keeps the mode; without the option the
 //!   mode lives in RAM ([`ModeStoreState::Volatile`]).
 //!
 //! Command line (semihosting `SYS_GET_CMDLINE`, QEMU's `-append`):
-//! `[--calib FILE] [--mode-store FILE] [--bench] [--window ROW] OFF.pgm ON.pgm [OFF.pgm ON.pgm …]`;
+//! `[--calib FILE] [--mode-store FILE] [--bench] [--window ROW] [--accel FX,FY,FZ [--accel-noise SIGMA]] OFF.pgm ON.pgm [OFF.pgm ON.pgm …]`;
 //! [`start`] reads it and brings the board up.
 
 use core::fmt::Write as _;
@@ -36,7 +42,10 @@ use tangent_core::protocol::{self, calibration_record, ModeStoreState, WireCalib
 
 use tangent_core::pipeline::{Workspace, WorkspaceSizes};
 
+use crate::adxl355::model::Adxl355Model;
+use crate::adxl355::{Adxl355, SAMPLE_SIGMA_M_S2};
 use crate::app::Buffers;
+use crate::i2c_target::TargetBus;
 
 use crate::mode_log::{FlashWords, ModeLog, VolatileModes, ERASED, WORD};
 use crate::pgm;
@@ -573,6 +582,16 @@ fn read_pgm_rows(
     Ok(())
 }
 
+/// Three finite numbers separated by commas (`--accel`).
+fn parse_vector(s: &str) -> Option<[f32; 3]> {
+    let mut v = [0.0f32; 3];
+    let mut parts = s.split(',');
+    for x in v.iter_mut() {
+        *x = parts.next()?.parse().ok().filter(|x: &f32| x.is_finite())?;
+    }
+    parts.next().is_none().then_some(v)
+}
+
 /// Reads a whole host file into `buf`; returns its length.
 pub fn read_file(path: &str, buf: &mut [u8]) -> Option<usize> {
     let f = HostFile::open(path, nr::open::R_BINARY)?;
@@ -637,6 +656,7 @@ impl<'c> ports::Board for Qemu<'c> {
     type Store = RamStore;
     type ModeStore = QemuModes<'c>;
     type Watchdog = NoWatchdog;
+    type Accelerometer = Adxl355<TargetBus<Adxl355Model>>;
     const KIND: protocol::Board = protocol::Board::Emulated;
     fn log(args: core::fmt::Arguments<'_>) {
         log(args)
@@ -678,6 +698,8 @@ pub fn start(syst: SYST) -> Started {
     let mut mode_path = None;
     let mut bench = false;
     let mut row_offset = 0u16;
+    let mut accel_force: Option<[f32; 3]> = None;
+    let mut accel_noise = SAMPLE_SIGMA_M_S2;
     let mut files: heapless::Vec<&str, { 2 * MAX_SCENES }> = heapless::Vec::new();
     let mut args = cmdline.split_ascii_whitespace();
     // The first word is the program (the -kernel file name).
@@ -693,6 +715,24 @@ pub fn start(syst: SYST) -> Started {
                 }
             },
             "--bench" => bench = true,
+            "--accel" => match args.next().and_then(parse_vector) {
+                Some(f) => accel_force = Some(f),
+                None => {
+                    log(format_args!(
+                        "--accel needs the specific force FX,FY,FZ (sensor axes, m/s²)"
+                    ));
+                    exit(false)
+                }
+            },
+            "--accel-noise" => match args.next().and_then(|s| s.parse::<f32>().ok()) {
+                Some(s) if s >= 0.0 && s.is_finite() => accel_noise = s,
+                _ => {
+                    log(format_args!(
+                        "--accel-noise needs the 1σ of a sample (m/s², ≥ 0)"
+                    ));
+                    exit(false)
+                }
+            },
             "--window" => match args.next().and_then(|r| r.parse().ok()) {
                 Some(r) => row_offset = r,
                 None => {
@@ -719,7 +759,7 @@ pub fn start(syst: SYST) -> Started {
     }
     if scenes.is_empty() || !files.len().is_multiple_of(2) {
         log(format_args!(
-            "usage: tangent-qemu [--calib FILE] [--mode-store FILE] [--bench] [--window ROW] OFF.pgm ON.pgm [OFF.pgm ON.pgm ...]"
+            "usage: tangent-qemu [--calib FILE] [--mode-store FILE] [--bench] [--window ROW] [--accel FX,FY,FZ [--accel-noise SIGMA]] OFF.pgm ON.pgm [OFF.pgm ON.pgm ...]"
         ));
         exit(false)
     }
@@ -758,6 +798,10 @@ pub fn start(syst: SYST) -> Started {
         store: RamStore::new(calibration),
         modes: QemuModes(mode_path.map(|p| ModeLog::new(FileSector::open(p)))),
         watchdog: NoWatchdog,
+        // The noise's seed is fixed: a run repeats.
+        accelerometer: Adxl355::new(TargetBus::new(
+            accel_force.map(|f| Adxl355Model::new(f, accel_noise, 1)),
+        )),
     };
     Started {
         devices,

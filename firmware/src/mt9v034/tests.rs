@@ -4,10 +4,12 @@
 use std::vec::Vec;
 
 use embassy_futures::block_on;
-use embedded_hal_async::i2c::{ErrorKind, ErrorType, I2c, Operation};
+use embedded_hal_async::i2c::ErrorKind;
 
 use super::*;
 use crate::board::h743;
+use crate::fakes::{self, Transfer};
+use crate::i2c_target::Target;
 
 /// One I²C transaction as the sensor sees it.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -18,51 +20,52 @@ enum Access {
     Read(u8),
 }
 
-/// An MT9V034 on a bus that records what is sent; answers the chip-version read with
-/// `chip_version` and fails every transaction after the first `fail_after`.
-struct RecordingBus {
-    accesses: Vec<Access>,
+/// An MT9V034's registers as its I²C interface presents them: writes of a 16-bit value,
+/// and the chip version (`chip_version`) as the only register read.
+struct Registers {
     chip_version: u16,
-    fail_after: usize,
+    pointer: u8,
 }
 
-impl RecordingBus {
-    fn new() -> Self {
-        RecordingBus {
-            accesses: Vec::new(),
-            chip_version: CHIP_VERSION,
-            fail_after: usize::MAX,
-        }
+impl Target for Registers {
+    fn address(&self) -> u8 {
+        0x48
     }
-}
-
-impl ErrorType for RecordingBus {
-    type Error = ErrorKind;
-}
-
-impl I2c for RecordingBus {
-    async fn transaction(
-        &mut self,
-        address: u8,
-        ops: &mut [Operation<'_>],
-    ) -> Result<(), ErrorKind> {
-        assert_eq!(address, 0x48, "the sensor's address");
-        if self.accesses.len() >= self.fail_after {
-            return Err(ErrorKind::Bus);
-        }
-        match ops {
-            [Operation::Write(&[r, hi, lo])] => self
-                .accesses
-                .push(Access::Write(r, u16::from_be_bytes([hi, lo]))),
-            [Operation::Write(&[r]), Operation::Read(buf)] if buf.len() == 2 => {
-                assert_eq!(r, reg::CHIP_VERSION, "only the chip version is read");
-                buf.copy_from_slice(&self.chip_version.to_be_bytes());
-                self.accesses.push(Access::Read(r));
-            }
-            other => panic!("not a register access: {other:?}"),
-        }
+    fn write(&mut self, bytes: &[u8]) -> Result<(), ErrorKind> {
+        self.pointer = bytes[0];
         Ok(())
     }
+    fn read(&mut self, buf: &mut [u8]) -> Result<(), ErrorKind> {
+        assert_eq!(
+            self.pointer,
+            reg::CHIP_VERSION,
+            "only the chip version is read"
+        );
+        buf.copy_from_slice(&self.chip_version.to_be_bytes());
+        Ok(())
+    }
+}
+
+type RecordingBus = fakes::RecordingBus<Registers>;
+
+/// A sensor answering `chip_version` on a recording bus.
+fn bus(chip_version: u16) -> RecordingBus {
+    fakes::RecordingBus::new(Registers {
+        chip_version,
+        pointer: 0,
+    })
+}
+
+/// The register accesses of a transaction log.
+fn accesses(transfers: &[Transfer]) -> Vec<Access> {
+    transfers
+        .iter()
+        .map(|t| match (t.write.as_slice(), t.read) {
+            (&[r, hi, lo], 0) => Access::Write(r, u16::from_be_bytes([hi, lo])),
+            (&[r], 2) => Access::Read(r),
+            other => panic!("not a register access: {other:?}"),
+        })
+        .collect()
 }
 
 /// The H743 board's sensor on a recording bus.
@@ -99,7 +102,7 @@ fn documented_setup() -> Vec<(u8, &'static str, u16)> {
 fn set_up_is_the_documented_sequence() {
     let doc = documented_setup();
     assert_eq!(doc.len(), 15, "{doc:?}");
-    let mut s = sensor(RecordingBus::new());
+    let mut s = sensor(bus(CHIP_VERSION));
     block_on(s.init()).unwrap();
     assert!(s.is_ready());
     let want: Vec<Access> = doc
@@ -113,7 +116,7 @@ fn set_up_is_the_documented_sequence() {
             }
         })
         .collect();
-    assert_eq!(s.i2c.accesses, want);
+    assert_eq!(accesses(&s.i2c.transfers), want);
 }
 
 #[test]
@@ -169,50 +172,52 @@ fn the_window_is_the_boards_and_inside_the_sensor() {
 
 #[test]
 fn shutter_width_is_written_when_the_exposure_changes() {
-    let mut s = sensor(RecordingBus::new());
+    let mut s = sensor(bus(CHIP_VERSION));
     // t_row = (752 + 94) / 26.66 MHz = 31.73 µs (docs/hardware.md).
     block_on(s.prepare(1000)).unwrap();
-    let set_up = s.i2c.accesses.len();
+    let set_up = s.i2c.transfers.len();
     assert_eq!(set_up, 15 + 1, "the first exposure sets the sensor up");
-    assert_eq!(s.i2c.accesses.last(), Some(&Access::Write(0x0B, 32)));
+    assert_eq!(
+        accesses(&s.i2c.transfers).last().cloned(),
+        Some(Access::Write(0x0B, 32))
+    );
     block_on(s.prepare(1000)).unwrap();
     assert_eq!(
-        s.i2c.accesses.len(),
+        s.i2c.transfers.len(),
         set_up,
         "same exposure, nothing written"
     );
     block_on(s.prepare(2000)).unwrap();
-    assert_eq!(s.i2c.accesses.last(), Some(&Access::Write(0x0B, 64)));
+    assert_eq!(
+        accesses(&s.i2c.transfers).last().cloned(),
+        Some(Access::Write(0x0B, 64))
+    );
     assert_eq!(s.shutter_rows_for(0), 1);
     assert_eq!(s.shutter_rows_for(u32::MAX), MAX_SHUTTER_ROWS);
 }
 
 #[test]
 fn a_wrong_chip_is_refused_before_any_write() {
-    let mut s = sensor(RecordingBus {
-        chip_version: 0x1313, // MT9V032
-        ..RecordingBus::new()
-    });
+    let mut s = sensor(bus(0x1313)); // MT9V032
     assert_eq!(block_on(s.init()), Err(CameraError::Bus));
     assert!(!s.is_ready());
-    assert_eq!(s.i2c.accesses, [Access::Read(0x00)]);
+    assert_eq!(accesses(&s.i2c.transfers), [Access::Read(0x00)]);
 }
 
 #[test]
 fn a_bus_failure_is_reported_and_the_set_up_retried() {
-    let mut s = sensor(RecordingBus {
-        fail_after: 5,
-        ..RecordingBus::new()
-    });
+    let mut b = bus(CHIP_VERSION);
+    b.fail_after = 5;
+    let mut s = sensor(b);
     assert_eq!(block_on(s.prepare(1000)), Err(CameraError::Bus));
     assert!(!s.is_ready());
     s.i2c.fail_after = usize::MAX;
-    s.i2c.accesses.clear();
+    s.i2c.transfers.clear();
     block_on(s.prepare(1000)).unwrap();
     assert_eq!(
-        s.i2c.accesses.first(),
-        Some(&Access::Read(0x00)),
+        accesses(&s.i2c.transfers).first().cloned(),
+        Some(Access::Read(0x00)),
         "set up again"
     );
-    assert_eq!(s.i2c.accesses.len(), 16);
+    assert_eq!(s.i2c.transfers.len(), 16);
 }

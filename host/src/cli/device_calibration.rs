@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{bail, Context, Result};
-use tangent_core::protocol::WireCalibration;
+use tangent_core::protocol::{WireAccelerometer, WireCalibration};
 use tangent_host::calibration_file;
 use tangent_host::link::{Link, LinkConfig};
 
@@ -40,13 +40,30 @@ enum Command {
     },
 }
 
+/// The `[accelerometer]` table as the device takes it: one σ for every axis, the largest
+/// of the three (the device's σ of gravity then covers every direction).
+fn wire_accelerometer(a: &calibration_file::AccelerometerToml) -> WireAccelerometer {
+    let largest = |v: [f64; 3]| v.into_iter().fold(0.0, f64::max);
+    WireAccelerometer {
+        bias_m_s2: a.bias_m_s2,
+        bias_sigma_m_s2: largest(a.bias_sigma_m_s2),
+        camera_from_sensor_rad: a.camera_from_sensor_rad,
+        alignment_sigma_rad: largest(a.alignment_sigma_rad),
+    }
+}
+
 /// Runs `tangent device-calibration …`.
 pub fn run(args: Args) -> Result<ExitCode> {
     match args.command {
         Command::Push { port, file } => {
             // The error names the file.
             let cal = calibration_file::read(&file)?;
-            let wire = WireCalibration::from(&cal);
+            let mut wire = WireCalibration::from(&cal);
+            // The accelerometer's calibration travels with the camera's: the device turns
+            // its readings into the plumb with it (`docs/building.md` §6).
+            wire.accelerometer = calibration_file::read_accelerometer(&file)?
+                .as_ref()
+                .map(wire_accelerometer);
             let path = resolve_port(port)?;
             let mut link = Link::open(&path, LinkConfig::default())?;
             link.write_calibration(&wire)?;

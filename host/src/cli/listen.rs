@@ -319,6 +319,10 @@ fn describe(t: &TreeRecord, r: &Reading) -> String {
             st.spread_m as f64 * 1e3
         );
     }
+    // A wall reading without its plumb says why (no accelerometer, or it failed).
+    if let Some(a) = r.accelerometer.filter(|a| a.mean().is_none()) {
+        s += &format!("  ({a})");
+    }
     let flags = fieldlog::flag_names(t.flags);
     if !flags.is_empty() {
         s += &format!("  [{flags}]");

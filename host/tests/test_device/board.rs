@@ -14,6 +14,9 @@ use tangent_core::protocol::{
     self, FrameSel, FromDevice, Method, ToDevice, WireCalibration, MAX_FRAME_LEN, MAX_RAW_LEN,
 };
 use tangent_core::solvers::result::Flags;
+use tangent_firmware::adxl355::model::Adxl355Model;
+use tangent_firmware::adxl355::Adxl355;
+use tangent_firmware::i2c_target::TargetBus;
 use tangent_firmware::measure::{FramePair, Measurer};
 use tangent_firmware::mode_log::{FlashWords, ModeLog, ERASED, WORD};
 use tangent_firmware::ports::{
@@ -61,6 +64,8 @@ impl Board for TestBoard {
     type Store = RamStore;
     type ModeStore = ModeLog<RamWords>;
     type Watchdog = NoWatchdog;
+    /// No accelerometer fitted (the stem tests' device): the ADXL355 driver on an empty bus.
+    type Accelerometer = Adxl355<TargetBus<Adxl355Model>>;
     const KIND: protocol::Board = protocol::Board::Emulated;
     /// The firmware's log, on stderr when `TANGENT_TEST_DEVICE_LOG` is set (the tests
     /// check what goes over the link).

@@ -282,6 +282,9 @@ fn boot(
         store,
         modes,
         watchdog: NoWatchdog,
+        accelerometer: tangent_firmware::adxl355::Adxl355::new(
+            tangent_firmware::i2c_target::TargetBus::new(None),
+        ),
     };
     let measurer = TestMeasurer {
         control: control.clone(),

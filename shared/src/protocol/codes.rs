@@ -34,6 +34,26 @@ pub const USB_PID: u16 = 0x7A6E;
 /// [`Request::CaptureFrames`](super::Request::CaptureFrames) cannot be served.
 pub const CAMERA_NO_FRAME_STORE: u32 = 6;
 
+/// Detail of [`AccelReading::Failed`](super::AccelReading::Failed): an I²C transaction with
+/// the accelerometer failed after it had answered (bus error, a lost acknowledge).
+pub const ACCEL_BUS: u32 = 1;
+/// Detail of [`AccelReading::Failed`](super::AccelReading::Failed): the part at the
+/// accelerometer's address is not the expected one (identity registers).
+pub const ACCEL_WRONG_PART: u32 = 2;
+/// Detail of [`AccelReading::Failed`](super::AccelReading::Failed): the accelerometer
+/// produced no new sample in time.
+pub const ACCEL_TIMEOUT: u32 = 3;
+
+/// What an [`AccelReading::Failed`](super::AccelReading::Failed) detail means to people.
+pub fn accel_failure(code: u32) -> &'static str {
+    match code {
+        ACCEL_BUS => "an I²C transaction failed",
+        ACCEL_WRONG_PART => "the part at its address is not an ADXL355",
+        ACCEL_TIMEOUT => "no new sample came in time",
+        _ => "unknown failure code",
+    }
+}
+
 /// Readings the device keeps for [`Request::History`](super::Request::History): a host that
 /// lost the link recovers the readings made meanwhile, up to this many.
 pub const HISTORY_LEN: usize = 64;

@@ -3,6 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::accelerometer::{Alignment, MeanReading};
 use crate::calibration::{Calibration, CalibrationError, MAX_PLANES};
 use crate::camera::{Camera, Distortion};
 use crate::laser_plane::LaserPlane;
@@ -256,6 +257,66 @@ pub struct Reading {
     pub measurement: Measurement,
     /// Running statistics of a held trigger or stream (`None` for a single reading).
     pub stats: Option<RunningStats>,
+    /// The accelerometer's part of the capture, for an instrument that uses the vertical
+    /// (the wall's plumb; protocol version 5): its mean, or why there is none. `None` in the
+    /// other modes (the device does not read it).
+    pub accelerometer: Option<AccelReading>,
+}
+
+/// The accelerometer's part of a reading (`docs/building.md` §6, `docs/protocol.md`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub enum AccelReading {
+    /// The mean specific force over the capture.
+    Mean {
+        /// x, y, z along the sensor's axes (m/s²; at rest it points up).
+        m_s2: [f32; 3],
+        /// Samples averaged.
+        samples: u16,
+        /// 1σ of one sample on each axis at the sensor's filter setting (m/s²).
+        sample_sigma_m_s2: f32,
+    },
+    /// No accelerometer answers (none fitted, or disconnected): the reading has no vertical.
+    Absent,
+    /// The accelerometer failed (`detail`: the board's code, `docs/protocol.md`).
+    Failed(u32),
+}
+
+impl AccelReading {
+    /// The mean as the core's reading (what [`crate::accelerometer::vertical`] takes), or
+    /// `None` when there is no mean.
+    pub fn mean(&self) -> Option<MeanReading> {
+        match *self {
+            AccelReading::Mean {
+                m_s2,
+                samples,
+                sample_sigma_m_s2,
+            } => Some(MeanReading {
+                mean_m_s2: Vec3::new(m_s2[0] as Real, m_s2[1] as Real, m_s2[2] as Real),
+                samples: samples as u32,
+                sample_sigma_m_s2: sample_sigma_m_s2 as Real,
+            }),
+            AccelReading::Absent | AccelReading::Failed(_) => None,
+        }
+    }
+}
+
+impl core::fmt::Display for AccelReading {
+    /// What the host prints of it.
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            AccelReading::Mean { m_s2, samples, .. } => write!(
+                f,
+                "accelerometer ({:.4}, {:.4}, {:.4}) m/s², mean of {samples}",
+                m_s2[0], m_s2[1], m_s2[2]
+            ),
+            AccelReading::Absent => write!(f, "no accelerometer answers: no vertical reference"),
+            AccelReading::Failed(code) => write!(
+                f,
+                "the accelerometer failed ({}): no vertical reference",
+                super::codes::accel_failure(*code)
+            ),
+        }
+    }
 }
 
 /// Running statistics of the readings of one held trigger or stream.
@@ -358,7 +419,8 @@ pub mod self_test {
 /// A calibration on the wire, in `f64` whatever the sender's [`Real`] is.
 ///
 /// Mirrors [`Calibration`] field by field (camera intrinsics, Brown–Conrady coefficients,
-/// each laser plane's unit normal, offset and source point) so that its bytes do not
+/// each laser plane's unit normal, offset and source point), with the accelerometer's
+/// calibration beside it (the device's whole calibration record), so that its bytes do not
 /// depend on the precision either side computes in.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct WireCalibration {
@@ -374,6 +436,58 @@ pub struct WireCalibration {
     pub distortion: [f64; 5],
     /// The laser planes.
     pub planes: heapless::Vec<WirePlane, MAX_PLANES>,
+    /// The accelerometer's calibration, when the device has one (protocol version 5): what
+    /// turns its readings into gravity in the camera frame for the plumb.
+    pub accelerometer: Option<WireAccelerometer>,
+}
+
+/// The accelerometer's calibration on the wire (`f64`): the core's
+/// [`Alignment`] (bias and sensor-to-camera rotation, each with one 1σ for all axes).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct WireAccelerometer {
+    /// Bias (sensor axes, m/s²).
+    pub bias_m_s2: [f64; 3],
+    /// 1σ of the bias on each axis (m/s²).
+    pub bias_sigma_m_s2: f64,
+    /// Rotation from the sensor's axes into the camera frame (rotation vector, radians).
+    pub camera_from_sensor_rad: [f64; 3],
+    /// 1σ of that rotation about each axis (radians).
+    pub alignment_sigma_rad: f64,
+}
+
+impl From<&Alignment> for WireAccelerometer {
+    fn from(a: &Alignment) -> Self {
+        let v = |x: &Vec3| [x.x as f64, x.y as f64, x.z as f64];
+        WireAccelerometer {
+            bias_m_s2: v(&a.bias_m_s2),
+            bias_sigma_m_s2: a.bias_sigma_m_s2 as f64,
+            camera_from_sensor_rad: v(&a.camera_from_sensor_rad),
+            alignment_sigma_rad: a.alignment_sigma_rad as f64,
+        }
+    }
+}
+
+impl WireAccelerometer {
+    /// The alignment in the local precision; `None` unless every value is finite and the
+    /// σ are ≥ 0.
+    pub fn to_alignment(&self) -> Option<Alignment> {
+        let finite = |a: &[f64]| a.iter().all(|x| x.is_finite());
+        let sigma_ok = |x: f64| x >= 0.0 && x.is_finite();
+        if !finite(&self.bias_m_s2)
+            || !finite(&self.camera_from_sensor_rad)
+            || !sigma_ok(self.bias_sigma_m_s2)
+            || !sigma_ok(self.alignment_sigma_rad)
+        {
+            return None;
+        }
+        let v = |a: [f64; 3]| Vec3::new(a[0] as Real, a[1] as Real, a[2] as Real);
+        Some(Alignment {
+            bias_m_s2: v(self.bias_m_s2),
+            bias_sigma_m_s2: self.bias_sigma_m_s2 as Real,
+            camera_from_sensor_rad: v(self.camera_from_sensor_rad),
+            alignment_sigma_rad: self.alignment_sigma_rad as Real,
+        })
+    }
 }
 
 /// A laser plane on the wire: `normal · X = offset`, emission point `source`.
@@ -413,6 +527,7 @@ impl From<&Calibration> for WireCalibration {
                 d.p2 as f64,
             ],
             planes,
+            accelerometer: None,
         }
     }
 }

@@ -52,15 +52,15 @@ pub use framing::{
     ProtocolError,
 };
 pub use messages::{
-    self_test, Board, DeviceError, DeviceInfo, ErrorCode, FrameSel, FrameSetInfo, FromDevice,
-    LinkStats, Method, ModeStoreState, Reading, Request, Response, RunningStats, SelfTestReport,
-    ToDevice, WireCalibration, WirePlane, UNSOLICITED,
+    self_test, AccelReading, Board, DeviceError, DeviceInfo, ErrorCode, FrameSel, FrameSetInfo,
+    FromDevice, LinkStats, Method, ModeStoreState, Reading, Request, Response, RunningStats,
+    SelfTestReport, ToDevice, WireAccelerometer, WireCalibration, WirePlane, UNSOLICITED,
 };
 
 /// Version of this protocol, the first byte of every raw frame. Bump it on any change to
 /// the message types (postcard has no field names: adding a variant in the middle or a
 /// field changes the bytes). The history of versions is in `docs/protocol.md`.
-pub const PROTOCOL_VERSION: u8 = 4;
+pub const PROTOCOL_VERSION: u8 = 5;
 
 /// Most pixel bytes in one [`Response::FrameChunk`].
 pub const FRAME_CHUNK_MAX: usize = 512;
@@ -70,7 +70,8 @@ pub const FRAME_CHUNK_MAX: usize = 512;
 /// The largest message is a [`Response::FrameChunk`]: [`FRAME_CHUNK_MAX`] bytes plus a
 /// header of at most 1 (tag varint ≤ 3) + 1 (variant) + 5 (capture varint) + 1 (frame)
 /// plus 5 (offset) + 5 (total) + 2 (length varint) = 22 bytes; with the version and CRC that
-/// is 537 bytes. A [`WireCalibration`] is at most 5 + 8 + 9·8 + 1 + 4·7·8 = 310 bytes.
+/// is 537 bytes. A [`WireCalibration`] is at most 5 + 8 + 9·8 + 1 + 4·7·8 + 1 + 8·8 = 375
+/// bytes.
 /// 640 leaves room for growth within this version.
 pub const MAX_RAW_LEN: usize = 640;
 

@@ -32,6 +32,17 @@ fn reading(seq: u32) -> Reading {
             mean_m: 0.314,
             spread_m: 0.0004,
         }),
+        accelerometer: None,
+    }
+}
+
+/// A calibrated accelerometer 1° off the camera, with a 25 mg bias.
+fn wire_accelerometer() -> WireAccelerometer {
+    WireAccelerometer {
+        bias_m_s2: [0.245, -0.12, 0.031],
+        bias_sigma_m_s2: 0.0074,
+        camera_from_sensor_rad: [0.0175, -0.003, 0.009],
+        alignment_sigma_rad: 0.00087,
     }
 }
 
@@ -114,6 +125,7 @@ fn largest_messages_fit() {
         cal.planes.push(cal.planes[0]).unwrap();
     }
     cal.id = u32::MAX;
+    cal.accelerometer = Some(wire_accelerometer());
     let msg = FromDevice {
         tag: u16::MAX,
         response: Response::Calibration(cal),
@@ -315,7 +327,8 @@ fn empty_frames_are_ignored() {
 
 #[test]
 fn calibration_record_round_trip_and_corruption() {
-    let cal = WireCalibration::from(&Calibration::reference_design());
+    let mut cal = WireCalibration::from(&Calibration::reference_design());
+    cal.accelerometer = Some(wire_accelerometer());
     let mut buf = [0xFFu8; calibration_record::MAX_RECORD];
     let n = calibration_record::encode(&cal, &mut buf).unwrap();
     assert_eq!(calibration_record::decode(&buf[..n]), Some(cal.clone()));
@@ -522,4 +535,63 @@ fn the_mode_travels_as_its_number() {
     let (mut out, n) = frame_of(&msg);
     let back: FromDevice = decode(&mut out[..n]).unwrap();
     assert_eq!(back, msg);
+}
+
+/// A wall reading carries the accelerometer's mean (or why there is none) beside the
+/// measurement, and both ends turn the mean into gravity with the same core function.
+#[test]
+fn a_reading_carries_the_accelerometer_and_both_ends_read_it_alike() {
+    let g = crate::accelerometer::STANDARD_GRAVITY as f32;
+    for accelerometer in [
+        Some(AccelReading::Mean {
+            m_s2: [0.2, g, -0.1],
+            samples: 16,
+            sample_sigma_m_s2: 0.0011,
+        }),
+        Some(AccelReading::Absent),
+        Some(AccelReading::Failed(codes::ACCEL_TIMEOUT)),
+        None,
+    ] {
+        let msg = FromDevice {
+            tag: 9,
+            response: Response::Reading(Reading {
+                accelerometer,
+                ..reading(4)
+            }),
+        };
+        let (mut out, n) = frame_of(&msg);
+        let back: FromDevice = decode(&mut out[..n]).unwrap();
+        assert_eq!(back, msg);
+    }
+    let mean = AccelReading::Mean {
+        m_s2: [0.2, -g, -0.1],
+        samples: 16,
+        sample_sigma_m_s2: 0.0011,
+    };
+    let m = mean.mean().unwrap();
+    assert_eq!((m.samples, m.mean_m_s2.y), (16, -g as Real));
+    assert_eq!(AccelReading::Absent.mean(), None);
+    // The wire alignment and the core's: exact both ways, and checked.
+    let a = wire_accelerometer().to_alignment().unwrap();
+    assert_eq!(WireAccelerometer::from(&a).to_alignment(), Some(a));
+    let v = crate::accelerometer::vertical(&m, &a).unwrap();
+    assert!((v.down.norm() - 1.0).abs() < 1e-5, "{v:?}");
+    assert!(
+        v.down.y > 0.99,
+        "the sensor reads up along −y: gravity is +y: {v:?}"
+    );
+    let mut bad = wire_accelerometer();
+    bad.alignment_sigma_rad = -1.0;
+    assert_eq!(bad.to_alignment(), None);
+    bad = wire_accelerometer();
+    bad.bias_m_s2[1] = f64::NAN;
+    assert_eq!(bad.to_alignment(), None);
+    // What the host prints of a failure names it.
+    let mut text: heapless::String<128> = heapless::String::new();
+    core::fmt::Write::write_fmt(
+        &mut text,
+        format_args!("{}", AccelReading::Failed(codes::ACCEL_WRONG_PART)),
+    )
+    .unwrap();
+    assert!(text.contains("ADXL355"), "{text}");
 }

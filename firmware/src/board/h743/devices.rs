@@ -3,6 +3,7 @@
 use core::cell::RefCell;
 
 use embassy_embedded_hal::adapter::BlockingAsync;
+use embassy_embedded_hal::shared_bus::asynch::i2c::I2cDevice;
 use embassy_stm32::dcmi::Dcmi;
 use embassy_stm32::dma::ReadableRingBuffer;
 use embassy_stm32::exti::ExtiInput;
@@ -15,6 +16,8 @@ use embassy_stm32::peripherals::DCMI;
 use embassy_stm32::peripherals::USB_OTG_FS;
 use embassy_stm32::usb::Driver;
 use embassy_stm32::wdg::IndependentWatchdog;
+use embassy_sync::blocking_mutex::raw::NoopRawMutex;
+use embassy_sync::mutex::Mutex;
 use embassy_time::{Duration, Instant, Timer};
 use embassy_usb::class::cdc_acm::CdcAcmClass;
 use embassy_usb::driver::EndpointError;
@@ -24,6 +27,7 @@ use super::{
     CALIB_OFFSET, CALIB_SECTOR, DEBOUNCE_US, FRAME_BYTES, MODES_OFFSET, MODES_SECTOR, PIXCLK_HZ,
     WIDTH, WINDOW,
 };
+use crate::adxl355::Adxl355;
 use crate::mode_log::{FlashWords, ModeLog, WORD};
 use crate::mt9v034::Mt9v034;
 use crate::ports::{self, CameraError, Geometry, LinkError, Strobe};
@@ -299,10 +303,18 @@ impl FlashWords for ModeSector {
     }
 }
 
-/// The sensor's I²C bus: I2C1 in blocking mode behind embassy's blocking-to-async adapter (a
-/// register write is 3 bytes, ≈ 80 µs at 400 kHz; the DMA-driven `I2c::new` would need two
-/// more DMA streams and the I2C1 interrupts for no gain).
-pub type SensorBus = BlockingAsync<I2c<'static, BlockingMode, Master>>;
+/// I2C1 in blocking mode behind embassy's blocking-to-async adapter (a register write is
+/// 3 bytes, ≈ 80 µs at 400 kHz; the DMA-driven `I2c::new` would need two more DMA streams
+/// and the I2C1 interrupts for no gain).
+pub type I2c1 = BlockingAsync<I2c<'static, BlockingMode, Master>>;
+
+/// I2C1 shared by the image sensor and the accelerometer (`docs/hardware.md`, "Wiring"):
+/// an async mutex around the bus, one transaction at a time. Both are used from the
+/// application's one task, never during a frame's read-out.
+pub type SharedI2c1 = Mutex<NoopRawMutex, I2c1>;
+
+/// One device's handle on [`SharedI2c1`].
+pub type SensorBus = I2cDevice<'static, NoopRawMutex, I2c1>;
 
 /// The camera: the MT9V034 (set up over I²C) with its EXPOSURE pin, frames by DCMI + DMA.
 pub struct Mt9v034Dcmi {
@@ -326,13 +338,13 @@ impl Mt9v034Dcmi {
     /// again before the next capture); `ring` is the circular DMA from the DCMI's data
     /// register into two blocks of [`BLOCK_WORDS`] words, `block` where each is read to.
     pub async fn new(
-        i2c: I2c<'static, BlockingMode, Master>,
+        i2c: SensorBus,
         dcmi: Dcmi<'static, DCMI>,
         ring: ReadableRingBuffer<'static, u32>,
         block: &'static mut [u32; BLOCK_WORDS],
         exposure_pin: Output<'static>,
     ) -> Self {
-        let mut sensor = Mt9v034::new(BlockingAsync::new(i2c), WINDOW, PIXCLK_HZ);
+        let mut sensor = Mt9v034::new(i2c, WINDOW, PIXCLK_HZ);
         if let Err(e) = sensor.init().await {
             defmt::warn!("MT9V034 set-up failed: {}", e.code());
         }
@@ -450,6 +462,7 @@ impl ports::Board for H743 {
     type Store = FlashStore;
     type ModeStore = FlashModes;
     type Watchdog = Iwdg;
+    type Accelerometer = Adxl355<SensorBus>;
     const KIND: protocol::Board = protocol::Board::H743;
     fn log(args: core::fmt::Arguments<'_>) {
         defmt::info!("{}", defmt::Display2Format(&args));

@@ -22,12 +22,17 @@ use tangent_core::pipeline::Workspace;
 use super::devices::BLOCK_WORDS;
 use super::devices::{
     Button, EmbassyClock, FlashModes, FlashStore, GpioLasers, Iwdg, ModeSector, Mt9v034Dcmi,
-    UsbLink, H743,
+    SharedI2c1, UsbLink, H743,
 };
 use super::{FRAME_BYTES, POINTS, USB_PID, USB_VID, WATCHDOG_US};
+use crate::adxl355::Adxl355;
 use crate::app::Buffers;
 use crate::buffers::FrameBuffer;
+use crate::ports::AccelError;
 use crate::ports::Devices;
+use embassy_embedded_hal::adapter::BlockingAsync;
+use embassy_embedded_hal::shared_bus::asynch::i2c::I2cDevice;
+use embassy_sync::mutex::Mutex;
 
 bind_interrupts!(struct Irqs {
     OTG_FS => usb::InterruptHandler<peripherals::USB_OTG_FS>;
@@ -114,10 +119,14 @@ pub async fn start() -> Started {
     let mut wdg = IndependentWatchdog::new(p.IWDG1, WATCHDOG_US);
     wdg.pet();
 
-    // Camera: I2C1 (PB8 SCL, PB9 SDA) for set-up, DCMI 8-bit on D9..D2 of the sensor.
+    // I2C1 (PB8 SCL, PB9 SDA): the camera's set-up and the accelerometer, shared.
     let mut i2c_config = i2c::Config::default();
     i2c_config.frequency = Hertz(400_000);
-    let i2c = I2c::new_blocking(p.I2C1, p.PB8, p.PB9, i2c_config);
+    static I2C1: StaticCell<SharedI2c1> = StaticCell::new();
+    let i2c1: &'static SharedI2c1 = I2C1.init(Mutex::new(BlockingAsync::new(I2c::new_blocking(
+        p.I2C1, p.PB8, p.PB9, i2c_config,
+    ))));
+    // Camera: DCMI 8-bit on D9..D2 of the sensor.
     let mut dcmi_config = dcmi::Config::default();
     dcmi_config.pixclk_polarity = dcmi::PixelClockPolarity::RisingEdge;
     dcmi_config.vsync_level = dcmi::VSyncDataInvalidLevel::Low;
@@ -164,7 +173,17 @@ pub async fn start() -> Started {
         (ring, &mut *addr_of_mut!(BLOCK))
     };
     let exposure_pin = Output::new(p.PD12, Level::Low, Speed::High);
-    let camera = Mt9v034Dcmi::new(i2c, dcmi, ring, block, exposure_pin).await;
+    let camera = Mt9v034Dcmi::new(I2cDevice::new(i2c1), dcmi, ring, block, exposure_pin).await;
+    // The accelerometer (the wall's vertical): the device measures without it when none
+    // answers (every wall reading then says so).
+    let mut accelerometer = Adxl355::new(I2cDevice::new(i2c1));
+    match accelerometer.init().await {
+        Ok(()) => defmt::info!("ADXL355 accelerometer set up"),
+        Err(AccelError::Absent) => {
+            defmt::info!("no accelerometer answers on I2C1: wall readings without the plumb")
+        }
+        Err(e) => defmt::warn!("ADXL355 set-up failed: code {}", e.code()),
+    }
 
     let trigger = Button::new(ExtiInput::new(p.PC13, p.EXTI13, Pull::Down, Irqs));
     // One flash driver for the calibration's sector and the mode log's.
@@ -217,6 +236,7 @@ pub async fn start() -> Started {
         store,
         modes,
         watchdog: Iwdg::start(wdg),
+        accelerometer,
     };
     Started {
         devices,
