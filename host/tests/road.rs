@@ -293,6 +293,7 @@ fn a_tilted_head_and_a_profile_mostly_dropouts_are_named() {
         Err(e @ PipelineError::Road(RoadError::TooManyDropouts { fraction, .. })) => {
             assert!((fraction - 98.0 / 667.0).abs() < 0.02, "{fraction}");
             assert!(e.to_string().contains("ISO 13473-1 allows 10 %"), "{e}");
+            println!("seven dark patches: {e}");
         }
         other => panic!("{other:?}"),
     }
@@ -328,6 +329,7 @@ fn scattered_dropouts_are_counted_and_located() {
                 text.contains("scattered in") && text.contains("ISO 13473-1 allows 10 %"),
                 "{text}"
             );
+            println!("one column in four dark: {text}");
         }
         other => panic!("{other:?}"),
     }
