@@ -361,6 +361,12 @@ pub fn dropout_runs(capture: &mut crate::capture::Capture, runs: usize, columns:
     });
 }
 
+/// Every `every`-th column returns nothing: drop-outs scattered column by column, as on a
+/// dark or porous surface.
+pub fn scattered_dropouts(capture: &mut crate::capture::Capture, every: usize) {
+    blank_columns(capture, |u| every > 0 && u % every == 0);
+}
+
 fn blank_columns(capture: &mut crate::capture::Capture, blank: impl Fn(usize) -> bool) {
     use crate::pgm::PgmSamples;
     let off = capture.off_frame().clone();

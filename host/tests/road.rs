@@ -10,7 +10,9 @@ use tangent_core::pipeline::{PipelineConfig, PipelineError};
 use tangent_core::real::Vec2;
 use tangent_core::solvers::road_profile::RoadError;
 use tangent_host::capture::Capture;
-use tangent_host::evaluate_road::{detrended_rms, dropout_runs, wet_mirror_patch};
+use tangent_host::evaluate_road::{
+    detrended_rms, dropout_runs, scattered_dropouts, wet_mirror_patch,
+};
 use tangent_host::measure::measure_road;
 use tangent_host::road::crosscheck::{captif_mpd, write_profile_csv};
 use tangent_host::road::height_scale::furrow_depth;
@@ -288,9 +290,46 @@ fn a_tilted_head_and_a_profile_mostly_dropouts_are_named() {
     dropout_runs(&mut sparse, 7, 14);
     let o = measure_road(&sparse, None, &PipelineConfig::default(), &params).unwrap();
     match &o.result {
-        Err(e @ PipelineError::Road(RoadError::TooManyDropouts { fraction })) => {
+        Err(e @ PipelineError::Road(RoadError::TooManyDropouts { fraction, .. })) => {
             assert!((fraction - 98.0 / 667.0).abs() < 0.02, "{fraction}");
             assert!(e.to_string().contains("ISO 13473-1 allows 10 %"), "{e}");
+            println!("seven dark patches: {e}");
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+/// Drop-outs scattered column by column (one column in four dark) are refused by name: how
+/// many, scattered where, and the standard's limit (`docs/road.md`, "Bad input").
+#[test]
+fn scattered_dropouts_are_counted_and_located() {
+    let params = RoadParams::default();
+    let captures = repo().join("tests/captures");
+    let mut capture = Capture::read(&captures.join("road-head-dense-asphalt")).unwrap();
+    scattered_dropouts(&mut capture, 4);
+    let o = measure_road(&capture, None, &PipelineConfig::default(), &params).unwrap();
+    match &o.result {
+        Err(
+            e @ PipelineError::Road(RoadError::TooManyDropouts {
+                fraction,
+                dropouts,
+                runs,
+                span,
+            }),
+        ) => {
+            assert!((fraction - 0.25).abs() < 0.03, "{fraction}");
+            // One run per dark column: scattered, not a patch.
+            assert!(
+                *runs as f64 >= 0.9 * *dropouts as f64,
+                "{runs} runs, {dropouts}"
+            );
+            assert!(span.0 < -0.045 && span.1 > 0.045, "{span:?}");
+            let text = e.to_string();
+            assert!(
+                text.contains("scattered in") && text.contains("ISO 13473-1 allows 10 %"),
+                "{text}"
+            );
+            println!("one column in four dark: {text}");
         }
         other => panic!("{other:?}"),
     }

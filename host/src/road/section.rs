@@ -241,6 +241,9 @@ mod tests {
         assert_eq!(s.add(&Ok(solution(1.2e-3))), Added::Segments(1));
         let dropouts = Err(PipelineError::Road(RoadError::TooManyDropouts {
             fraction: 0.3,
+            dropouts: 200,
+            runs: 180,
+            span: (-0.05, 0.05),
         }));
         assert_eq!(s.add(&dropouts), Added::Excluded("drop-outs"));
         let tilted = Err(PipelineError::Road(RoadError::Tilted { angle: 0.2 }));

@@ -136,7 +136,17 @@ pub fn correct_dropouts(profile: &[Vec2], heights: &mut [Real]) -> Result<usize,
     }
     match previous {
         Some(last) => heights[last + 1..].fill(profile[last].y),
-        None => return Err(RoadError::TooManyDropouts { fraction: 1.0 }),
+        None => {
+            return Err(RoadError::TooManyDropouts {
+                fraction: 1.0,
+                dropouts: n,
+                runs: usize::from(n > 0),
+                span: (
+                    profile.first().map_or(Real::NAN, |p| p.x),
+                    profile.last().map_or(Real::NAN, |p| p.x),
+                ),
+            })
+        }
     }
     Ok(missing)
 }
@@ -435,9 +445,22 @@ pub fn mean_profile_depth(
         let raw = profile
             .iter()
             .filter(|p| p.x > seg_start && p.x <= seg_start + (k1 - k0) as Real * spacing);
-        let (raw_n, raw_drop) = raw.fold((0usize, 0usize), |(a, d), p| {
-            (a + 1, d + usize::from(is_dropout(p)))
-        });
+        let (mut raw_n, mut raw_drop, mut runs) = (0usize, 0usize, 0usize);
+        let mut span = (Real::NAN, Real::NAN);
+        let mut previous_dropout = false;
+        for p in raw {
+            raw_n += 1;
+            let dropout = is_dropout(p);
+            if dropout {
+                raw_drop += 1;
+                runs += usize::from(!previous_dropout);
+                if raw_drop == 1 {
+                    span.0 = p.x;
+                }
+                span.1 = p.x;
+            }
+            previous_dropout = dropout;
+        }
         seg.dropout_fraction = raw_drop as Real / raw_n.max(1) as Real;
         let spiked = spike_marks[k0..k1]
             .iter()
@@ -448,6 +471,9 @@ pub fn mean_profile_depth(
             seg.valid = false;
             first_error.get_or_insert(RoadError::TooManyDropouts {
                 fraction: seg.dropout_fraction,
+                dropouts: raw_drop,
+                runs,
+                span,
             });
         } else if seg.spike_fraction > params.max_spike_fraction {
             seg.valid = false;

@@ -52,6 +52,14 @@ pub enum RoadError {
     TooManyDropouts {
         /// Drop-out share of the evaluation window (0–1).
         fraction: Real,
+        /// Drop-out samples (0 when unknown: the wire carries the share alone).
+        dropouts: usize,
+        /// Separate runs they form: as many as drop-outs when scattered sample by sample
+        /// (0 when unknown).
+        runs: usize,
+        /// Positions of the first and the last drop-out along the line (metres; NaN when
+        /// unknown).
+        span: (Real, Real),
     },
     /// One contiguous stretch returned no light: a wet (mirror) patch, a hole or an
     /// obstacle shadowing the line.
@@ -99,11 +107,30 @@ impl fmt::Display for RoadError {
                 f,
                 "the laser plane does not cross the optical axis ahead: not a road-head calibration"
             ),
-            RoadError::TooManyDropouts { fraction } => write!(
-                f,
-                "{:.0} % of the profile are drop-outs (ISO 13473-1 allows 10 %): profile excluded",
-                fraction * 100.0
-            ),
+            RoadError::TooManyDropouts {
+                fraction,
+                dropouts,
+                runs,
+                span: (first, last),
+            } => {
+                write!(f, "{:.0} % of the profile are drop-outs", fraction * 100.0)?;
+                if dropouts > 0 && runs > 0 && first.is_finite() && last.is_finite() {
+                    // A mean run under 2 samples is the signature of a dark or porous
+                    // surface returning too little light, not of one patch.
+                    let how = if 2 * runs > dropouts {
+                        "scattered"
+                    } else {
+                        "grouped"
+                    };
+                    write!(
+                        f,
+                        " ({dropouts} samples, {how} in {runs} runs from {:+.1} to {:+.1} mm along the line)",
+                        first * 1e3,
+                        last * 1e3
+                    )?;
+                }
+                write!(f, "; ISO 13473-1 allows 10 %: profile excluded")
+            }
             RoadError::DropoutGap { start, length } => {
                 write!(f, "no return over {:.1} mm", length * 1e3)?;
                 if start.is_finite() {
@@ -159,7 +186,7 @@ impl RoadError {
             RoadError::BufferTooSmall { needed, .. } => 1 | (needed.min(0xFFFF) as u32) << 4,
             RoadError::InvalidParameter(_) => 2,
             RoadError::NotARoadHead => 3,
-            RoadError::TooManyDropouts { fraction } => 4 | q(fraction, 1e-3),
+            RoadError::TooManyDropouts { fraction, .. } => 4 | q(fraction, 1e-3),
             RoadError::DropoutGap { length, .. } => 5 | q(length, 1e-4),
             RoadError::Tilted { angle } => 6 | q(angle.to_degrees(), 0.1),
             RoadError::OutOfRange { height } => 7 | q(height, 1e-4),
@@ -169,7 +196,8 @@ impl RoadError {
     }
 
     /// The error a wire number carries ([`RoadError::wire`]'s inverse, to its resolution;
-    /// a gap's start and a parameter's name do not travel).
+    /// a gap's start, a parameter's name and the drop-outs' count, runs and span do not
+    /// travel).
     pub fn from_wire(n: u32) -> Option<RoadError> {
         let magnitude = ((n >> 4) & 0xFFFF) as Real;
         let v = |unit: Real| {
@@ -189,7 +217,12 @@ impl RoadError {
             },
             2 => RoadError::InvalidParameter("a road parameter"),
             3 => RoadError::NotARoadHead,
-            4 => RoadError::TooManyDropouts { fraction: v(1e-3) },
+            4 => RoadError::TooManyDropouts {
+                fraction: v(1e-3),
+                dropouts: 0,
+                runs: 0,
+                span: (Real::NAN, Real::NAN),
+            },
             5 => RoadError::DropoutGap {
                 start: Real::NAN,
                 length: v(1e-4),
@@ -297,20 +330,32 @@ pub fn road_profile(
     if n_inside < MIN_POINTS {
         return Err(RoadError::TooFewPoints { points: n_inside });
     }
-    let spacing = typical_step(points.iter().filter(inside).map(|p| p.x), steps)?;
+    let spacing = typical_step(points.iter().filter(inside).map(|p| p.x), steps, 0.5)?;
+    // Drop-outs are counted in the image's normalised coordinate `x/z`, where one column is
+    // `1/f` whatever the height, against the single-column step: the median of the steps
+    // within 1.5× the lower decile — one column even when most columns are dark (drop-outs
+    // scattered one column in three would make the median of all steps two columns and
+    // hide them).
+    let decile = typical_step(points.iter().filter(inside).map(|p| p.x / p.z), steps, 0.1)?;
+    // `typical_step` left the `n_inside − 1` steps sorted at the front of `steps`.
+    let sorted = &steps[..(n_inside - 1).min(steps.len())];
+    let single = sorted.iter().take_while(|&&d| d <= 1.5 * decile).count();
+    let column = sorted.get(single / 2).copied().unwrap_or(decile);
     let mut w = Writer {
         out,
         n: 0,
         dropouts: 0,
+        runs: 0,
+        span: (Real::NAN, Real::NAN),
     };
     let mut gap = Gap::default();
-    let mut previous: Option<Real> = None;
+    let mut previous: Option<(Real, Real)> = None;
     for p in points.iter().filter(inside) {
         let h = params.height_scale * (z_ref - p.z);
         // Missing samples before this point: from the window start, or since the previous.
         let (from, missing) = match previous {
             None => (s0 - spacing, missing_before(p.x - s0, spacing)),
-            Some(prev) => (prev, missing_between(p.x - prev, spacing)),
+            Some((prev, prev_q)) => (prev, missing_between((p.x / p.z - prev_q).abs(), column)),
         };
         let step = (p.x - from) / (missing + 1) as Real;
         for k in 1..=missing {
@@ -318,16 +363,16 @@ pub fn road_profile(
         }
         gap.add(from, p.x, missing, spacing);
         w.push(Vec2::new(p.x, h))?;
-        previous = Some(p.x);
+        previous = Some((p.x, p.x / p.z));
     }
-    if let Some(last) = previous {
+    if let Some((last, _)) = previous {
         let missing = missing_before(s1 - last, spacing);
         for k in 1..=missing {
             w.push(Vec2::new(last + spacing * k as Real, Real::NAN))?;
         }
         gap.add(last, s1 + spacing, missing, spacing);
     }
-    let (samples, dropouts) = (w.n, w.dropouts);
+    let (samples, dropouts, runs, span) = (w.n, w.dropouts, w.runs, w.span);
     let (mean_height, tilt) = regression(&out[..samples]);
     let summary = ProfileSummary {
         samples,
@@ -346,6 +391,9 @@ pub fn road_profile(
     if summary.dropout_fraction() > MAX_DROPOUT_FRACTION {
         return Err(RoadError::TooManyDropouts {
             fraction: summary.dropout_fraction(),
+            dropouts,
+            runs,
+            span,
         });
     }
     if tilt.abs() > params.max_tilt {
@@ -383,11 +431,12 @@ fn check_params(p: &ProfileParams) -> Result<(), RoadError> {
     Ok(())
 }
 
-/// The median step between consecutive positions: the column footprint, robust to the
-/// drop-outs' long steps.
+/// The `quantile` (0–1) of the steps between consecutive positions: with 0.5 the column
+/// footprint, robust to the drop-outs' long steps.
 fn typical_step(
     positions: impl Iterator<Item = Real>,
     steps: &mut [Real],
+    quantile: Real,
 ) -> Result<Real, RoadError> {
     let mut n = 0;
     let mut previous: Option<Real> = None;
@@ -404,11 +453,12 @@ fn typical_step(
     }
     let steps = &mut steps[..n];
     steps.sort_unstable_by(|a, b| a.partial_cmp(b).unwrap_or(core::cmp::Ordering::Equal));
-    let median = steps.get(n / 2).copied().unwrap_or(0.0);
-    if !(median > 0.0) {
+    let rank = ((n as Real * quantile) as usize).min(n.saturating_sub(1));
+    let step = steps.get(rank).copied().unwrap_or(0.0);
+    if !(step > 0.0) {
         return Err(RoadError::TooFewPoints { points: n + 1 });
     }
-    Ok(median)
+    Ok(step)
 }
 
 /// Samples missing in a step of `d` between two points `spacing` apart nominally.
@@ -432,6 +482,10 @@ struct Writer<'a> {
     out: &'a mut [Vec2],
     n: usize,
     dropouts: usize,
+    /// Runs of consecutive drop-outs.
+    runs: usize,
+    /// First and last drop-out position.
+    span: (Real, Real),
 }
 
 impl Writer<'_> {
@@ -442,9 +496,15 @@ impl Writer<'_> {
             actual,
         })?;
         *slot = v;
+        let follows_dropout = self.n > 0 && is_dropout(&self.out[self.n - 1]);
         self.n += 1;
         if is_dropout(&v) {
             self.dropouts += 1;
+            self.runs += usize::from(!follows_dropout);
+            if self.dropouts == 1 {
+                self.span.0 = v.x;
+            }
+            self.span.1 = v.x;
         }
         Ok(())
     }
@@ -576,8 +636,51 @@ mod tests {
         }
         let e = road_profile(&sparse[..k], 0.3, &params, &mut steps, &mut out);
         assert!(
-            matches!(e, Err(RoadError::TooManyDropouts { fraction }) if (fraction - 0.2).abs() < 0.01),
+            matches!(e, Err(RoadError::TooManyDropouts { fraction, dropouts, runs, .. })
+                if (fraction - 0.2).abs() < 0.01 && runs > 60 && dropouts == 2 * runs),
             "{e:?}"
+        );
+        // One column in three dark: half the steps are two columns, still counted.
+        let mut thirds = [Vec3::zeros(); 800];
+        let mut k = 0;
+        for (i, p) in pts.iter().enumerate() {
+            if i % 3 != 0 {
+                thirds[k] = *p;
+                k += 1;
+            }
+        }
+        let e = road_profile(&thirds[..k], 0.3, &params, &mut steps, &mut out);
+        assert!(
+            matches!(e, Err(RoadError::TooManyDropouts { fraction, .. }) if (fraction - 1.0 / 3.0).abs() < 0.01),
+            "{e:?}"
+        );
+        // Scattered (one column in four dark): named with how many, where and the limit.
+        let mut scattered = [Vec3::zeros(); 800];
+        let mut k = 0;
+        for (i, p) in pts.iter().enumerate() {
+            if i % 4 != 0 {
+                scattered[k] = *p;
+                k += 1;
+            }
+        }
+        let e = road_profile(&scattered[..k], 0.3, &params, &mut steps, &mut out).unwrap_err();
+        let RoadError::TooManyDropouts {
+            dropouts,
+            runs,
+            span,
+            ..
+        } = e
+        else {
+            panic!("{e:?}")
+        };
+        assert_eq!(runs, dropouts);
+        assert!(span.0 < -0.049 && span.1 > 0.049, "{span:?}");
+        let text = std::format!("{e}");
+        assert!(
+            text.contains("25 % of the profile")
+                && text.contains("scattered in")
+                && text.contains("ISO 13473-1 allows 10 %"),
+            "{text}"
         );
         // Tilted 8°.
         let pts = line(800, 0.15e-3, |x| 0.3 + x * (8.0 as Real).to_radians().tan());
@@ -599,7 +702,12 @@ mod tests {
         assert_eq!(e, RoadError::TooFewPoints { points: 0 });
         // Every refusal travels as one number and reads the same at the other end.
         for e in [
-            RoadError::TooManyDropouts { fraction: 0.234 },
+            RoadError::TooManyDropouts {
+                fraction: 0.234,
+                dropouts: 0,
+                runs: 0,
+                span: (Real::NAN, Real::NAN),
+            },
             RoadError::Tilted { angle: -0.15 },
             RoadError::OutOfRange { height: 0.0213 },
             RoadError::TooFewPoints { points: 7 },

@@ -179,10 +179,15 @@ fn the_road_instrument_alone_takes_its_curve_unsmoothed_and_in_fragments() {
     let road = pipeline_config(Mode::Road, &base);
     assert_eq!(road.smooth.half_window, 0);
     assert_eq!(road.max_fragments, crate::curve::MAX_CURVES);
+    // Scattered drop-outs: pieces taller than wide are kept and the curve grown through them.
+    assert_eq!(road.selection.max_height_to_width, Real::INFINITY);
+    assert!(road.grow.is_some());
     assert_eq!(
         PipelineConfig {
             smooth: base.smooth,
             max_fragments: base.max_fragments,
+            selection: base.selection,
+            grow: base.grow,
             ..road
         },
         base
