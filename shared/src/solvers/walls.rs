@@ -512,14 +512,20 @@ fn group(
 ) -> Result<heapless::Vec<Group, MAX_WALLS>, SolveError> {
     let mut walls: heapless::Vec<Group, MAX_WALLS> = heapless::Vec::new();
     while walls.len() < MAX_WALLS {
-        let mut best: Option<(usize, usize, usize, PlaneFit)> = None;
+        // Seeds of two lines across the image first (a pair of them spans a wall by
+        // itself), then the largest: the crossing line runs down the image beside a corner's
+        // edge and, paired with the other wall's longer run, passes as a plane that is
+        // neither wall (docs/building.md §2, step 2b).
+        let mut best: Option<(usize, usize, (bool, usize), PlaneFit)> = None;
         for i in 0..runs.len() {
             for j in i + 1..runs.len() {
                 let (a, b) = (runs[i], runs[j]);
                 if a.wall.is_some() || b.wall.is_some() || a.curve == b.curve {
                     continue;
                 }
-                let count = a.len() + b.len();
+                let across = !input.planes[a.curve as usize].is_row_wise()
+                    && !input.planes[b.curve as usize].is_row_wise();
+                let count = (across, a.len() + b.len());
                 if best.is_some_and(|(_, _, c, _)| c >= count) {
                     continue;
                 }
