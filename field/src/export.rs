@@ -19,10 +19,10 @@ pub enum ExportFormat {
     Json,
 }
 
-/// The tree-level columns of the CSV/TSV exports, in order (`kind`, last so that the
-/// column numbers importers are set up with stay, says what each row measured: `stem`,
-/// `sphere`, …; `dbh_mm` is then that reading's diameter).
-pub const TREE_COLUMNS: [&str; 12] = [
+/// The tree-level columns of the CSV/TSV exports, in order (`kind` and `label`, last so that
+/// the column numbers importers are set up with stay: what each row measured — `stem`,
+/// `sphere`, `wall`, …; `dbh_mm` is then that reading's value — and the user's label of it).
+pub const TREE_COLUMNS: [&str; 13] = [
     "tree_id",
     "species",
     "dbh_mm",
@@ -35,6 +35,7 @@ pub const TREE_COLUMNS: [&str; 12] = [
     "seq",
     "plot_id",
     "kind",
+    "label",
 ];
 
 /// A plot with its trees, as exported.
@@ -148,6 +149,7 @@ fn export_table(plots: &[ExportPlot], sep: char) -> String {
                 t.seq.to_string(),
                 field(&t.plot_id, s),
                 field(&t.kind, s),
+                field(&t.label, s),
             ];
             out += &row.join(&sep.to_string());
             out.push('\n');

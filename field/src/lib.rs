@@ -21,8 +21,8 @@ pub use export::{
     export, export_records, plots, ExportFormat, ExportPlot, NoSuchPlot, TREE_COLUMNS,
 };
 pub use record::{
-    board_device_id, decode_line, encode_line, flag_names, select_plot, Filing, PlotHeader, Record,
-    TreeRecord, MAGIC_LINE,
+    board_device_id, decode_line, encode_line, flag_names, reading_line, select_plot, Filing,
+    PlotHeader, Record, TreeRecord, MAGIC_LINE,
 };
 pub use scan::{
     is_foreign, scan, DamageKind, DamagedSpan, Duplicate, HeaderlessPlot, Located, Scan, Tolerated,

@@ -67,6 +67,10 @@ pub struct TreeRecord {
     /// from logs written before readings had kinds.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub measurement: Option<Measurement>,
+    /// The user's free-text label of the reading (`"kitchen NE corner"`, `"door 2 width"`);
+    /// empty when none was given, and in logs written before readings had labels.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub label: String,
 }
 
 /// The kind of the readings of logs written before readings had kinds.
@@ -74,8 +78,8 @@ fn stem_kind() -> String {
     "stem".to_string()
 }
 
-/// Where a reading is filed: the plot, tree and species the forester chose, the device it
-/// came from, and the host's time it arrived (RFC 3339 UTC with seconds,
+/// Where a reading is filed: the plot, tree and species the forester chose, the user's label,
+/// the device it came from, and the host's time it arrived (RFC 3339 UTC with seconds,
 /// `2025-06-01T10:00:00Z`).
 #[derive(Debug, Clone, Copy)]
 pub struct Filing<'a> {
@@ -85,6 +89,8 @@ pub struct Filing<'a> {
     pub tree_id: u32,
     /// Species code.
     pub species: &'a str,
+    /// Free-text label (empty: none).
+    pub label: &'a str,
     /// Device id.
     pub device_id: &'a str,
     /// Host time.
@@ -117,6 +123,7 @@ impl TreeRecord {
             device_time_ms: r.timestamp_ms,
             kind: m.kind().to_string(),
             measurement: Some(*m),
+            label: filing.label.to_string(),
         }
     }
 }
@@ -164,6 +171,53 @@ pub fn flag_names(flags: u32) -> String {
         names.push(format!("0x{rest:04X}"));
     }
     names.join("+")
+}
+
+/// One reading as `tangent log show` prints it: plot, number, kind, value (mm) ± σ (a
+/// wall's corner angle, plumb, parallel distance and segment too, when it has them),
+/// species, flags, time and the label in quotes (fields that are empty are left out).
+pub fn reading_line(t: &TreeRecord) -> String {
+    let mut s = format!(
+        "{} #{} {} {:.1} mm ± {:.1}",
+        t.plot_id, t.tree_id, t.kind, t.diameter_mm, t.uncertainty_mm
+    );
+    if let Some(Measurement::Wall(w)) = &t.measurement {
+        let degrees = |v: tangent_core::real::Real| (v as f64).to_degrees();
+        let mm = |v: tangent_core::real::Real| v as f64 * 1e3;
+        if let Some(c) = w.corner {
+            s += &format!(
+                ", corner {:.2}° ± {:.2}",
+                degrees(c.value),
+                degrees(c.sigma)
+            );
+        }
+        if let Some(p) = w.plumb {
+            s += &format!(", plumb {:.2}° ± {:.2}", degrees(p.value), degrees(p.sigma));
+        }
+        if let Some(p) = w.parallel {
+            s += &format!(", parallel {:.1} mm ± {:.1}", mm(p.value), mm(p.sigma));
+        }
+        if let Some((l, whole)) = w.segment {
+            let bound = if whole { "" } else { " (at least)" };
+            s += &format!(
+                ", segment {:.1} mm ± {:.1}{bound}",
+                mm(l.value),
+                mm(l.sigma)
+            );
+        }
+    }
+    if !t.species.is_empty() {
+        s += &format!(" {}", t.species);
+    }
+    let flags = flag_names(t.flags);
+    if !flags.is_empty() {
+        s += &format!(" [{flags}]");
+    }
+    s += &format!(" {}", t.time);
+    if !t.label.is_empty() {
+        s += &format!(" \"{}\"", t.label);
+    }
+    s
 }
 
 /// Encodes one record as its journal line.

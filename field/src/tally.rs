@@ -123,6 +123,7 @@ mod tests {
             device_time_ms: 0,
             kind: "stem".into(),
             measurement: None,
+            label: String::new(),
         })
     }
 

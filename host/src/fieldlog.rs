@@ -45,8 +45,8 @@ pub use tangent_field::export::{
     export, export_records, plots, ExportFormat, ExportPlot, NoSuchPlot, TREE_COLUMNS,
 };
 pub use tangent_field::record::{
-    decode_line, encode_line, flag_names, select_plot, Filing, PlotHeader, Record, TreeRecord,
-    MAGIC_LINE,
+    decode_line, encode_line, flag_names, reading_line, select_plot, Filing, PlotHeader, Record,
+    TreeRecord, MAGIC_LINE,
 };
 pub use tangent_field::scan::{
     scan, DamageKind, DamagedSpan, Duplicate, HeaderlessPlot, Located, Scan, Tolerated,

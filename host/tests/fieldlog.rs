@@ -42,14 +42,26 @@ fn tree(plot_id: &str, tree_id: u32, species: &str, d: f64, flags: u32, seq: u32
         device_time_ms: 1000 * seq as u64,
         kind: "stem".into(),
         measurement: None,
+        label: String::new(),
     })
+}
+
+/// `record` with the user's `label`.
+fn labelled(mut record: Record, label: &str) -> Record {
+    if let Record::Tree(t) = &mut record {
+        t.label = label.into();
+    }
+    record
 }
 
 fn sample() -> Vec<Record> {
     vec![
         plot("P-017"),
         tree("P-017", 1, "PIAB", 314.06, 0, 1),
-        tree("P-017", 2, "PISY", 201.96, 0x0006, 2),
+        labelled(
+            tree("P-017", 2, "PISY", 201.96, 0x0006, 2),
+            "by the \"old\" gate, north",
+        ),
         plot("P 18, \"north\""),
         tree("P 18, \"north\"", 1, "50", 88.0, 0x8400, 3),
     ]
@@ -106,17 +118,17 @@ started,2025-06-01T08:00:00Z
 note,
 trees,2
 
-tree_id,species,dbh_mm,uncertainty_mm,tilt_deg,flags,time,device_id,calib_id,seq,plot_id,kind
-1,PIAB,314.1,1.2,3.0,,2025-06-01T08:01:00Z,H743-0001,7,1,P-017,stem
-2,PISY,202.0,1.2,3.0,POOR_FIT+TILT_IGNORED,2025-06-01T08:02:00Z,H743-0001,7,2,P-017,stem
+tree_id,species,dbh_mm,uncertainty_mm,tilt_deg,flags,time,device_id,calib_id,seq,plot_id,kind,label
+1,PIAB,314.1,1.2,3.0,,2025-06-01T08:01:00Z,H743-0001,7,1,P-017,stem,
+2,PISY,202.0,1.2,3.0,POOR_FIT+TILT_IGNORED,2025-06-01T08:02:00Z,H743-0001,7,2,P-017,stem,\"by the \"\"old\"\" gate, north\"
 
 plot_id,\"P 18, \"\"north\"\"\"
 started,2025-06-01T08:00:00Z
 note,
 trees,1
 
-tree_id,species,dbh_mm,uncertainty_mm,tilt_deg,flags,time,device_id,calib_id,seq,plot_id,kind
-1,50,88.0,1.2,3.0,NEAR_POLE+NOT_SPHERICAL,2025-06-01T08:01:00Z,H743-0001,7,3,\"P 18, \"\"north\"\"\",stem
+tree_id,species,dbh_mm,uncertainty_mm,tilt_deg,flags,time,device_id,calib_id,seq,plot_id,kind,label
+1,50,88.0,1.2,3.0,NEAR_POLE+NOT_SPHERICAL,2025-06-01T08:01:00Z,H743-0001,7,3,\"P 18, \"\"north\"\"\",stem,
 ";
     assert_eq!(fieldlog::export(&sample(), ExportFormat::Csv), want);
 }
@@ -125,14 +137,14 @@ tree_id,species,dbh_mm,uncertainty_mm,tilt_deg,flags,time,device_id,calib_id,seq
 fn tsv_export_is_exactly_the_documented_layout() {
     let got = fieldlog::export(&sample()[..3], ExportFormat::Tsv);
     let want = "plot_id\tP-017\nstarted\t2025-06-01T08:00:00Z\nnote\t\ntrees\t2\n\n\
-tree_id\tspecies\tdbh_mm\tuncertainty_mm\ttilt_deg\tflags\ttime\tdevice_id\tcalib_id\tseq\tplot_id\tkind\n\
-1\tPIAB\t314.1\t1.2\t3.0\t\t2025-06-01T08:01:00Z\tH743-0001\t7\t1\tP-017\tstem\n\
-2\tPISY\t202.0\t1.2\t3.0\tPOOR_FIT+TILT_IGNORED\t2025-06-01T08:02:00Z\tH743-0001\t7\t2\tP-017\tstem\n";
+tree_id\tspecies\tdbh_mm\tuncertainty_mm\ttilt_deg\tflags\ttime\tdevice_id\tcalib_id\tseq\tplot_id\tkind\tlabel\n\
+1\tPIAB\t314.1\t1.2\t3.0\t\t2025-06-01T08:01:00Z\tH743-0001\t7\t1\tP-017\tstem\t\n\
+2\tPISY\t202.0\t1.2\t3.0\tPOOR_FIT+TILT_IGNORED\t2025-06-01T08:02:00Z\tH743-0001\t7\t2\tP-017\tstem\tby the \"old\" gate, north\n";
     assert_eq!(got, want);
     // Field-Map's calliper import skips the header lines and reads tab-separated columns:
     // every tree row has exactly as many fields as the column line.
     let rows: Vec<&str> = got.lines().skip(5).collect();
-    assert!(rows.iter().all(|r| r.split('\t').count() == 12));
+    assert!(rows.iter().all(|r| r.split('\t').count() == 13));
 }
 
 #[test]
@@ -153,7 +165,53 @@ fn json_export_nests_trees_in_plots() {
         t["flag_names"],
         serde_json::json!(["POOR_FIT", "TILT_IGNORED"])
     );
+    assert_eq!(t["label"], "by the \"old\" gate, north");
+    // No label, no key: the records of unlabelled readings are as they always were.
+    assert!(plots[0]["trees"][0].get("label").is_none());
     assert_eq!(plots[1]["trees"].as_array().unwrap().len(), 1);
+}
+
+/// Logs written before readings had kinds and labels (and before they carried the whole
+/// reading) still read: their readings are unlabelled stems, exported with an empty label,
+/// and re-encoding them gives back the very same line.
+#[test]
+fn logs_from_before_labels_still_read() {
+    use tangent_core::protocol::calibration_record::CRC32;
+    let old_json = r#"{"type":"tree","plot_id":"P-1","tree_id":4,"species":"PIAB","diameter_mm":250.5,"uncertainty_mm":1.1,"tilt_deg":0.0,"flags":0,"time":"2024-05-01T09:00:00Z","device_id":"H743-0001","calib_id":3,"seq":9,"device_time_ms":9000}"#;
+    let header = r#"{"type":"plot","plot_id":"P-1","started":"2024-05-01T08:00:00Z"}"#;
+    let line = |json: &str| format!("{:08x} {json}\n", CRC32.checksum(json.as_bytes()));
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("old.log");
+    std::fs::write(
+        &path,
+        format!("{MAGIC_LINE}{}{}", line(header), line(old_json)),
+    )
+    .unwrap();
+    let records = FieldLog::read(&path).unwrap();
+    let Record::Tree(t) = &records[1] else {
+        panic!("not a reading: {:?}", records[1]);
+    };
+    assert_eq!((t.kind.as_str(), t.label.as_str()), ("stem", ""));
+    assert_eq!((t.tree_id, t.diameter_mm, t.measurement), (4, 250.5, None));
+    // Re-encoded, it gains only its kind (no label key, no reading).
+    assert_eq!(
+        encode_line(&records[1]),
+        line(&old_json.replace(
+            r#""device_time_ms":9000}"#,
+            r#""device_time_ms":9000,"kind":"stem"}"#
+        ))
+    );
+    let csv = fieldlog::export(&records, ExportFormat::Csv);
+    assert!(csv.ends_with(",P-1,stem,\n"), "{csv}");
+    // A log that has labels appends to it, and both read back.
+    {
+        let mut log = FieldLog::open(&path).unwrap();
+        log.append(labelled(tree("P-1", 5, "PISY", 300.0, 0, 10), "new"))
+            .unwrap();
+    }
+    let records = FieldLog::read(&path).unwrap();
+    assert_eq!(records.len(), 3);
+    assert!(matches!(&records[2], Record::Tree(t) if t.label == "new"));
 }
 
 /// A power cut can leave the last record cut at any byte (or the file extended with
@@ -252,7 +310,14 @@ fn killed_listener_loses_and_duplicates_nothing() {
         .arg(dev.path())
         .arg("--log")
         .arg(&log)
-        .args(["--plot-id", "K1", "--species", "FASY"])
+        .args([
+            "--plot-id",
+            "K1",
+            "--species",
+            "FASY",
+            "--label",
+            "stand 4, edge",
+        ])
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -330,6 +395,12 @@ fn killed_listener_loses_and_duplicates_nothing() {
     );
     assert!(trees.iter().all(|t| t.plot_id == "K1"));
     assert!(trees[..k as usize].iter().all(|t| t.species == "FASY"));
+    // So does the label: on the first run's readings (and printed with them), not after.
+    assert!(trees[..k as usize]
+        .iter()
+        .all(|t| t.label == "stand 4, edge"));
+    assert!(trees[k as usize..].iter().all(|t| t.label.is_empty()));
+    assert!(printed.iter().all(|l| l.contains("\"stand 4, edge\"")));
 }
 
 #[test]
@@ -375,6 +446,52 @@ fn log_export_command_writes_the_format() {
         String::from_utf8(out.stdout).unwrap(),
         fieldlog::export(&sample()[..3], ExportFormat::Csv)
     );
+}
+
+/// `tangent log show` lists each reading with its kind and label; `--kind` and `--plot-id`
+/// select.
+#[test]
+fn log_show_lists_readings_with_kind_and_label() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("field.log");
+    {
+        let mut log = FieldLog::open(&path).unwrap();
+        for r in sample() {
+            log.append(r).unwrap();
+        }
+        let mut sphere = tree("P-017", 3, "", 80.0, 0, 4);
+        if let Record::Tree(t) = &mut sphere {
+            t.kind = "sphere".into();
+        }
+        log.append(labelled(sphere, "ball B")).unwrap();
+    }
+    let show = |extra: &[&str]| {
+        let out = tangent()
+            .args(["log", "show", "--log"])
+            .arg(&path)
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{out:?}");
+        String::from_utf8(out.stdout).unwrap()
+    };
+    let all = show(&[]);
+    let lines: Vec<&str> = all.lines().collect();
+    assert_eq!(lines.len(), 4, "{all}");
+    assert_eq!(
+        lines[1],
+        "P-017 #2 stem 202.0 mm ± 1.2 PISY [POOR_FIT+TILT_IGNORED] 2025-06-01T08:02:00Z \"by the \"old\" gate, north\""
+    );
+    assert!(
+        lines[0].ends_with("08:01:00Z"),
+        "no label, nothing after the time: {}",
+        lines[0]
+    );
+    assert_eq!(
+        show(&["--kind", "sphere"]).trim_end(),
+        "P-017 #3 sphere 80.0 mm ± 1.2 2025-06-01T08:03:00Z \"ball B\""
+    );
+    assert_eq!(show(&["--plot-id", "P 18, \"north\""]).lines().count(), 1);
 }
 
 /// Damage of every kind and the property tests over random corruptions.

@@ -125,6 +125,7 @@ impl Link {
                 plot_id: &filing.plot_id,
                 tree_id: filing.tree_id,
                 species: &filing.species,
+                label: &filing.label,
                 device_id: &filing.device_id,
                 time: &filing.time,
             },
@@ -140,6 +141,9 @@ pub struct FilingJson {
     plot_id: String,
     tree_id: u32,
     species: String,
+    /// Optional: the page files without a label unless it sends one.
+    #[serde(default)]
+    label: String,
     device_id: String,
     time: String,
 }

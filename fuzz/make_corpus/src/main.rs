@@ -188,6 +188,7 @@ fn main() {
             device_time_ms: 1000 * tree_id as u64,
             kind: "stem".into(),
             measurement: None,
+            label: String::new(),
         })
     };
     let records = [

@@ -43,6 +43,10 @@ pub struct Args {
     /// Species code for the readings (your inventory's code list, e.g. PIAB or 50).
     #[arg(long, default_value = "")]
     species: String,
+    /// Free-text label stored with every reading of this session ("kitchen NE corner",
+    /// "door 2"); shown by `tangent log show` and exported as the `label` column.
+    #[arg(long, default_value = "")]
+    label: String,
     /// Also keep a PNG of this session's diameters (± 2σ) by tree id, updated per reading.
     #[arg(long, value_name = "PNG")]
     plot: Option<PathBuf>,
@@ -265,6 +269,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
                 plot_id: &plot_id,
                 tree_id,
                 species: &species,
+                label: &args.label,
                 device_id: &device_id,
                 time: &fieldlog::now_rfc3339(),
             },
@@ -322,6 +327,9 @@ fn describe(t: &TreeRecord, r: &Reading) -> String {
     // A wall reading without its plumb says why (no accelerometer, or it failed).
     if let Some(a) = r.accelerometer.filter(|a| a.mean().is_none()) {
         s += &format!("  ({a})");
+    }
+    if !t.label.is_empty() {
+        s += &format!("  \"{}\"", t.label);
     }
     let flags = fieldlog::flag_names(t.flags);
     if !flags.is_empty() {

@@ -1,5 +1,6 @@
 //! `tangent log export`: the field log as inventory software imports it; `tangent log
-//! check`: what a log holds, damage included, without changing it.
+//! check`: what a log holds, damage included, without changing it; `tangent log show`: its
+//! readings, one a line, with their kind and label.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -30,7 +31,7 @@ pub struct Args {
 enum Command {
     /// Export the log: per plot a header block (plot id, start, note, tree count), then one
     /// row per tree (tree_id, species, dbh_mm, uncertainty_mm, tilt_deg, flags, time,
-    /// device_id, calib_id, seq, plot_id). TSV suits Field-Map's calliper import and Haglöf
+    /// device_id, calib_id, seq, plot_id, kind, label). TSV suits Field-Map's calliper import and Haglöf
     /// software (set "lines to skip" to 5); JSON nests trees in plots.
     #[command(after_help = EXIT_STATUS)]
     Export(ExportArgs),
@@ -38,6 +39,24 @@ enum Command {
     /// and byte ranges), readings found twice, a torn tail.
     #[command(after_help = EXIT_STATUS)]
     Check(CheckArgs),
+    /// List the readings, one a line: plot, number, kind (stem, sphere, wall, …), value
+    /// (mm) ± σ, species, flags, time and the user's label.
+    #[command(after_help = EXIT_STATUS)]
+    Show(ShowArgs),
+}
+
+/// Arguments of `tangent log show`.
+#[derive(clap::Args, Debug)]
+struct ShowArgs {
+    /// The field log.
+    #[arg(long, default_value = "tangent-field.log")]
+    log: PathBuf,
+    /// Only this plot.
+    #[arg(long)]
+    plot_id: Option<String>,
+    /// Only readings of this kind (`stem`, `sphere`, `wall`, `road`, `road_section`).
+    #[arg(long)]
+    kind: Option<String>,
 }
 
 /// Arguments of `tangent log check`.
@@ -77,7 +96,35 @@ pub fn run(args: Args) -> Result<ExitCode> {
     match args.command {
         Command::Export(a) => export(a),
         Command::Check(a) => check(a),
+        Command::Show(a) => show(a),
     }
+}
+
+fn show(a: ShowArgs) -> Result<ExitCode> {
+    let scan = FieldLog::scan_file(&a.log)
+        .with_context(|| format!("cannot read the field log {}", a.log.display()))?;
+    for finding in scan.findings() {
+        eprintln!("warning: {}: {finding}", a.log.display());
+    }
+    let records = match &a.plot_id {
+        Some(id) => {
+            let selected = fieldlog::select_plot(&scan.records(), id);
+            if selected.is_empty() {
+                anyhow::bail!("{}: no plot {id}", a.log.display());
+            }
+            selected
+        }
+        None => scan.records(),
+    };
+    for p in fieldlog::plots(&records) {
+        for t in p.trees {
+            if a.kind.as_deref().is_some_and(|k| k != t.kind) {
+                continue;
+            }
+            println!("{}", fieldlog::reading_line(t));
+        }
+    }
+    Ok(exit_code(&scan))
 }
 
 /// The exit status for what a scan found.

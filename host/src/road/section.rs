@@ -150,7 +150,7 @@ pub const SECTION_KIND: &str = "road_section";
 impl Section {
     /// Stores the section in the field log: a plot header named by its location label (if
     /// the log's current plot is another), then one record of kind [`SECTION_KIND`] filed
-    /// under the label, whose size column holds the section's MPD (mm), its uncertainty
+    /// under the label (and labelled with it), whose size column holds the section's MPD (mm), its uncertainty
     /// column the MSD's standard error (mm), its tree number the running count of valid
     /// segments, its sequence number the profiles taken and its note-like species column
     /// `MPD; ` and the [`Section::tally`] (the excluded and failed profiles by reason).
@@ -188,6 +188,7 @@ impl Section {
             device_time_ms: 0,
             kind: SECTION_KIND.into(),
             measurement: None,
+            label: self.label.clone(),
         }))?;
         Ok(true)
     }

@@ -316,6 +316,7 @@ fn arb_record(seq: u32) -> impl Strategy<Value = Record> {
                     device_time_ms: ms,
                     kind: "stem".into(),
                     measurement: None,
+                    label: String::new(),
                 })
             },
         );

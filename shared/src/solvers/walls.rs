@@ -241,12 +241,13 @@ pub fn solve(input: &WallInput<'_>, params: &WallParams) -> Result<WallSolution,
     if runs.is_empty() {
         return Err(SolveError::TooFewPoints);
     }
-    let walls = group(input, params, &mut runs)?;
+    let mut walls = group(input, params, &mut runs)?;
+    reassign(input, params, &mut runs, &mut walls);
     check_not_curved(input, params, &runs, &walls)?;
     let mut walls_out: heapless::Vec<Wall, MAX_WALLS> = heapless::Vec::new();
     let mut points = 0;
     for (w, wall) in walls.iter().enumerate() {
-        let plane = refit(input, params, &runs, w, &wall.plane)?;
+        let plane = refit(input, params, &runs, &walls, w, &wall.plane)?;
         // Far walls scatter by millimetres: only scatter the noise does not explain is
         // a surface that is not flat.
         if plane.rms > params.max_rms && plane.chi2 > params.coplanar_chi2 {
@@ -415,6 +416,18 @@ struct Group {
 
 /// Whether the points of run `run` lie on `plane` (χ² or rms test).
 fn on_plane(input: &WallInput<'_>, params: &WallParams, run: &Run, plane: &PlaneFit) -> bool {
+    let (chi2, rms) = run_fit(input, params, run, plane);
+    chi2 <= params.coplanar_chi2 || rms <= params.coplanar_rms
+}
+
+/// χ² per point and rms distance of run `run`'s points about `plane` (σ along its normal);
+/// infinite for an empty run.
+fn run_fit(
+    input: &WallInput<'_>,
+    params: &WallParams,
+    run: &Run,
+    plane: &PlaneFit,
+) -> (Real, Real) {
     let one = [*run];
     let (mut chi2, mut sq, mut n) = (0.0 as Real, 0.0 as Real, 0usize);
     for (p, s) in samples(
@@ -430,8 +443,64 @@ fn on_plane(input: &WallInput<'_>, params: &WallParams, run: &Run, plane: &Plane
         sq += r * r;
         n += 1;
     }
-    n > 0
-        && (chi2 / n as Real <= params.coplanar_chi2 || sqrt(sq / n as Real) <= params.coplanar_rms)
+    if n == 0 {
+        return (Real::INFINITY, Real::INFINITY);
+    }
+    (chi2 / n as Real, sqrt(sq / n as Real))
+}
+
+/// The unweighted plane of wall `w`'s runs, leaving run `skip` out (`usize::MAX`: none);
+/// `None` when what is left is no plane (one line, or narrower than `min_width`).
+fn group_plane(
+    input: &WallInput<'_>,
+    params: &WallParams,
+    runs: &[Run],
+    w: u8,
+    skip: usize,
+) -> Option<PlaneFit> {
+    let take = move |k: usize, r: &Run| k != skip && r.wall == Some(w);
+    let fit = fit_plane(samples(input, runs, take, None, 0, params.roughness)).ok()?;
+    (sqrt(fit.spread[1]) >= params.min_width).then_some(fit)
+}
+
+/// Moves each run to the wall whose plane it fits best, each wall's plane taken without the
+/// run (`docs/building.md` §2, step 2b). Grouping seeds a wall with the pair of runs with the
+/// most points: a long run near a corner's edge (the crossing line running down the image
+/// beside it) passes the coplanarity test of either wall there — its points' σ is
+/// millimetres at 2–3 m — and joins the wall whose other run is longer, then tilts that
+/// wall's plane towards itself (its 480 points outweigh the rest). Against the other runs
+/// alone the wrong wall's plane misses it by far more than the right one's.
+fn reassign(input: &WallInput<'_>, params: &WallParams, runs: &mut [Run], walls: &mut [Group]) {
+    for i in 0..runs.len() {
+        let Some(w) = runs[i].wall else { continue };
+        // A run its wall cannot do without stays.
+        let Some(without) = group_plane(input, params, runs, w, i) else {
+            continue;
+        };
+        let mut best = (run_fit(input, params, &runs[i], &without).0, w);
+        for (v, g) in walls.iter().enumerate() {
+            if v == w as usize {
+                continue;
+            }
+            let (chi2, rms) = run_fit(input, params, &runs[i], &g.plane);
+            let fits = chi2 <= params.coplanar_chi2 || rms <= params.coplanar_rms;
+            if fits && chi2 < best.0 {
+                best = (chi2, v as u8);
+            }
+        }
+        if best.1 == w {
+            continue;
+        }
+        runs[i].wall = Some(best.1);
+        for moved in [w, best.1] {
+            let g = &mut walls[moved as usize];
+            g.plane = group_plane(input, params, runs, moved, usize::MAX).unwrap_or(g.plane);
+            g.lines = runs
+                .iter()
+                .filter(|r| r.wall == Some(moved))
+                .fold(0u8, |m, r| m | (1 << r.curve));
+        }
+    }
 }
 
 /// Groups the runs into walls: the pair of runs of different curves with the most points that
@@ -443,14 +512,20 @@ fn group(
 ) -> Result<heapless::Vec<Group, MAX_WALLS>, SolveError> {
     let mut walls: heapless::Vec<Group, MAX_WALLS> = heapless::Vec::new();
     while walls.len() < MAX_WALLS {
-        let mut best: Option<(usize, usize, usize, PlaneFit)> = None;
+        // Seeds of two lines across the image first (a pair of them spans a wall by
+        // itself), then the largest: the crossing line runs down the image beside a corner's
+        // edge and, paired with the other wall's longer run, passes as a plane that is
+        // neither wall (docs/building.md §2, step 2b).
+        let mut best: Option<(usize, usize, (bool, usize), PlaneFit)> = None;
         for i in 0..runs.len() {
             for j in i + 1..runs.len() {
                 let (a, b) = (runs[i], runs[j]);
                 if a.wall.is_some() || b.wall.is_some() || a.curve == b.curve {
                     continue;
                 }
-                let count = a.len() + b.len();
+                let across = !input.planes[a.curve as usize].is_row_wise()
+                    && !input.planes[b.curve as usize].is_row_wise();
+                let count = (across, a.len() + b.len());
                 if best.is_some_and(|(_, _, c, _)| c >= count) {
                     continue;
                 }
@@ -553,38 +628,103 @@ fn check_not_curved(
     Ok(())
 }
 
-/// Final fit of wall `w`: its runs trimmed at their ends, each point's σ along the wall's
-/// normal.
+/// The edges between wall `w` and the other walls that are not parallel to it, as lines
+/// (a point and a unit direction).
+fn edges(walls: &[Group], w: usize, params: &WallParams) -> heapless::Vec<(Vec3, Vec3), MAX_WALLS> {
+    let mut out = heapless::Vec::new();
+    let a = &walls[w].plane;
+    for (v, g) in walls.iter().enumerate() {
+        if v == w || normal_angle(a, &g.plane).value <= params.parallel_max {
+            continue;
+        }
+        if let Some(line) = plane_intersection(a.normal, a.offset, g.plane.normal, g.plane.offset) {
+            let _ = out.push(line);
+        }
+    }
+    out
+}
+
+/// Whether point `p` of a row-wise (crossing) line lies within `trim_points` columns of one
+/// of `edges`, measured along its image row: its stripe straddles the kink there and its
+/// peak is pulled off the wall, as at the trimmed ends of the other lines' runs. A crossing
+/// line runs down the image beside a corner's edge, parallel to it, so trimming its ends
+/// does not remove these points (`docs/building.md` §2, step 4).
+fn beside_edge(p: Vec3, edges: &[(Vec3, Vec3)], params: &WallParams) -> bool {
+    edges.iter().any(|&(o, d)| {
+        // The edge's point seen on p's row: (o + t d).y/(o + t d).z = p.y/p.z.
+        let den = p.z * d.y - p.y * d.z;
+        if den.abs() < 1e-9 {
+            return false;
+        }
+        let q = o + d * ((p.y * o.z - p.z * o.y) / den);
+        q.z > 0.0 && (params.focal_px * (p.x / p.z - q.x / q.z)).abs() < params.trim_points as Real
+    })
+}
+
+/// The points of the runs `take` selects for a wall's final fit, with their line and σ along
+/// `normal` (see [`refit`]).
+fn kept_lines<'a>(
+    input: &'a WallInput<'a>,
+    params: &'a WallParams,
+    runs: &'a [Run],
+    take: impl Fn(usize, &Run) -> bool + Clone + 'a,
+    normal: Vec3,
+    edges: &'a [(Vec3, Vec3)],
+) -> impl Iterator<Item = (usize, Vec3, Real)> + Clone + 'a {
+    line_samples(
+        input,
+        runs,
+        take,
+        Some(normal),
+        params.trim_points,
+        params.roughness,
+    )
+    .filter(move |&(k, p, _)| !(input.planes[k].is_row_wise() && beside_edge(p, edges, params)))
+}
+
+/// [`kept_lines`] without the line index.
+fn kept<'a>(
+    input: &'a WallInput<'a>,
+    params: &'a WallParams,
+    runs: &'a [Run],
+    take: impl Fn(usize, &Run) -> bool + Clone + 'a,
+    normal: Vec3,
+    edges: &'a [(Vec3, Vec3)],
+) -> impl Iterator<Item = (Vec3, Real)> + Clone + 'a {
+    kept_lines(input, params, runs, take, normal, edges).map(|(_, p, s)| (p, s))
+}
+
+/// Final fit of wall `w`: its runs trimmed at their ends and the crossing line's points
+/// beside another wall's edge left out, each point's σ along the wall's normal.
 fn refit(
     input: &WallInput<'_>,
     params: &WallParams,
     runs: &[Run],
+    walls: &[Group],
     w: usize,
     first: &PlaneFit,
 ) -> Result<PlaneFit, SolveError> {
+    let mut edges = edges(walls, w, params);
     let w = w as u8;
     let take = move |_: usize, r: &Run| r.wall == Some(w);
-    let mut plane = *first;
-    for _ in 0..2 {
-        plane = fit_plane(samples(
-            input,
-            runs,
-            take,
-            Some(plane.normal),
-            params.trim_points,
-            params.roughness,
-        ))?;
-    }
+    let fit = |edges: &[(Vec3, Vec3)]| -> Result<PlaneFit, SolveError> {
+        let mut plane = *first;
+        for _ in 0..2 {
+            plane = fit_plane(kept(input, params, runs, take, plane.normal, edges))?;
+        }
+        Ok(plane)
+    };
+    // A wall that is no plane without those points (the crossing line was its second line)
+    // keeps them.
+    let mut plane = match fit(&edges) {
+        Ok(p) => p,
+        Err(_) => {
+            edges.clear();
+            fit(&edges)?
+        }
+    };
     // docs/building.md, eq. (B3b): the stripe-row bias shared by each line's points.
-    let lines = line_samples(
-        input,
-        runs,
-        take,
-        Some(plane.normal),
-        params.trim_points,
-        params.roughness,
-    )
-    .map(|(k, p, s)| {
+    let lines = kept_lines(input, params, runs, take, plane.normal, &edges).map(|(k, p, s)| {
         let dxdv = displacement_per_pixel(&input.planes[k], params.focal_px, p)
             .unwrap_or_else(|_| Vec3::zeros());
         (k, p, s, dxdv)
