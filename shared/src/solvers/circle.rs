@@ -393,7 +393,12 @@ fn finish<W: Fn(usize, Vec2) -> Real>(
         return Err(SolveError::Degenerate);
     }
     let theta = Vec3::new(theta.x, theta.y, r);
-    finish_with(norm, theta, iterations, accumulate(points, norm, theta, weight))
+    finish_with(
+        norm,
+        theta,
+        iterations,
+        accumulate(points, norm, theta, weight),
+    )
 }
 
 /// [`finish`] from the normal equations `sums` ([`accumulate`]) already formed at `theta`

@@ -11,7 +11,9 @@
 use crate::real::Float;
 use crate::real::{self, sqrt, Mat3, Real, Vec2, Vec3};
 
-use super::{accumulate, finish, finish_with, lm, normalised_start, tukey, Circle, CircleFit, Normalisation};
+use super::{
+    accumulate, finish, finish_with, lm, normalised_start, tukey, Circle, CircleFit, Normalisation,
+};
 use super::{RobustParams, SolveError};
 
 /// Floor of a point's orthogonal-residual σ as a fraction of its σ along its noise direction
