@@ -15,6 +15,8 @@
 //!   the cost changes by less than its rounding while the gradient is still resolved, and this
 //!   reaches `ε/λ_min` instead of `√(ε/λ_min)`, which matters in `f32`. Then `λ ← max(λ/10,
 //!   10⁻¹²)`; a rejected or out-of-domain candidate sets `λ ← max(10λ, ε)`;
+//! * a rejected step whose predicted gain `−2δᵀJᵀr − δᵀJᵀJδ` the problem calls settled
+//!   ([`LeastSquares::settled`]) ends the iteration at the current parameters;
 //! * it stops converged after an accepted step shorter than `tolerance·scale(θ)` (or one the
 //!   problem calls [`LeastSquares::settled`]), or when `λ > 10¹⁶` after a rejection (every
 //!   direction raises the cost even with a vanishing step: the minimum to rounding), and fails
@@ -136,8 +138,8 @@ pub trait LeastSquares<const N: usize> {
     /// (typically `1 + |θ|`).
     fn step_scale(&self, p: &Self::Params) -> Real;
     /// Whether an accepted step from cost `before` to `after` ends the iteration although it
-    /// is not small (a fit that needs the cost settled, not the last ulp of a flat valley).
-    /// Default: never.
+    /// is not small (a fit that needs the cost settled, not the last ulp of a flat valley);
+    /// also asked for a rejected step with `after` its predicted cost. Default: never.
     fn settled(&self, _before: Real, _after: Real) -> bool {
         false
     }
@@ -207,6 +209,14 @@ pub fn minimise<const N: usize, L: LeastSquares<N>>(
                 }
             }
             None => {
+                // A rejected step whose predicted gain the problem already calls settled ends
+                // the iteration: raising λ only shortens the step and its gain further (in
+                // `f32` the cost's own rounding, `8ε·cost`, can exceed the settling gain, and
+                // every further rejection would be one more evaluation to reach λ > 10¹⁶).
+                let gain = predicted_gain(&current.normal, &delta);
+                if problem.settled(current.normal.cost, current.normal.cost - gain) {
+                    return Ok((current, it));
+                }
                 lambda = (lambda * 10.0).max(Real::EPSILON);
                 if lambda > 1e16 {
                     return Ok((current, it));
@@ -215,6 +225,12 @@ pub fn minimise<const N: usize, L: LeastSquares<N>>(
         }
     }
     Err(SolveError::NotConverged)
+}
+
+/// The decrease of the cost `Σr²` the Gauss–Newton model predicts for the step `delta`:
+/// `−2δᵀJᵀr − δᵀJᵀJδ` (positive for a damped step).
+fn predicted_gain<const N: usize>(normal: &NormalEquations<N>, delta: &SVector<Real, N>) -> Real {
+    -2.0 * delta.dot(&normal.jtr) - delta.dot(&(normal.jtj * delta))
 }
 
 /// The acceptance rule: a finite cost that is lower, or equal to within its rounding

@@ -465,3 +465,38 @@ fn weighted_fit_states_its_line_of_sight_pull() {
         );
     }
 }
+
+/// The whole-arc fit's last round ends within a few LM steps, in `f32` as on the device: a
+/// step rejected near the minimum (the cost's rounding there exceeds `SETTLED_CHI2`) ends the
+/// round instead of raising `λ` until `λ > 10¹⁶` with one evaluation per tenfold
+/// (`docs/performance.md`, session 8).
+#[test]
+fn weighted_fit_rounds_end_within_a_few_steps() {
+    let c = Circle::new(Vec2::new(0.0, 1.0), 0.3);
+    let n = 240;
+    let point = |i: usize| {
+        let phi = -PI / 2.0 + (i as Real / (n - 1) as Real - 0.5) * (2.0 * PI / 3.0);
+        c.centre + Vec2::new(phi.cos(), phi.sin()) * c.radius
+    };
+    let dir = |q: Vec2| q / crate::real::norm(&q);
+    let sigma = 0.4e-3;
+    let mut rng = Rng::new(17);
+    let mut pts = std::vec![Vec2::zeros(); n];
+    let mut scratch = std::vec![0.0; WEIGHTED_SCRATCH_PER_POINT * n];
+    let mut most = 0;
+    for _ in 0..20 {
+        for (i, p) in pts.iter_mut().enumerate() {
+            let q = point(i);
+            *p = q + dir(q) * (sigma * rng.gauss() as Real);
+        }
+        let init = fit_hyper(&pts).unwrap();
+        let noise = |i: usize| dir(pts[i]) * sigma;
+        let w = fit_weighted(&pts, noise, init, &RobustParams::default(), &mut scratch).unwrap();
+        assert!(
+            (w.fit.circle.radius - c.radius).abs() < 4.0 * w.sigma_radius,
+            "{w:?}"
+        );
+        most = most.max(w.fit.iterations);
+    }
+    assert!(most <= 6, "{most} LM steps in a round");
+}

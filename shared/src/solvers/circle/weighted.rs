@@ -13,7 +13,9 @@ use crate::real::{self, sqrt, Mat3, Real, Vec2, Vec3};
 use crate::solvers::correlation::autocorrelation;
 
 use super::pull::{expected_bias, FittedArc};
-use super::{accumulate, finish, lm, normalised_start, tukey, Circle, CircleFit, Normalisation};
+use super::{
+    accumulate, finish, finish_with, lm, normalised_start, tukey, Circle, CircleFit, Normalisation,
+};
 use super::{RobustParams, SolveError};
 
 /// Floor of a point's orthogonal-residual σ as a fraction of its σ along its noise direction
@@ -178,8 +180,14 @@ pub fn fit_weighted(
     points_noise.weights(points, &norm, theta, cs, buf);
     let weights: &[Real] = buf;
     let weight = |i: usize, _: Vec2| weights.get(i).copied().unwrap_or(0.0);
-    let (jtj, _, chi2, _, used) = accumulate(points, &norm, theta, &weight);
-    let mut fit = finish(points, &norm, theta, last_it, &weight)?;
+    let sums = accumulate(points, &norm, theta, &weight);
+    let (jtj, _, chi2, _, used) = sums;
+    // With `r > 0` (the usual case) `finish` would form the same sums again.
+    let mut fit = if theta.z > 0.0 {
+        finish_with(&norm, theta, last_it, sums)?
+    } else {
+        finish(points, &norm, theta, last_it, &weight)?
+    };
     // Unweighted RMS of the inliers (metres), as the unweighted fits report.
     let (mut ss, mut count) = (0.0, 0usize);
     for (p, w) in points.iter().zip(weights) {
