@@ -4,7 +4,7 @@
 
 use crate::measurement::{Measurement, Mode, Point, SphereReading};
 use crate::noise::NoiseModel;
-use crate::pipeline::PipelineError;
+use crate::pipeline::{GrowParams, PipelineConfig, PipelineError};
 use crate::real::Real;
 use crate::solvers::sphere::{self, SphereInput, SphereParams, SphereSolution};
 use crate::solvers::SolveError;
@@ -23,6 +23,17 @@ impl Instrument for Sphere {
     type Params = SphereParams;
     type Solution = SphereSolution;
 
+    /// The curves are grown along the stripe beyond the threshold's cut
+    /// ([`crate::pipeline::grow`]): a speckled steel stripe breaks into pieces under the
+    /// threshold, and a section that keeps one piece is too short an arc (`docs/sphere.md`,
+    /// "Grown sections and the points' own σ").
+    fn pipeline_config(base: &PipelineConfig) -> PipelineConfig {
+        PipelineConfig {
+            grow: Some(GrowParams::default()),
+            ..*base
+        }
+    }
+
     /// A ball that runs off the frame is still measured (the sections need no silhouette);
     /// the solution's flags include the [`Profile::image_flags`].
     ///
@@ -32,7 +43,15 @@ impl Instrument for Sphere {
         params: &SphereParams,
         scratch: Scratch<'_>,
     ) -> Result<SphereSolution, PipelineError> {
-        let noise: &NoiseModel = &params.noise;
+        // Each point's σ is the subpixel estimator's own term, without the noise model's
+        // speckle floor: on grown sections the floor over-weights the faint grown ends against
+        // the bright points, and the floor a ball's surface really has (≈ 0 matt, ≈ 0.17 px
+        // steel) is carried by the joint fit's scaling by its own residuals
+        // (`docs/sphere.md`, "Grown sections and the points' own σ").
+        let noise: &NoiseModel = &NoiseModel {
+            speckle_contrast: 0.0,
+            ..params.noise
+        };
         let focal: Real = params.focal_px;
         let sigmas = points.sigmas(noise, focal, scratch.sigmas)?;
         let curves = points.curves();

@@ -24,8 +24,9 @@ use super::SolveError;
 use crate::laser_plane::LaserPlane;
 
 /// [`SphereFitParams::direction_free_share`]'s default, from the tuning balls
-/// (`docs/sphere.md`, "Joint fit").
-pub const KAPPA: Real = 0.5;
+/// with grown sections and estimator-only point σ (`docs/sphere.md`, "Joint fit" and
+/// "Grown sections and the points' own σ").
+pub const KAPPA: Real = 0.2;
 
 /// Settings of [`fit_sphere`].
 #[derive(Debug, Clone, Copy, PartialEq)]
