@@ -29,10 +29,11 @@
 
 #[allow(unused_imports)]
 use crate::real::Float;
-use crate::real::{self, sqrt, Mat3, Real, Vec2, Vec3};
+use crate::real::{self, Mat3, Real, Vec2, Vec3};
 
 use super::weighted::LATERAL_FLOOR;
 use super::Normalisation;
+use crate::solvers::correlation::MAX_CORRELATION_LAG;
 
 /// The data of a finished [`super::fit_weighted`], normalised: the points and their noise,
 /// the final weights and the residuals' variance and autocorrelation.
@@ -149,38 +150,18 @@ impl FittedArc<'_> {
         let kappa = observed / predicted;
         (kappa.is_finite() && kappa > 0.0).then_some(kappa)
     }
-
-    /// Indices of the inliers within `self.rho.len() − 1` inliers of `i` on one side (`step`
-    /// = −1 before, +1 after), with their lag.
-    fn neighbours(&self, i: usize, forward: bool) -> impl Iterator<Item = (usize, usize)> + '_ {
-        let n = self.points.len();
-        let max_lag = self.rho.len().saturating_sub(1);
-        let mut j = i;
-        let mut lag = 0;
-        core::iter::from_fn(move || {
-            while lag < max_lag {
-                j = if forward {
-                    if j + 1 >= n {
-                        return None;
-                    }
-                    j + 1
-                } else {
-                    j.checked_sub(1)?
-                };
-                if self.weights.get(j).is_some_and(|w| *w > 0.0) {
-                    lag += 1;
-                    return Some((j, lag));
-                }
-            }
-            None
-        })
-    }
 }
 
 /// Expected bias `E[θ̂ − θ]` of the fitted circle `(cx, cy, r)` (normalised units) under the
 /// arc's own noise (module documentation), `None` when it cannot be evaluated (singular
-/// normal matrix, no inliers). Cost: one pass for `A`, one over the inliers with their
-/// correlated neighbours (`2·(rho.len() − 1)` each), one for `F_θθ[S]`.
+/// normal matrix, no inliers). Cost: one pass for `A`, one over the inliers (each point's
+/// terms once; `mᵢ` from a window of its correlated neighbours' `hⱼ`, below), one for
+/// `F_θθ[S]`.
+///
+/// `mᵢ = Σⱼ Cᵢⱼ θⱼ = −κσᵢ A⁻¹ Σ_k ρ_|k| hᵢ₊ₖ` with `hⱼ = wⱼaⱼσⱼJⱼ`: the neighbours enter only
+/// through `hⱼ`, so each point's `hⱼ` is formed once and kept in a window of the last
+/// `2K + 1` inliers (`K = rho.len() − 1`) instead of recomputing every neighbour's terms for
+/// every point — on the device that was most of the solver's cost (`docs/performance.md`).
 pub(super) fn expected_bias(arc: &FittedArc<'_>) -> Option<Vec3> {
     let n = arc.points.len();
     // A does not depend on κ.
@@ -192,34 +173,28 @@ pub(super) fn expected_bias(arc: &FittedArc<'_>) -> Option<Vec3> {
     }
     let a_inv = a.try_inverse()?;
     let kappa = arc.variance_factor(&a_inv)?;
-    let r = arc.theta.z;
-    // First-order response of θ̂ to point j's displacement.
-    let response = |l: &Local| -(a_inv * l.j) * (l.w * l.a);
-    let mut total = Vec3::zeros();
-    let mut s = Mat3::zeros();
+    let mut sums = Sums {
+        total: Vec3::zeros(),
+        s: Mat3::zeros(),
+    };
+    let mut window = Window::new(arc.rho.len().saturating_sub(1));
     for i in 0..n {
-        let Some(li) = arc.local(i, kappa) else {
+        if !arc.weights.get(i).is_some_and(|w| *w > 0.0) {
             continue;
-        };
-        let theta_i = response(&li);
-        // mᵢ = Σⱼ Cᵢⱼ θⱼ over the correlated neighbours (and i itself, ρ₀ = 1).
-        let mut m = theta_i * li.variance;
-        for (j, lag) in arc.neighbours(i, false).chain(arc.neighbours(i, true)) {
-            if let (Some(lj), Some(rho)) = (arc.local(j, kappa), arc.rho.get(lag)) {
-                m += response(&lj) * (rho * sqrt(li.variance * lj.variance));
-            }
         }
-        // Cᵢᵢ F_εε: the slide off the circle, the normal's turn, the weight's change.
-        let f_ee = li.j * (2.0 * li.w * li.half_curvature + 2.0 * li.dw_de * li.a)
-            + li.dj_de * (2.0 * li.w * li.a);
-        // F_θε applied to mᵢ.
-        let jm = li.j.dot(&m);
-        let f_te = li.j * (li.dw_de * jm + li.w * li.dj_de.dot(&m) + li.a * li.dw_dtheta.dot(&m))
-            + li.dj_de * (li.w * jm)
-            + li.tangent * (li.w * li.a * li.tangent.dot(&m) / r);
-        total += f_ee * li.variance + f_te * 2.0;
-        s += theta_i * m.transpose();
+        let h = arc
+            .local(i, 1.0)
+            .map_or(Vec3::zeros(), |l| h_term(arc, i, &l));
+        window.push(i, h);
+        if let Some(centre) = window.ready() {
+            centre_terms(arc, kappa, &a_inv, &window, centre, &mut sums);
+        }
     }
+    while let Some(centre) = window.drain() {
+        centre_terms(arc, kappa, &a_inv, &window, centre, &mut sums);
+    }
+    let r = arc.theta.z;
+    let (mut total, s) = (sums.total, sums.s);
     // F_θθ contracted with S (symmetric in expectation).
     for i in 0..n {
         let Some(l) = arc.local(i, kappa) else {
@@ -232,4 +207,117 @@ pub(super) fn expected_bias(arc: &FittedArc<'_>) -> Option<Vec3> {
     }
     let bias = a_inv * total * -0.5;
     (bias.x.is_finite() && bias.y.is_finite() && bias.z.is_finite()).then_some(bias)
+}
+
+/// `hⱼ = wⱼaⱼσⱼJⱼ` of point `j` (see [`expected_bias`]).
+fn h_term(arc: &FittedArc<'_>, j: usize, l: &Local) -> Vec3 {
+    let sigma = arc.sigmas.get(j).copied().unwrap_or(0.0);
+    l.j * (l.w * l.a * sigma)
+}
+
+/// The running sums of [`expected_bias`]: `Σᵢ Cᵢᵢ F_εε + 2F_θε mᵢ` and `S = Σᵢ θᵢ mᵢᵀ`.
+struct Sums {
+    total: Vec3,
+    s: Mat3,
+}
+
+/// Point `i`'s (the window's `centre`-th inlier) terms of the expansion.
+fn centre_terms(
+    arc: &FittedArc<'_>,
+    kappa: Real,
+    a_inv: &Mat3,
+    window: &Window,
+    centre: usize,
+    sums: &mut Sums,
+) {
+    let i = window.index(centre);
+    let Some(li) = arc.local(i, kappa) else {
+        return;
+    };
+    let sigma_i = arc.sigmas.get(i).copied().unwrap_or(0.0);
+    let r = arc.theta.z;
+    // First-order response of θ̂ to point i's displacement.
+    let theta_i = -(a_inv * li.j) * (li.w * li.a);
+    // mᵢ = Σⱼ Cᵢⱼ θⱼ over the correlated neighbours (and i itself, ρ₀ = 1).
+    let m = -(a_inv * window.correlated_sum(centre, arc.rho)) * (kappa * sigma_i);
+    // Cᵢᵢ F_εε: the slide off the circle, the normal's turn, the weight's change.
+    let f_ee = li.j * (2.0 * li.w * li.half_curvature + 2.0 * li.dw_de * li.a)
+        + li.dj_de * (2.0 * li.w * li.a);
+    // F_θε applied to mᵢ.
+    let jm = li.j.dot(&m);
+    let f_te = li.j * (li.dw_de * jm + li.w * li.dj_de.dot(&m) + li.a * li.dw_dtheta.dot(&m))
+        + li.dj_de * (li.w * jm)
+        + li.tangent * (li.w * li.a * li.tangent.dot(&m) / r);
+    sums.total += f_ee * li.variance + f_te * 2.0;
+    sums.s += theta_i * m.transpose();
+}
+
+/// Slots of [`Window`]: `2·MAX_CORRELATION_LAG + 1` inliers.
+const WINDOW: usize = 2 * MAX_CORRELATION_LAG + 1;
+
+/// The last `2K + 1` inliers' `hⱼ` in curve order (a ring on the stack: ≈ 2 KB in `f32`).
+/// Inlier `p` (in inlier order) is a centre once the `K` inliers after it are in, or at
+/// the end.
+struct Window {
+    h: [Vec3; WINDOW],
+    index: [usize; WINDOW],
+    lag: usize,
+    pushed: usize,
+    centred: usize,
+}
+
+impl Window {
+    fn new(lag: usize) -> Self {
+        Window {
+            h: [Vec3::zeros(); WINDOW],
+            index: [0; WINDOW],
+            lag: lag.min(MAX_CORRELATION_LAG),
+            pushed: 0,
+            centred: 0,
+        }
+    }
+
+    fn push(&mut self, index: usize, h: Vec3) {
+        self.h[self.pushed % WINDOW] = h;
+        self.index[self.pushed % WINDOW] = index;
+        self.pushed += 1;
+    }
+
+    /// The next centre, if the `K` inliers after it are in.
+    fn ready(&mut self) -> Option<usize> {
+        (self.pushed > self.centred + self.lag).then(|| {
+            self.centred += 1;
+            self.centred - 1
+        })
+    }
+
+    /// The next centre after the last inlier.
+    fn drain(&mut self) -> Option<usize> {
+        (self.centred < self.pushed).then(|| {
+            self.centred += 1;
+            self.centred - 1
+        })
+    }
+
+    /// The point index of inlier `p`.
+    fn index(&self, p: usize) -> usize {
+        self.index[p % WINDOW]
+    }
+
+    /// `Σ_k ρ_|k| h_{p+k}` over the inliers within `K` of `p`.
+    fn correlated_sum(&self, p: usize, rho: &[Real]) -> Vec3 {
+        let mut sum = self.h[p % WINDOW];
+        for k in 1..=self.lag {
+            let Some(&r) = rho.get(k) else {
+                break;
+            };
+            if let Some(before) = p.checked_sub(k) {
+                sum += self.h[before % WINDOW] * r;
+            }
+            if p + k < self.pushed {
+                sum += self.h[(p + k) % WINDOW] * r;
+            }
+        }
+        sum
+    }
 }
