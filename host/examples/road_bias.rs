@@ -6,7 +6,8 @@
 //!
 //! `cargo run --release -p tangent-host --example road_bias` (the committed road captures);
 //! `BIAS_SEEDS=91000,91001` adds simulated dense asphalt and worn concrete on those seeds,
-//! `SHEET_W0_MM=0.15` simulates them with a sheet of that 1/e² half-width (no divergence),
+//! `SHEET_W0_MM=0.68` simulates them with a sheet of that 1/e² half-width (no divergence; the
+//! default is the road head's focused 0.25 mm sheet, 0.68 mm the collimated module's),
 //! `NO_SPECKLE=1` without speckle, `BIAS_SKIP_COMMITTED=1` skips the committed captures.
 
 use std::path::Path;

@@ -6,6 +6,7 @@ use std::path::Path;
 use rand::{RngExt, SeedableRng};
 use rand_pcg::Pcg64;
 use tangent_core::instrument::road::RoadParams;
+use tangent_core::instrument::road::{ROAD_HEAD_BASELINE, ROAD_HEAD_STANDOFF};
 use tangent_core::pipeline::{PipelineConfig, PipelineError};
 use tangent_core::real::Vec2;
 use tangent_core::solvers::road_profile::RoadError;
@@ -19,6 +20,7 @@ use tangent_host::road::height_scale::furrow_depth;
 use tangent_host::road::{mpd_of_profile, true_profile};
 use tangent_host::simulate::road_corpus::{
     furrow_spec, piezo_spec, road_spec, Condition, Surface, FURROW_PITCH, FURROW_WIDTH,
+    ROAD_SHEET_WAIST,
 };
 use tangent_host::simulate::simulate;
 
@@ -137,6 +139,40 @@ fn a_simulated_road_reads_its_true_mpd() {
         r.depth.mpd
     );
     assert!(r.profile.dropout_fraction() < 0.05);
+}
+
+/// The road head's line is focused on the road (`docs/hardware.md`, "Road head"): its waist
+/// on the road, its Rayleigh range `π w0²/λ` ≈ 0.30 m, so over the ±15 mm depth range
+/// (±15.8 mm along the beam at 18.4°) the sheet widens by ≈ 0.14 % (`√(1 + (Δr/z_R)²)`).
+#[test]
+fn the_road_heads_sheet_is_focused_on_the_road() {
+    let laser = road_spec(Surface::DenseAsphalt, Condition::default(), 1)
+        .params
+        .laser;
+    let to_road = ROAD_HEAD_BASELINE.hypot(ROAD_HEAD_STANDOFF);
+    assert!((laser.half_width(to_road) - ROAD_SHEET_WAIST).abs() < 1e-12);
+    let rayleigh = std::f64::consts::PI * ROAD_SHEET_WAIST.powi(2) / laser.wavelength_m;
+    assert!((rayleigh - 0.302).abs() < 1e-3, "{rayleigh}");
+    // ±15 mm of height is ±15 mm / cos δ along the beam.
+    let depth = 0.015 * to_road / ROAD_HEAD_STANDOFF;
+    for r in [to_road - depth, to_road + depth] {
+        let grown = laser.half_width(r) / ROAD_SHEET_WAIST;
+        let expected = (1.0 + (depth / rayleigh).powi(2)).sqrt();
+        assert!((grown - expected).abs() < 1e-9 && grown < 1.0015, "{grown}");
+    }
+}
+
+/// Worn concrete, the surface whose MPD the collimated sheet read +0.033–0.045 mm high
+/// (`docs/accuracy.md`, road section), within the 0.03 mm target on a fresh seed.
+#[test]
+fn worn_concrete_reads_its_true_mpd() {
+    let params = RoadParams::default();
+    let spec = road_spec(Surface::WornConcrete, Condition::default(), 77_003);
+    let (capture, _) = simulate(&spec).unwrap();
+    let o = measure_road(&capture, None, &PipelineConfig::default(), &params).unwrap();
+    let mpd = o.result.as_ref().unwrap().depth.mpd;
+    let truth = o.truth_mpd.unwrap();
+    assert!((mpd - truth).abs() <= 0.03e-3, "{mpd} vs {truth}");
 }
 
 #[test]

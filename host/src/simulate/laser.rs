@@ -18,10 +18,16 @@ pub struct LaserParams {
     pub power_w: f64,
     /// Full fan angle (radians); the power is spread uniformly over it (Powell lens).
     pub fan_angle_rad: f64,
-    /// `1/e²` half-thickness of the sheet at the source (metres).
+    /// `1/e²` half-thickness of the sheet at its waist (metres).
     pub waist_half_width_m: f64,
-    /// Growth of the half-thickness with distance (radians): `w(r) = √(w0² + (θ·r)²)`.
+    /// Growth of the half-thickness with distance from the waist (radians):
+    /// `w(r) = √(w0² + (θ·(r − r_w))²)`.
     pub divergence_rad: f64,
+    /// Distance `r_w` from the source to the waist (metres): 0 for a collimated module (the
+    /// default, not written to `capture.toml`), the working distance for a line focused there
+    /// (the road head, `docs/hardware.md`, "Road head").
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub waist_distance_m: f64,
     /// Spectral width (metres); with the surface roughness it reduces the speckle contrast
     /// ([`super::sensor::spectral_speckle_contrast`]).
     pub spectral_width_m: f64,
@@ -44,6 +50,11 @@ pub enum SheetProfile {
         /// Exponent (2 = Gaussian; 4–10 flat-topped).
         order: f64,
     },
+}
+
+/// True for a waist at the source (serde's `skip_serializing_if`).
+fn is_zero(value: &f64) -> bool {
+    *value == 0.0
 }
 
 impl SheetProfile {
@@ -80,6 +91,7 @@ impl Default for LaserParams {
             fan_angle_rad: 45f64.to_radians(),
             waist_half_width_m: 0.6e-3,
             divergence_rad: 1e-3,
+            waist_distance_m: 0.0,
             spectral_width_m: 1e-9,
             profile: SheetProfile::Gaussian,
         }
@@ -89,7 +101,8 @@ impl Default for LaserParams {
 impl LaserParams {
     /// `1/e²` half-thickness at distance `r` from the source (metres).
     pub fn half_width(&self, r: f64) -> f64 {
-        (self.waist_half_width_m.powi(2) + (self.divergence_rad * r).powi(2)).sqrt()
+        let from_waist = r - self.waist_distance_m;
+        (self.waist_half_width_m.powi(2) + (self.divergence_rad * from_waist).powi(2)).sqrt()
     }
 
     /// Irradiance (W/m²) the laser of `plane` puts on a surface at `p` with unit normal

@@ -12,7 +12,9 @@
 use rand::{RngExt, SeedableRng};
 use rand_pcg::Pcg64;
 use tangent_core::calibration::Calibration;
-use tangent_core::instrument::road::{road_head_calibration, ROAD_HEAD_STANDOFF};
+use tangent_core::instrument::road::{
+    road_head_calibration, ROAD_HEAD_BASELINE, ROAD_HEAD_STANDOFF,
+};
 
 use super::rig::CorpusEntry;
 use super::{SimParams, SimSpec};
@@ -131,13 +133,26 @@ pub fn calibration() -> Calibration {
     road_head_calibration(12).unwrap_or_else(|_| Calibration::reference_design())
 }
 
-/// Simulation settings of the road head: the reference laser and sensor, the head's shade
-/// (its skirt keeps daylight out: a dim diffuse ambient), speckle on.
+/// `1/e²` half-thickness of the road head's laser sheet at its waist, on the road (metres):
+/// the sheet's thickness is the road MPD's texture-tied error (`docs/road.md`, "Across the
+/// sheet"), so the head's line generator focuses it there, as thin as keeps the stripe ≥ 1 px
+/// (σ) in the image for the sub-pixel peak (`docs/road.md`, "The road head").
+pub const ROAD_SHEET_WAIST: f64 = 0.25e-3;
+
+/// Simulation settings of the road head: the reference sensor; the reference laser's diode
+/// behind a line generator focused on the road (`1/e²` half-width [`ROAD_SHEET_WAIST`] at the
+/// source-to-road distance `√(B² + Z²)`, a single-mode Gaussian beam's far-field divergence
+/// `θ = λ/(π w0)`: Rayleigh range `π w0²/λ` ≈ 0.30 m against the road's few millimetres,
+/// `docs/hardware.md`, "Road head"); the head's shade (its skirt keeps daylight out: a dim
+/// diffuse ambient), speckle on.
 pub fn params(seed: u64) -> SimParams {
     let mut p = SimParams {
         seed,
         ..SimParams::default()
     };
+    p.laser.waist_half_width_m = ROAD_SHEET_WAIST;
+    p.laser.divergence_rad = p.laser.wavelength_m / (std::f64::consts::PI * ROAD_SHEET_WAIST);
+    p.laser.waist_distance_m = ROAD_HEAD_BASELINE.hypot(ROAD_HEAD_STANDOFF);
     p.lighting.diffuse_w_m2 = 0.05;
     p.lighting.sun_w_m2 = 0.0;
     p

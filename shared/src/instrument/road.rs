@@ -56,6 +56,12 @@ pub struct RoadParams {
 /// Most segments one profile holds (the road head's line spans ≈ 113 mm: one).
 pub const MAX_SEGMENTS: usize = 4;
 
+/// Smallest object (pixels) the road head keeps as a piece of its line: two columns of a
+/// stripe ≈ 3 rows thick above the threshold (the focused sheet, `docs/road.md`, "The road
+/// head"). Under the head's skirt the line is the only lit object, so the caliper's floor
+/// against sunlit clutter is not needed; single speckle grains (1–4 pixels) stay out.
+pub const ROAD_MIN_PIXELS: u32 = 6;
+
 /// What the road instrument measured on one profile.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RoadSolution {
@@ -102,9 +108,13 @@ impl Instrument for Road {
     /// line is the only lit object) and the curve is grown along the stripe
     /// ([`crate::pipeline::grow`]) through runs of up to `max_misses` dark columns: the profile
     /// then holds the scattered drop-outs, counted and located, and the standard's 10 %
-    /// refuses them by name (`docs/road.md`, "Bad input").
+    /// refuses them by name (`docs/road.md`, "Bad input"). Those pieces are small: the head's
+    /// focused sheet images ≈ 1 px thick (σ), ≈ 3 rows above the threshold, so a piece of
+    /// three columns is ≈ 9 pixels, below the caliper's 16-pixel floor (set for a trunk's
+    /// curve, [`crate::image::select::SelectionParams::default`]); the floor here is [`ROAD_MIN_PIXELS`].
     fn pipeline_config(base: &PipelineConfig) -> PipelineConfig {
         let mut config = *base;
+        config.selection.min_pixels = ROAD_MIN_PIXELS;
         config.smooth.half_window = 0;
         config.max_fragments = MAX_CURVES;
         config.selection.max_height_to_width = Real::INFINITY;
