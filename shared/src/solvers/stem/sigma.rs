@@ -215,7 +215,7 @@ pub(super) struct RobustCircle {
     pub(super) pull: Real,
 }
 
-/// [`RobustCircle`] of `pts`: Hyper start, robust fit with the scale floor `near_sigma` of the
+/// [`RobustCircle`] of `pts`: Hyper start ([`start_circle`]), robust fit with the scale floor `near_sigma` of the
 /// start's point nearest the source (origin), the residual sandwich and the bending term with
 /// the points' noise vectors `noise(i)`. `None` when a fit fails or the start circle is
 /// centred on the source.
@@ -226,7 +226,7 @@ pub(super) fn robust_circle(
     params: &CylinderParams,
     values: &mut [Real],
 ) -> Option<RobustCircle> {
-    let init = circle::fit_hyper(pts).ok()?;
+    let init = start_circle(pts)?;
     let cn = norm(&init.centre);
     if !(cn > 0.0) {
         return None;
@@ -249,6 +249,32 @@ pub(super) fn robust_circle(
         data_sigma,
         bending,
         pull: wf.radius_pull,
+    })
+}
+
+/// Start of the robust fit: the Hyper circle when its centre lies beyond the arc's middle
+/// point as seen from the source (origin): every point a stem shows the source satisfies
+/// `|p| < |C|`, the middle one by the radius. Otherwise (a short, noisy arc whose outlying end
+/// points tip the algebraic fit to the concave side, report seed 7 000 124) the circle
+/// through the middle point with half the chord for radius, centred beyond it on its line of
+/// sight (`docs/cylinder.md`, "Whole-arc fit"): from the concave side the fit runs away to a
+/// line; from any start beyond the arc it converges to the same circle. `None` when the
+/// Hyper fit fails.
+fn start_circle(pts: &[Vec2]) -> Option<circle::Circle> {
+    let hyper = circle::fit_hyper(pts).ok()?;
+    let mid = *pts.get(pts.len() / 2)?;
+    let d_mid = norm(&mid);
+    if norm(&hyper.centre) > d_mid {
+        return Some(hyper);
+    }
+    let (first, last) = (pts.first()?, pts.last()?);
+    let radius = 0.5 * norm(&(last - first));
+    if !(radius > 0.0 && d_mid > 0.0) {
+        return None;
+    }
+    Some(circle::Circle {
+        centre: mid + mid / d_mid * radius,
+        radius,
     })
 }
 
