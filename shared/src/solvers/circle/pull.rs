@@ -31,7 +31,6 @@
 use crate::real::Float;
 use crate::real::{self, Mat3, Real, Vec2, Vec3};
 
-use super::weighted::LATERAL_FLOOR;
 use super::Normalisation;
 use crate::solvers::correlation::MAX_CORRELATION_LAG;
 
@@ -54,6 +53,10 @@ pub(super) struct FittedArc<'a> {
     pub(super) weights: &'a [Real],
     /// Autocorrelation of the normalised residuals along the inliers, `rho[0] = 1`.
     pub(super) rho: &'a [Real],
+    /// The fit's lateral floor `f` (`weighted::LATERAL_FLOOR`): a residual's σ is
+    /// `σᵢ·√((nᵢ·ĝᵢ)² + f²)`. Handed over rather than imported, so the pull depends on the
+    /// fit's description alone.
+    pub(super) lateral_floor: Real,
 }
 
 /// One point's terms of the expansion (module documentation).
@@ -97,7 +100,7 @@ impl FittedArc<'_> {
         let t = Vec2::new(-n.y, n.x);
         let a = n.dot(&g);
         let gamma = t.dot(&g);
-        let p = a * a + LATERAL_FLOOR * LATERAL_FLOOR;
+        let p = a * a + self.lateral_floor * self.lateral_floor;
         let tangent = Vec3::new(t.x, t.y, 0.0);
         Some(Local {
             j: Vec3::new(-n.x, -n.y, -1.0),
@@ -143,7 +146,7 @@ impl FittedArc<'_> {
             let leverage = w * j.dot(&(a_inv * j));
             let residual = len - self.theta.z;
             // Without the Tukey factor, which lowers the larger residuals' share.
-            let p = sigma * sigma * (a * a + LATERAL_FLOOR * LATERAL_FLOOR);
+            let p = sigma * sigma * (a * a + self.lateral_floor * self.lateral_floor);
             observed += residual * residual / p;
             predicted += sigma * sigma * a * a * (1.0 - leverage).max(0.0) / p;
         }

@@ -225,6 +225,7 @@ pub fn fit_weighted(
         dir_y: points_noise.dir_y,
         weights: buf,
         rho: &rho[..correlation.1],
+        lateral_floor: LATERAL_FLOOR,
     };
     let radius_pull = expected_bias(&arc).map_or(0.0, |b| b.z * norm.scale);
     let correlation = correlation.0;
