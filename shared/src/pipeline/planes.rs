@@ -3,10 +3,11 @@
 
 use crate::calibration::{Calibration, MAX_PLANES};
 use crate::curve::MAX_CURVES;
-use crate::image::segment::ObjectFeatures;
+use crate::image::segment::{ObjectFeatures, Run};
 use crate::image::select::{self, SelectionReport};
 use crate::real::{Real, Vec2, Vec3};
 
+use super::fragments;
 use super::{PipelineConfig, PipelineError};
 
 /// One selected object and what the plane assignment needs of it.
@@ -113,9 +114,11 @@ impl Candidates {
 
 /// Selects the objects that look like laser curves (the per-object criteria, nearest to the
 /// central column first, `max_fragments` per plane) and assigns them to planes. The first
-/// candidate must get a plane, or there is no curve.
+/// candidate must get a plane, or there is no curve. `runs` are the segmentation's labelled
+/// runs (the depth agreement of [`fragments`] reads the pieces' rows from them).
 pub(super) fn select_and_assign(
     objects: &[ObjectFeatures],
+    runs: &[Run],
     width: usize,
     calibration: &Calibration,
     config: &PipelineConfig,
@@ -149,7 +152,7 @@ pub(super) fn select_and_assign(
         }
     }
     let len = candidates.len;
-    assign_planes(&mut candidates.list[..len], calibration, config);
+    assign_planes(&mut candidates.list[..len], runs, calibration, config);
     if candidates.list[0].plane.is_none() {
         return Err(PipelineError::NoCurve);
     }
@@ -162,10 +165,18 @@ pub(super) fn select_and_assign(
 /// plane's. With several planes, the candidates overlapping it in columns are the other planes'
 /// curves on the same object; they are sorted by mean row and matched to the planes sorted by
 /// the row at which each plane is seen on the central column at mid range — parallel planes
-/// keep their image order at every depth (docs/pipeline.md). Then fragments: a remaining
-/// candidate whose column span continues an assigned curve's within `max_fragment_gap` columns
-/// and whose mean row is within `max_fragment_step` rows joins that plane.
-fn assign_planes(cands: &mut [Candidate], calibration: &Calibration, config: &PipelineConfig) {
+/// keep their image order at every depth (docs/pipeline.md). With `config.stacks` (wall
+/// mode), the other surfaces' pieces one above the other are assigned next when their depths
+/// agree ([`fragments::assign_stacks`]). Then fragments: a remaining candidate whose column
+/// span continues an assigned curve's within `max_fragment_gap` columns and whose mean row is
+/// within `max_fragment_step` rows joins that plane (in wall mode only if it agrees in depth
+/// with the pieces above or below it, [`fragments::agrees_with_partners`]).
+pub(super) fn assign_planes(
+    cands: &mut [Candidate],
+    runs: &[Run],
+    calibration: &Calibration,
+    config: &PipelineConfig,
+) {
     let n_planes = calibration.planes.len();
     let Some(first) = cands.first().copied() else {
         return;
@@ -211,7 +222,10 @@ fn assign_planes(cands: &mut [Candidate], calibration: &Calibration, config: &Pi
             cands[ci].plane = Some(best);
         }
     }
-    join_fragments(cands, config);
+    if let Some(stacks) = &config.stacks {
+        fragments::assign_stacks(cands, runs, calibration, planes_order, stacks);
+    }
+    join_fragments(cands, runs, calibration, config);
 }
 
 /// The planes sorted by the image row at which each is seen on the central column, at the
@@ -256,8 +270,14 @@ pub(super) fn planes_by_row(
 }
 
 /// Joins the candidates left without a plane that continue an assigned curve: a column gap
-/// of at most `max_fragment_gap` and a mean-row step of at most `max_fragment_step`.
-fn join_fragments(cands: &mut [Candidate], config: &PipelineConfig) {
+/// of at most `max_fragment_gap` and a mean-row step of at most `max_fragment_step` (and, with
+/// `config.stacks`, depths that agree with the other planes' pieces in the same columns).
+fn join_fragments(
+    cands: &mut [Candidate],
+    runs: &[Run],
+    calibration: &Calibration,
+    config: &PipelineConfig,
+) {
     let mut changed = true;
     while changed {
         changed = false;
@@ -278,6 +298,11 @@ fn join_fragments(cands: &mut [Candidate], config: &PipelineConfig) {
                 (gap <= config.max_fragment_gap
                     && (c.mean_row - a.mean_row).abs() <= config.max_fragment_step)
                     .then_some(plane)
+            });
+            let join = join.filter(|&plane| {
+                config.stacks.as_ref().is_none_or(|stacks| {
+                    fragments::agrees_with_partners(&c, plane, cands, runs, calibration, stacks)
+                })
             });
             if let Some(plane) = join {
                 cands[i].plane = Some(plane);
