@@ -5,10 +5,11 @@
 extern crate std;
 use std::vec::Vec;
 
-use super::super::planes::{assign_planes, Candidate};
+use super::super::planes::{assign_planes, select_and_assign, Candidate};
 use super::super::tests::{calibration, wall_row};
 use super::*;
 use crate::calibration::Calibration;
+use crate::image::segment::ObjectFeatures;
 use crate::pipeline::PipelineConfig;
 
 /// One piece: its label, columns (inclusive), the plane whose line it is, the wall's depth.
@@ -333,4 +334,117 @@ fn a_pitched_walls_lines_agree_within_the_slope_bound() {
     let (mut cands, runs) = scene(&cal, &pieces);
     assign_planes(&mut cands, &runs, &cal, &strict);
     assert_eq!(planes_of(&cands), [Some(0), Some(1), None, None]);
+}
+
+/// Tuning seed 3000014's niche (back wall at 1.69 m broken by a cable at 1.22 m, front wall
+/// at 1.50 m): with the pieces ranked by their distance to the central column, the cable's
+/// two pieces and the back wall's four fill the eight curves that the fragment limit keeps,
+/// and the two next, the front wall's line 0 left and right, are no pair. Wall mode selects
+/// more, assigns, and extracts the eight nearest assigned pieces: a front-wall pair among them.
+#[test]
+fn a_cables_pieces_do_not_crowd_out_the_front_wall() {
+    let cal = calibration(2);
+    let (zf, zb, zc) = (1.500, 1.690, 1.219);
+    let pieces = [
+        Piece {
+            label: 1,
+            cols: (259, 610),
+            plane: 0,
+            z: zb,
+        },
+        Piece {
+            label: 2,
+            cols: (259, 610),
+            plane: 1,
+            z: zb,
+        },
+        Piece {
+            label: 3,
+            cols: (141, 232),
+            plane: 0,
+            z: zb,
+        },
+        Piece {
+            label: 4,
+            cols: (141, 232),
+            plane: 1,
+            z: zb,
+        },
+        Piece {
+            label: 5,
+            cols: (233, 258),
+            plane: 0,
+            z: zc,
+        },
+        Piece {
+            label: 6,
+            cols: (233, 258),
+            plane: 1,
+            z: zc,
+        },
+        Piece {
+            label: 7,
+            cols: (0, 111),
+            plane: 0,
+            z: zf,
+        },
+        Piece {
+            label: 8,
+            cols: (640, 751),
+            plane: 0,
+            z: zf,
+        },
+        Piece {
+            label: 9,
+            cols: (0, 111),
+            plane: 1,
+            z: zf,
+        },
+        Piece {
+            label: 10,
+            cols: (640, 751),
+            plane: 1,
+            z: zf,
+        },
+    ];
+    let (cands, runs) = scene(&cal, &pieces);
+    let objects: Vec<ObjectFeatures> = cands
+        .iter()
+        .map(|c| {
+            let mut f = ObjectFeatures::empty(c.label);
+            for r in runs.iter().filter(|r| r.label == c.label) {
+                f.pixel_count += 1;
+                f.x_sum += r.start as u64;
+                f.y_sum += r.row as u64;
+                f.min_y = f.min_y.min(r.row);
+                f.max_y = f.max_y.max(r.row);
+            }
+            f.min_x = c.min_x;
+            f.max_x = c.max_x;
+            f
+        })
+        .collect();
+    let assigned = |config: &PipelineConfig| -> Vec<(u16, usize)> {
+        let chosen = select_and_assign(&objects, &runs, 752, &cal, config).unwrap();
+        let used = chosen.used_curves();
+        let mut v: Vec<(u16, usize)> = (0..used.len)
+            .map(|i| (used.labels[i], used.planes[i]))
+            .collect();
+        v.sort();
+        v
+    };
+    // The fragment limit alone: the back wall and the cable's pieces; no front wall.
+    let legacy = assigned(&PipelineConfig::default());
+    assert!(legacy.iter().all(|&(l, _)| l <= 4), "{legacy:?}");
+    let wall = assigned(&wall_config());
+    assert_eq!(wall.len(), 8, "{wall:?}");
+    for p in &pieces {
+        if let Some(&(_, k)) = wall.iter().find(|&&(l, _)| l == p.label) {
+            assert_eq!(k, p.plane, "piece {}", p.label);
+        }
+    }
+    assert!(
+        wall.iter().filter(|&&(l, _)| l >= 7).count() >= 2,
+        "a front-wall pair is extracted: {wall:?}"
+    );
 }

@@ -33,10 +33,16 @@ impl Candidate {
     };
 }
 
+/// Most objects selected with [`PipelineConfig::stacks`] (wall mode): the assignment, not the
+/// rank alone, decides which pieces are curves — a cable's two pieces near the central column
+/// would otherwise crowd out a niche's front wall — and at most [`MAX_CURVES`] of them, the
+/// nearest, are extracted.
+pub(super) const MAX_CANDIDATES: usize = 2 * MAX_CURVES;
+
 /// The selected objects, nearest to the central column first, each with its plane.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Candidates {
-    list: [Candidate; MAX_CURVES],
+    list: [Candidate; MAX_CANDIDATES],
     len: usize,
     /// What the selection found.
     pub report: SelectionReport,
@@ -87,6 +93,9 @@ impl Candidates {
             len: 0,
         };
         for c in self.used() {
+            if used.len == MAX_CURVES {
+                break;
+            }
             if let Some(plane) = c.plane {
                 used.labels[used.len] = c.label;
                 used.planes[used.len] = plane;
@@ -125,15 +134,19 @@ pub(super) fn select_and_assign(
 ) -> Result<Candidates, PipelineError> {
     let n_planes = calibration.planes.len();
     let mut params = config.selection;
-    params.max_objects = (config.max_fragments * n_planes).clamp(1, MAX_CURVES);
-    let mut selected = [0u16; MAX_CURVES];
+    params.max_objects = if config.stacks.is_some() {
+        MAX_CANDIDATES
+    } else {
+        (config.max_fragments * n_planes).clamp(1, MAX_CURVES)
+    };
+    let mut selected = [0u16; MAX_CANDIDATES];
     let report = select::select(objects, width, &params, &mut selected);
     if report.selected == 0 {
         return Err(PipelineError::NoCurve);
     }
     let mut candidates = Candidates {
-        list: [Candidate::NONE; MAX_CURVES],
-        len: report.selected.min(MAX_CURVES),
+        list: [Candidate::NONE; MAX_CANDIDATES],
+        len: report.selected.min(MAX_CANDIDATES),
         report,
     };
     for (c, &label) in candidates.list.iter_mut().zip(&selected[..candidates.len]) {
@@ -153,10 +166,49 @@ pub(super) fn select_and_assign(
     }
     let len = candidates.len;
     assign_planes(&mut candidates.list[..len], runs, calibration, config);
+    if config.stacks.is_some() {
+        keep_nearest_curves(&mut candidates.list[..len]);
+    }
     if candidates.list[0].plane.is_none() {
         return Err(PipelineError::NoCurve);
     }
     Ok(candidates)
+}
+
+/// Keeps the curves the seed table holds, [`MAX_CURVES`]: the assigned candidates nearest to
+/// the central column first, each with the assigned pieces of other planes above or below it
+/// (its lines on the same surface) or not at all — one line of a surface is no plane for the
+/// wall solver, and a lone piece would take the place of the next surface's pair.
+fn keep_nearest_curves(cands: &mut [Candidate]) {
+    let n = cands.len().min(MAX_CANDIDATES);
+    let mut keep = [false; MAX_CANDIDATES];
+    let mut kept = 0;
+    for i in 0..n {
+        let Some(plane) = cands[i].plane.filter(|_| !keep[i]) else {
+            continue;
+        };
+        let c = cands[i];
+        let mut group = [false; MAX_CANDIDATES];
+        group[i] = true;
+        for (j, o) in cands.iter().enumerate().take(n).skip(i + 1) {
+            group[j] = !keep[j]
+                && o.plane.is_some_and(|k| k != plane)
+                && o.min_x.max(c.min_x) <= o.max_x.min(c.max_x);
+        }
+        let size = group.iter().filter(|&&g| g).count();
+        if kept + size > MAX_CURVES {
+            continue;
+        }
+        for (k, g) in keep.iter_mut().zip(group.iter()) {
+            *k |= *g;
+        }
+        kept += size;
+    }
+    for (c, &k) in cands.iter_mut().zip(keep.iter()) {
+        if !k {
+            c.plane = None;
+        }
+    }
 }
 
 /// Assigns candidates (sorted nearest to the central column first) to laser planes.
