@@ -34,7 +34,7 @@ use crate::laser_plane::triangulate;
 use crate::real::Float;
 use crate::real::{Real, Vec2, Vec3};
 
-use super::planes::Candidate;
+use super::planes::{Candidate, MAX_CANDIDATES};
 
 /// Settings of the depth-agreement assignment ([`super::PipelineConfig::stacks`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -159,11 +159,12 @@ fn pair_fit(
     Some((disagreement(&da, &db, params), ka, kb))
 }
 
-/// Assigns the unassigned candidates that pair up as one surface's two lines: each, nearest
-/// to the central column first, with the unassigned candidate one above or below it whose
-/// depths agree best (when they agree), in the planes' row order. Only for two planes
-/// across the image (the reference head's); with more, nothing is assigned here. Returns
-/// whether any candidate was assigned.
+/// Assigns the unassigned candidates that pair up as one surface's two lines, in the planes'
+/// row order, when their depths agree: the pairs sharing the most columns first (a surface's
+/// two lines share nearly all of theirs; a short piece beside a corner shares a few columns
+/// with the next wall's long one), each piece in one pair at most, and neither plane already
+/// lit in those columns ([`occupied`]). Only for two planes across the image (the reference
+/// head's); with more, nothing is assigned here. Returns whether any candidate was assigned.
 pub(super) fn assign_stacks(
     cands: &mut [Candidate],
     runs: &[Run],
@@ -174,39 +175,53 @@ pub(super) fn assign_stacks(
     if calibration.planes.len() != 2 || planes_order.len() != 2 {
         return false;
     }
+    let n = cands.len().min(MAX_CANDIDATES);
+    // Bit `j` of `tried[i]`: the pair (i, j) was tested and refused.
+    let mut tried = [0u16; MAX_CANDIDATES];
     let mut changed = false;
-    for i in 0..cands.len() {
-        if cands[i].plane.is_some() {
-            continue;
-        }
-        let mut best: Option<(Real, usize, usize, usize)> = None;
-        for j in 0..cands.len() {
-            if j == i || cands[j].plane.is_some() {
+    loop {
+        // The untried pair of unassigned pieces sharing the most columns.
+        let mut widest: Option<(u16, usize, usize)> = None;
+        for i in 0..n {
+            if cands[i].plane.is_some() {
                 continue;
             }
-            let Some((d, ki, kj)) = pair_fit(
-                &cands[i],
-                &cands[j],
-                runs,
-                calibration,
-                planes_order,
-                params,
-            ) else {
-                continue;
-            };
-            let free =
-                !occupied(cands, ki, &cands[i], params) && !occupied(cands, kj, &cands[j], params);
-            if free && d <= 1.0 && best.is_none_or(|b| d < b.0) {
-                best = Some((d, j, ki, kj));
+            for j in i + 1..n {
+                if cands[j].plane.is_some() || tried[i] & (1 << j) != 0 {
+                    continue;
+                }
+                if let Some((x0, x1)) = shared_columns(&cands[i], &cands[j], params) {
+                    if widest.is_none_or(|w| x1 - x0 > w.0) {
+                        widest = Some((x1 - x0, i, j));
+                    }
+                }
             }
         }
-        if let Some((_, j, ki, kj)) = best {
-            cands[i].plane = Some(ki);
-            cands[j].plane = Some(kj);
-            changed = true;
+        let Some((_, i, j)) = widest else {
+            return changed;
+        };
+        let fit = pair_fit(
+            &cands[i],
+            &cands[j],
+            runs,
+            calibration,
+            planes_order,
+            params,
+        )
+        .filter(|&(d, ki, kj)| {
+            d <= 1.0
+                && !occupied(cands, ki, &cands[i], params)
+                && !occupied(cands, kj, &cands[j], params)
+        });
+        match fit {
+            Some((_, ki, kj)) => {
+                cands[i].plane = Some(ki);
+                cands[j].plane = Some(kj);
+                changed = true;
+            }
+            None => tried[i] |= 1 << j,
         }
     }
-    changed
 }
 
 /// Whether plane `plane` already has an assigned piece above or below `c`. A laser plane
