@@ -12,7 +12,8 @@ use crate::calibration::Calibration;
 use crate::image::segment::ObjectFeatures;
 use crate::pipeline::PipelineConfig;
 
-/// One piece: its label, columns (inclusive), the plane whose line it is, the wall's depth.
+/// One piece: its label, columns (inclusive), the plane whose line it is, the wall's depth on
+/// the optical axis.
 struct Piece {
     label: u16,
     cols: (u16, u16),
@@ -20,15 +21,32 @@ struct Piece {
     z: Real,
 }
 
+/// A wall turned about the vertical: `z = z₀ + x·slope`, so the ray of column `u`
+/// (`x = a z`, `a = (u − c_x)/f_x`) meets it at `z₀/(1 − a·slope)`.
+fn turned(cal: &Calibration, p: &Piece, slope: Real, u: Real) -> Real {
+    let a = (u - cal.camera.cx) / cal.camera.fx;
+    p.z / (1.0 - a * slope)
+}
+
 /// The candidates and runs of `pieces` (candidates in the order given: the first is the
 /// aimed one, as the selection ranks them).
 fn scene(cal: &Calibration, pieces: &[Piece]) -> (Vec<Candidate>, Vec<Run>) {
+    scene_turned(cal, pieces, &[])
+}
+
+/// [`scene`] with the walls of the pieces labelled in `slopes` turned (label, slope).
+fn scene_turned(
+    cal: &Calibration,
+    pieces: &[Piece],
+    slopes: &[(u16, Real)],
+) -> (Vec<Candidate>, Vec<Run>) {
     let mut runs = Vec::new();
     let mut cands = Vec::new();
     for p in pieces {
         let (mut n, mut sum) = (0u32, 0.0);
+        let slope = slopes.iter().find(|s| s.0 == p.label).map_or(0.0, |s| s.1);
         for u in p.cols.0..=p.cols.1 {
-            let v = wall_row(cal, p.plane, u as Real, p.z);
+            let v = wall_row(cal, p.plane, u as Real, turned(cal, p, slope, u as Real));
             // The two pixel rows the stripe's centre falls between.
             let r0 = (v - 0.5).floor() as u16;
             for row in [r0, r0 + 1] {
@@ -446,5 +464,61 @@ fn a_cables_pieces_do_not_crowd_out_the_front_wall() {
     assert!(
         wall.iter().filter(|&&(l, _)| l >= 7).count() >= 2,
         "a front-wall pair is extracted: {wall:?}"
+    );
+}
+
+/// Report seed 9000097's corner: the left wall faces the camera, the right one is turned 58°
+/// and its lines slope down the image by ≈ 0.2 rows a column. Beside the edge a short piece of
+/// the right wall's line 1 (its first 27 columns) shares 19 columns with the right wall's
+/// long line-0 piece; the long line-1 piece starts 20 columns on and ≈ 40 rows lower. Paired
+/// nearest the central column first, the short piece would take the long line-0 piece and
+/// leave the long line 1 out (the step join cannot reach it); widest shared span first, the
+/// long pieces pair and the short one continues the left wall's line 1 within the step.
+#[test]
+fn the_widest_pair_goes_first() {
+    let cal = calibration(2);
+    let slope: Real = 1.6; // tan 58°
+    let z0 = 1.2;
+    let corner = z0 / (1.0 - (389.0 - cal.camera.cx) / cal.camera.fx * slope);
+    let pieces = [
+        Piece {
+            label: 1,
+            cols: (300, 397),
+            plane: 0,
+            z: corner,
+        },
+        Piece {
+            label: 2,
+            cols: (300, 389),
+            plane: 1,
+            z: corner,
+        },
+        Piece {
+            label: 3,
+            cols: (391, 417),
+            plane: 1,
+            z: z0,
+        },
+        Piece {
+            label: 4,
+            cols: (399, 751),
+            plane: 0,
+            z: z0,
+        },
+        Piece {
+            label: 5,
+            cols: (438, 751),
+            plane: 1,
+            z: z0,
+        },
+    ];
+    let turned_right = [(3, slope), (4, slope), (5, slope)];
+    let (mut cands, runs) = scene_turned(&cal, &pieces, &turned_right);
+    // The long line-1 piece is out of the step join's reach of the short one.
+    assert!((cands[4].mean_row - cands[2].mean_row).abs() > 20.0);
+    assign_planes(&mut cands, &runs, &cal, &wall_config());
+    assert_eq!(
+        planes_of(&cands),
+        [Some(0), Some(1), Some(1), Some(0), Some(1)]
     );
 }
