@@ -45,6 +45,7 @@ use crate::solvers::SolveError;
 pub mod buffers;
 pub mod crossing;
 pub mod faint;
+pub mod fragments;
 pub mod grow;
 mod planes;
 pub mod profile;
@@ -56,6 +57,7 @@ pub mod workspace;
 pub use buffers::OwnedBuffers;
 pub use buffers::{Buffers, Objects, RunBuffers, SmallBuffers, NO_OBJECTS};
 pub use faint::FaintParams;
+pub use fragments::StackParams;
 pub use grow::GrowParams;
 pub use profile::{point_sigmas, Profile, Stage};
 pub use readout_fits::ReadoutBuffers;
@@ -95,6 +97,10 @@ pub struct PipelineConfig {
     /// threshold ([`grow`]); `None` leaves the curves as the threshold cut them. The stem
     /// instrument turns it on (`Instrument::pipeline_config`).
     pub grow: Option<GrowParams>,
+    /// Assigning other surfaces' pieces one above the other to the planes when their depths
+    /// agree ([`fragments`]: a niche's front wall beside its back wall); `None` leaves them to
+    /// the fragment join. The wall instrument turns it on.
+    pub stacks: Option<StackParams>,
 }
 
 impl Default for PipelineConfig {
@@ -112,6 +118,7 @@ impl Default for PipelineConfig {
             edge_margin: 2,
             faint: Some(FaintParams::default()),
             grow: None,
+            stacks: None,
         }
     }
 }

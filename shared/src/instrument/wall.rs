@@ -51,6 +51,16 @@ impl Instrument for Wall {
     type Params = WallInstrumentParams;
     type Solution = WallSolution;
 
+    /// The pipeline with the other surfaces' pieces assigned by depth agreement
+    /// ([`PipelineConfig::stacks`]: a niche's front wall beside its back wall,
+    /// `docs/building.md`, "Niches"); nothing else changes.
+    fn pipeline_config(base: &PipelineConfig) -> PipelineConfig {
+        PipelineConfig {
+            stacks: Some(base.stacks.unwrap_or_default()),
+            ..*base
+        }
+    }
+
     /// Unlike a stem, a wall may run off the frame: a segment that does is reported as open
     /// ([`walls::EndKind::FrameSide`]). The solution's flags include the
     /// [`Profile::image_flags`].
@@ -153,7 +163,9 @@ pub fn solve_walls(
 /// `on`, `calibration_across`: the planes across the image) through the pipeline, the
 /// crossing line's transposed pair through [`extract_crossing`] in a workspace of its own
 /// (`crossing_ws`: transposed frame size, one plane), then [`solve_walls`] on all of them.
-/// Also returns where the crossing line's points are in `crossing_ws.points`.
+/// Also returns where the crossing line's points are in `crossing_ws.points`. `config` is
+/// the base configuration: both extractions use the wall instrument's
+/// ([`Instrument::pipeline_config`]).
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
 pub fn measure_with_crossing<P: Pixel>(
     off: &Frame<P, impl AsRef<[P]>>,
@@ -168,6 +180,7 @@ pub fn measure_with_crossing<P: Pixel>(
     ws: &mut Workspace<'_, P>,
     crossing_ws: &mut Workspace<'_, P>,
 ) -> Result<(Measured<WallSolution>, (usize, usize)), PipelineError> {
+    let config = &Wall::pipeline_config(config);
     let profile: Profile = extract_profile(off, on, calibration_across, config, ws)?;
     let (s, e) = extract_crossing(
         off_t,

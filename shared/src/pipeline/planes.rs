@@ -3,10 +3,11 @@
 
 use crate::calibration::{Calibration, MAX_PLANES};
 use crate::curve::MAX_CURVES;
-use crate::image::segment::ObjectFeatures;
+use crate::image::segment::{ObjectFeatures, Run};
 use crate::image::select::{self, SelectionReport};
 use crate::real::{Real, Vec2, Vec3};
 
+use super::fragments;
 use super::{PipelineConfig, PipelineError};
 
 /// One selected object and what the plane assignment needs of it.
@@ -32,10 +33,16 @@ impl Candidate {
     };
 }
 
+/// Most objects selected with [`PipelineConfig::stacks`] (wall mode): the assignment, not the
+/// rank alone, decides which pieces are curves — a cable's two pieces near the central column
+/// would otherwise crowd out a niche's front wall — and at most [`MAX_CURVES`] of them, the
+/// nearest, are extracted.
+pub(super) const MAX_CANDIDATES: usize = 2 * MAX_CURVES;
+
 /// The selected objects, nearest to the central column first, each with its plane.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Candidates {
-    list: [Candidate; MAX_CURVES],
+    list: [Candidate; MAX_CANDIDATES],
     len: usize,
     /// What the selection found.
     pub report: SelectionReport,
@@ -86,6 +93,9 @@ impl Candidates {
             len: 0,
         };
         for c in self.used() {
+            if used.len == MAX_CURVES {
+                break;
+            }
             if let Some(plane) = c.plane {
                 used.labels[used.len] = c.label;
                 used.planes[used.len] = plane;
@@ -113,24 +123,30 @@ impl Candidates {
 
 /// Selects the objects that look like laser curves (the per-object criteria, nearest to the
 /// central column first, `max_fragments` per plane) and assigns them to planes. The first
-/// candidate must get a plane, or there is no curve.
+/// candidate must get a plane, or there is no curve. `runs` are the segmentation's labelled
+/// runs (the depth agreement of [`fragments`] reads the pieces' rows from them).
 pub(super) fn select_and_assign(
     objects: &[ObjectFeatures],
+    runs: &[Run],
     width: usize,
     calibration: &Calibration,
     config: &PipelineConfig,
 ) -> Result<Candidates, PipelineError> {
     let n_planes = calibration.planes.len();
     let mut params = config.selection;
-    params.max_objects = (config.max_fragments * n_planes).clamp(1, MAX_CURVES);
-    let mut selected = [0u16; MAX_CURVES];
+    params.max_objects = if config.stacks.is_some() {
+        MAX_CANDIDATES
+    } else {
+        (config.max_fragments * n_planes).clamp(1, MAX_CURVES)
+    };
+    let mut selected = [0u16; MAX_CANDIDATES];
     let report = select::select(objects, width, &params, &mut selected);
     if report.selected == 0 {
         return Err(PipelineError::NoCurve);
     }
     let mut candidates = Candidates {
-        list: [Candidate::NONE; MAX_CURVES],
-        len: report.selected.min(MAX_CURVES),
+        list: [Candidate::NONE; MAX_CANDIDATES],
+        len: report.selected.min(MAX_CANDIDATES),
         report,
     };
     for (c, &label) in candidates.list.iter_mut().zip(&selected[..candidates.len]) {
@@ -149,11 +165,50 @@ pub(super) fn select_and_assign(
         }
     }
     let len = candidates.len;
-    assign_planes(&mut candidates.list[..len], calibration, config);
+    assign_planes(&mut candidates.list[..len], runs, calibration, config);
+    if config.stacks.is_some() {
+        keep_nearest_curves(&mut candidates.list[..len]);
+    }
     if candidates.list[0].plane.is_none() {
         return Err(PipelineError::NoCurve);
     }
     Ok(candidates)
+}
+
+/// Keeps the curves the seed table holds, [`MAX_CURVES`]: the assigned candidates nearest to
+/// the central column first, each with the assigned pieces of other planes above or below it
+/// (its lines on the same surface) or not at all — one line of a surface is no plane for the
+/// wall solver, and a lone piece would take the place of the next surface's pair.
+fn keep_nearest_curves(cands: &mut [Candidate]) {
+    let n = cands.len().min(MAX_CANDIDATES);
+    let mut keep = [false; MAX_CANDIDATES];
+    let mut kept = 0;
+    for i in 0..n {
+        let Some(plane) = cands[i].plane.filter(|_| !keep[i]) else {
+            continue;
+        };
+        let c = cands[i];
+        let mut group = [false; MAX_CANDIDATES];
+        group[i] = true;
+        for (j, o) in cands.iter().enumerate().take(n).skip(i + 1) {
+            group[j] = !keep[j]
+                && o.plane.is_some_and(|k| k != plane)
+                && o.min_x.max(c.min_x) <= o.max_x.min(c.max_x);
+        }
+        let size = group.iter().filter(|&&g| g).count();
+        if kept + size > MAX_CURVES {
+            continue;
+        }
+        for (k, g) in keep.iter_mut().zip(group.iter()) {
+            *k |= *g;
+        }
+        kept += size;
+    }
+    for (c, &k) in cands.iter_mut().zip(keep.iter()) {
+        if !k {
+            c.plane = None;
+        }
+    }
 }
 
 /// Assigns candidates (sorted nearest to the central column first) to laser planes.
@@ -162,10 +217,18 @@ pub(super) fn select_and_assign(
 /// plane's. With several planes, the candidates overlapping it in columns are the other planes'
 /// curves on the same object; they are sorted by mean row and matched to the planes sorted by
 /// the row at which each plane is seen on the central column at mid range — parallel planes
-/// keep their image order at every depth (docs/pipeline.md). Then fragments: a remaining
-/// candidate whose column span continues an assigned curve's within `max_fragment_gap` columns
-/// and whose mean row is within `max_fragment_step` rows joins that plane.
-fn assign_planes(cands: &mut [Candidate], calibration: &Calibration, config: &PipelineConfig) {
+/// keep their image order at every depth (docs/pipeline.md). With `config.stacks` (wall
+/// mode), the other surfaces' pieces one above the other are assigned next when their depths
+/// agree ([`fragments::assign_stacks`]). Then fragments: a remaining candidate whose column
+/// span continues an assigned curve's within `max_fragment_gap` columns and whose mean row is
+/// within `max_fragment_step` rows joins that plane (in wall mode only if it agrees in depth
+/// with the pieces above or below it, [`fragments::agrees_with_partners`]).
+pub(super) fn assign_planes(
+    cands: &mut [Candidate],
+    runs: &[Run],
+    calibration: &Calibration,
+    config: &PipelineConfig,
+) {
     let n_planes = calibration.planes.len();
     let Some(first) = cands.first().copied() else {
         return;
@@ -211,7 +274,10 @@ fn assign_planes(cands: &mut [Candidate], calibration: &Calibration, config: &Pi
             cands[ci].plane = Some(best);
         }
     }
-    join_fragments(cands, config);
+    if let Some(stacks) = &config.stacks {
+        fragments::assign_stacks(cands, runs, calibration, planes_order, stacks);
+    }
+    join_fragments(cands, runs, calibration, config);
 }
 
 /// The planes sorted by the image row at which each is seen on the central column, at the
@@ -256,8 +322,14 @@ pub(super) fn planes_by_row(
 }
 
 /// Joins the candidates left without a plane that continue an assigned curve: a column gap
-/// of at most `max_fragment_gap` and a mean-row step of at most `max_fragment_step`.
-fn join_fragments(cands: &mut [Candidate], config: &PipelineConfig) {
+/// of at most `max_fragment_gap` and a mean-row step of at most `max_fragment_step` (and, with
+/// `config.stacks`, depths that agree with the other planes' pieces in the same columns).
+fn join_fragments(
+    cands: &mut [Candidate],
+    runs: &[Run],
+    calibration: &Calibration,
+    config: &PipelineConfig,
+) {
     let mut changed = true;
     while changed {
         changed = false;
@@ -278,6 +350,11 @@ fn join_fragments(cands: &mut [Candidate], config: &PipelineConfig) {
                 (gap <= config.max_fragment_gap
                     && (c.mean_row - a.mean_row).abs() <= config.max_fragment_step)
                     .then_some(plane)
+            });
+            let join = join.filter(|&plane| {
+                config.stacks.as_ref().is_none_or(|stacks| {
+                    fragments::agrees_with_partners(&c, plane, cands, runs, calibration, stacks)
+                })
             });
             if let Some(plane) = join {
                 cands[i].plane = Some(plane);

@@ -195,7 +195,13 @@ pub(super) fn after_segmentation<P: Pixel>(
     let objects = &ws.objects[..seg.objects.min(ws.objects.len())];
 
     // Selection (§5.6) and plane assignment (docs/pipeline.md).
-    let candidates = planes::select_and_assign(objects, width, calibration, config)?;
+    let candidates = planes::select_and_assign(
+        objects,
+        &ws.runs[..seg.runs.min(ws.runs.len())],
+        width,
+        calibration,
+        config,
+    )?;
     let used = candidates.used_curves();
     probe(Stage::Selected);
 

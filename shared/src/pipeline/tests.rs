@@ -29,7 +29,7 @@ pub(crate) fn calibration(planes: usize) -> Calibration {
 /// The row where `plane` crosses column `u` on a fronto-parallel wall at depth `z`
 /// (undistorted reference camera): the ray through (u, v) hits the wall at
 /// (x, y) = (u − cx, v − cy)·z/f, and the plane n·X = d gives y analytically.
-fn wall_row(cal: &Calibration, plane: usize, u: Real, z: Real) -> Real {
+pub(crate) fn wall_row(cal: &Calibration, plane: usize, u: Real, z: Real) -> Real {
     let cam = &cal.camera;
     let p = cal.planes[plane];
     let x = (u - cam.cx) * z / cam.fx;

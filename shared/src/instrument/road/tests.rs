@@ -192,16 +192,27 @@ fn the_road_instrument_alone_takes_its_curve_unsmoothed_and_in_fragments() {
         },
         base
     );
-    for mode in [Mode::Sphere, Mode::Wall] {
-        assert_eq!(pipeline_config(mode, &base), base);
+    // The stem and the sphere grow their curves along the stripe (`pipeline::grow`) and
+    // change nothing else.
+    for mode in [Mode::Cylinder, Mode::Sphere] {
+        let grown = pipeline_config(mode, &base);
+        assert!(grown.grow.is_some());
+        assert_eq!(
+            PipelineConfig {
+                grow: base.grow,
+                ..grown
+            },
+            base
+        );
     }
-    // The stem grows its curves along the stripe (`pipeline::grow`) and changes nothing else.
-    let stem = pipeline_config(Mode::Cylinder, &base);
-    assert!(stem.grow.is_some());
+    // The wall assigns other surfaces' pieces by depth agreement (`pipeline::fragments`) and
+    // changes nothing else.
+    let wall = pipeline_config(Mode::Wall, &base);
+    assert!(wall.stacks.is_some());
     assert_eq!(
         PipelineConfig {
-            grow: base.grow,
-            ..stem
+            stacks: base.stacks,
+            ..wall
         },
         base
     );
