@@ -43,6 +43,7 @@ use crate::solvers::road_profile::RoadError;
 use crate::solvers::SolveError;
 
 pub mod buffers;
+mod candidate;
 pub mod crossing;
 pub mod faint;
 pub mod fragments;

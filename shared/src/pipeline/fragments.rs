@@ -34,7 +34,7 @@ use crate::laser_plane::triangulate;
 use crate::real::Float;
 use crate::real::{Real, Vec2, Vec3};
 
-use super::planes::{Candidate, MAX_CANDIDATES};
+use super::candidate::{Candidate, MAX_CANDIDATES};
 
 /// Settings of the depth-agreement assignment ([`super::PipelineConfig::stacks`]).
 #[derive(Debug, Clone, Copy, PartialEq)]

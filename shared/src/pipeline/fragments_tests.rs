@@ -5,7 +5,8 @@
 extern crate std;
 use std::vec::Vec;
 
-use super::super::planes::{assign_planes, select_and_assign, Candidate};
+use super::super::candidate::Candidate;
+use super::super::planes::{assign_planes, select_and_assign};
 use super::super::tests::{calibration, wall_row};
 use super::*;
 use crate::calibration::Calibration;
