@@ -129,7 +129,8 @@ fn shared_columns(a: &Candidate, b: &Candidate, params: &StackParams) -> Option<
         return None;
     }
     let shared = (x1 - x0) as Real + 1.0;
-    let narrower = ((a.max_x - a.min_x).min(b.max_x - b.min_x)) as Real + 1.0;
+    let narrower =
+        (a.max_x.saturating_sub(a.min_x)).min(b.max_x.saturating_sub(b.min_x)) as Real + 1.0;
     (shared >= params.min_overlap * narrower).then_some((x0, x1))
 }
 
