@@ -685,18 +685,6 @@ fn kept_lines<'a>(
     .filter(move |&(k, p, _)| !(input.planes[k].is_row_wise() && beside_edge(p, edges, params)))
 }
 
-/// [`kept_lines`] without the line index.
-fn kept<'a>(
-    input: &'a WallInput<'a>,
-    params: &'a WallParams,
-    runs: &'a [Run],
-    take: impl Fn(usize, &Run) -> bool + Clone + 'a,
-    normal: Vec3,
-    edges: &'a [(Vec3, Vec3)],
-) -> impl Iterator<Item = (Vec3, Real)> + Clone + 'a {
-    kept_lines(input, params, runs, take, normal, edges).map(|(_, p, s)| (p, s))
-}
-
 /// Final fit of wall `w`: its runs trimmed at their ends and the crossing line's points
 /// beside another wall's edge left out, each point's σ along the wall's normal.
 fn refit(
@@ -713,7 +701,9 @@ fn refit(
     let fit = |edges: &[(Vec3, Vec3)]| -> Result<PlaneFit, SolveError> {
         let mut plane = *first;
         for _ in 0..2 {
-            plane = fit_plane(kept(input, params, runs, take, plane.normal, edges))?;
+            plane = fit_plane(
+                kept_lines(input, params, runs, take, plane.normal, edges).map(|(_, p, s)| (p, s)),
+            )?;
         }
         Ok(plane)
     };
