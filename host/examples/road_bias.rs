@@ -8,7 +8,11 @@
 //! `BIAS_SEEDS=91000,91001` adds simulated dense asphalt and worn concrete on those seeds,
 //! `SHEET_W0_MM=0.68` simulates them with a sheet of that 1/e² half-width (no divergence; the
 //! default is the road head's focused 0.25 mm sheet, 0.68 mm the collimated module's),
-//! `NO_SPECKLE=1` without speckle, `BIAS_SKIP_COMMITTED=1` skips the committed captures.
+//! `NO_SPECKLE=1` without speckle, `BIAS_SKIP_COMMITTED=1` skips the committed captures;
+//! `BIAS_SURFACES=surface-dressing,…` picks the simulated surfaces (by name); `BIAS_NO_MICRO=1`
+//! renders them without microtexture, `=across` without the microtexture components running
+//! across the line, `=along` without those along it (`docs/road.md`, "Relief finer than the
+//! sheet"); `BIAS_DUMP=1` prints the columns about each segment's peaks.
 
 use std::path::Path;
 
@@ -77,6 +81,29 @@ fn diag(name: &str, capture: &Capture) {
     let at = |s: f64| fe[(idx(s).clamp(0, fe.len() as isize - 1)) as usize] - fme;
     let e_meas_pk = (at(sa[0].peaks[0].x) + at(sa[0].peaks[1].x)) / 2.0;
     let e_true_pk = (at(st[0].peaks[0].x) + at(st[0].peaks[1].x)) / 2.0;
+    if std::env::var("BIAS_DUMP").is_ok() {
+        for pk in [
+            st[0].peaks[0],
+            st[0].peaks[1],
+            sa[0].peaks[0],
+            sa[0].peaks[1],
+        ] {
+            println!(
+                "peak at {:+.3} mm (height {:.4} mm)",
+                pk.x * 1e3,
+                pk.y * 1e3
+            );
+            for (k, p) in m.iter().enumerate() {
+                if (p.x - pk.x).abs() < 1.5e-3 {
+                    let fk = idx(p.x).clamp(0, fe.len() as isize - 1) as usize;
+                    println!(
+                        "  col {k:4} x {:+8.3} meas {:+.4} truth {:+.4} err {:+6.1} µm | filtered meas {:+.4} truth {:+.4}",
+                        p.x * 1e3, p.y * 1e3, tc[k].y * 1e3, (p.y - tc[k].y) * 1e6, fm[fk] * 1e3, ft[fk] * 1e3
+                    );
+                }
+            }
+        }
+    }
     // True + white noise of the measured σ; true + the measured error circularly shifted.
     let mut rng = Pcg64::seed_from_u64(7);
     let normal = Normal::new(0.0, se).unwrap();
@@ -208,11 +235,43 @@ fn main() {
         .map(|s| s.split(',').map(|v| v.parse().unwrap()).collect())
         .unwrap_or_default();
     for seed in seeds {
-        for s in [Surface::DenseAsphalt, Surface::WornConcrete] {
+        let surfaces: Vec<Surface> = match std::env::var("BIAS_SURFACES") {
+            Ok(names) => Surface::ALL
+                .into_iter()
+                .filter(|s| names.split(',').any(|n| n == s.name()))
+                .collect(),
+            Err(_) => vec![Surface::DenseAsphalt, Surface::WornConcrete],
+        };
+        for s in surfaces {
             let mut spec = road_spec(s, Condition::default(), seed);
             if let Ok(w) = std::env::var("SHEET_W0_MM") {
                 spec.params.laser.waist_half_width_m = w.parse::<f64>().unwrap() * 1e-3;
                 spec.params.laser.divergence_rad = 0.0;
+            }
+            if std::env::var("BIAS_NO_MICRO").is_ok() {
+                for o in &mut spec.objects {
+                    if let tangent_host::truth::Object::Road(r) = o {
+                        // BIAS_NO_MICRO=across keeps the microtexture waves running along the
+                        // line (|cos φ| > 0.5), =along those running across it.
+                        let keep = std::env::var("BIAS_NO_MICRO").unwrap_or_default();
+                        for w in &r.waves {
+                            if w.wavelength_m < 0.5e-3 {
+                                println!(
+                                    "micro λ {:.3} mm direction {:.0}° along-line wavelength {:.2} mm",
+                                    w.wavelength_m * 1e3,
+                                    w.direction_rad.to_degrees(),
+                                    w.wavelength_m / w.direction_rad.cos().abs() * 1e3
+                                );
+                            }
+                        }
+                        r.waves.retain(|w| {
+                            let along = w.direction_rad.cos().abs() > 0.5;
+                            w.wavelength_m >= 0.5e-3
+                                || (keep == "across" && along)
+                                || (keep == "along" && !along)
+                        });
+                    }
+                }
             }
             if std::env::var("NO_SPECKLE").is_ok() {
                 spec.params.speckle = false;

@@ -55,6 +55,71 @@ pub fn naive_depth(profile: &[Vec2]) -> Option<f64> {
     Some(v.iter().copied().fold(f64::NEG_INFINITY, f64::max) - mean)
 }
 
+/// The profiles of each surface type taken as one ISO 13473-1 section: its MPD is the mean of
+/// its segments' depths, its truth the mean of theirs (`docs/road.md`, "Ambulatory use").
+#[derive(Default)]
+struct SurfaceSections {
+    /// Per surface (in first-seen order): each profile's reading.
+    rows: Vec<(String, Vec<ProfileReading>)>,
+}
+
+/// One profile's `(truth, MPD, u)` (metres).
+type ProfileReading = (f64, f64, f64);
+
+impl SurfaceSections {
+    fn add(&mut self, name: &str, truth: f64, mpd: f64, u: f64) {
+        if !(truth.is_finite() && mpd.is_finite()) {
+            return;
+        }
+        match self.rows.iter_mut().find(|(n, _)| n == name) {
+            Some((_, v)) => v.push((truth, mpd, u)),
+            None => self.rows.push((name.into(), vec![(truth, mpd, u)])),
+        }
+    }
+
+    /// One row per surface: the section's error and the per-profile spread against the
+    /// instrument's own `u` (an honest `u` covers ≈ 95 % of the errors at 2u).
+    fn write(&self, doc: &mut String) -> std::fmt::Result {
+        writeln!(
+            doc,
+            "Each surface type as one section (ISO 13473-1: the MPD of a measurement is the mean \
+             of its segments' depths; truth likewise). Per-profile SD and coverage: the spread \
+             of single 100 mm segments and how many of them lie within 2u of their truth.\n\n\
+             | surface | profiles | section truth (mm) | section MPD (mm) | section error (mm) | per-profile SD (mm) | largest single-profile error (mm, absolute) | mean u (mm) | within 2u |\n\
+             |---|---|---|---|---|---|---|---|---|"
+        )?;
+        let (mut covered, mut total) = (0, 0);
+        for (name, v) in &self.rows {
+            let n = v.len() as f64;
+            let errors: Vec<f64> = v.iter().map(|(t, m, _)| m - t).collect();
+            let mean_error = errors.iter().sum::<f64>() / n;
+            let sd = (errors.iter().map(|e| (e - mean_error).powi(2)).sum::<f64>()
+                / (n - 1.0).max(1.0))
+            .sqrt();
+            let largest = errors.iter().fold(0.0f64, |a, e| a.max(e.abs()));
+            let within = v
+                .iter()
+                .filter(|(t, m, u)| (m - t).abs() <= 2.0 * u)
+                .count();
+            covered += within;
+            total += v.len();
+            writeln!(
+                doc,
+                "| {name} | {} | {:.3} | {:.3} | {:+.3} | {:.3} | {:.3} | {:.3} | {within}/{} |",
+                v.len(),
+                v.iter().map(|r| r.0).sum::<f64>() / n * 1e3,
+                v.iter().map(|r| r.1).sum::<f64>() / n * 1e3,
+                mean_error * 1e3,
+                sd * 1e3,
+                largest * 1e3,
+                v.iter().map(|r| r.2).sum::<f64>() / n * 1e3,
+                v.len()
+            )?;
+        }
+        writeln!(doc, "\nWithin 2u: **{covered} of {total}** profiles.\n")
+    }
+}
+
 /// Writes the evaluation as Markdown; `seeds` fresh seeds per surface type from `first_seed`.
 pub fn report(first_seed: u64, seeds: u64, repo: &Path, scratch: &Path) -> Result<String> {
     let params = RoadParams::default();
@@ -88,10 +153,11 @@ pub fn report(first_seed: u64, seeds: u64, repo: &Path, scratch: &Path) -> Resul
          Each row: one fresh simulated profile (road head, speckle on), measured by \
          `tangent_core::instrument::Road`; *truth* is the same ISO 13473-1 chain on the true \
          profile along the laser sheet sampled every 0.02 mm; *naive* is max − mean of the raw \
-         profile (no filter, no halves). Target: |MPD − truth| ≤ 0.03 mm; captif-slp on the \
-         same measured profile within 0.005 mm.\n\n\
-         | surface | seed | truth (mm) | MPD (mm) | error (mm) | naive error (mm) | drop-outs | captif-slp − ours (mm) |\n\
-         |---|---|---|---|---|---|---|---|"
+         profile (no filter, no halves); *± u* the instrument's own 1σ (`docs/road.md`, \
+         \"Uncertainty\"). Target: |MPD − truth| ≤ 0.03 mm; captif-slp on the same measured \
+         profile within 0.005 mm.\n\n\
+         | surface | seed | truth (mm) | MPD (mm) | ± u (mm) | error (mm) | naive error (mm) | drop-outs | captif-slp − ours (mm) |\n\
+         |---|---|---|---|---|---|---|---|---|"
     )?;
     let mut files = Vec::new();
     for (i, (.., o)) in outcomes.iter().enumerate() {
@@ -105,6 +171,7 @@ pub fn report(first_seed: u64, seeds: u64, repo: &Path, scratch: &Path) -> Resul
     let captif = captif_mpd(repo, &existing)?;
     let mut worst = 0.0f64;
     let mut worst_captif = 0.0f64;
+    let mut sections = SurfaceSections::default();
     for (i, (s, c, seed, o)) in outcomes.iter().enumerate() {
         let name = format!(
             "{}{}{}",
@@ -113,13 +180,15 @@ pub fn report(first_seed: u64, seeds: u64, repo: &Path, scratch: &Path) -> Resul
             if c.polished { ", polished" } else { "" }
         );
         let truth = o.truth_mpd.unwrap_or(f64::NAN);
-        let (mpd, dropouts) = match &o.result {
+        let (mpd, u, dropouts) = match &o.result {
             Ok(r) => (
                 r.depth.mpd,
+                r.uncertainty,
                 format!("{:.1} %", 100.0 * r.profile.dropout_fraction()),
             ),
-            Err(e) => (f64::NAN, format!("refused: {e}")),
+            Err(e) => (f64::NAN, f64::NAN, format!("refused: {e}")),
         };
+        sections.add(&name, truth, mpd, u);
         let naive = naive_depth(&o.profile).unwrap_or(f64::NAN);
         let cap = match &captif {
             Ok(m) => m
@@ -138,9 +207,10 @@ pub fn report(first_seed: u64, seeds: u64, repo: &Path, scratch: &Path) -> Resul
         worst = worst.max((mpd - truth).abs());
         writeln!(
             doc,
-            "| {name} | {seed} | {:.3} | {:.3} | {:+.3} | {:+.3} | {dropouts} | {cap} |",
+            "| {name} | {seed} | {:.3} | {:.3} | {:.3} | {:+.3} | {:+.3} | {dropouts} | {cap} |",
             truth * 1e3,
             mpd * 1e3,
+            u * 1e3,
             (mpd - truth) * 1e3,
             (naive - truth) * 1e3
         )?;
@@ -151,6 +221,7 @@ pub fn report(first_seed: u64, seeds: u64, repo: &Path, scratch: &Path) -> Resul
         worst * 1e3,
         worst_captif * 1e3
     )?;
+    sections.write(&mut doc)?;
 
     // --- Piezo calibration of a unit with a 1 % baseline error -----------------------------
     let believed = crate::simulate::road_corpus::calibration();

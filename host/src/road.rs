@@ -29,6 +29,8 @@ pub mod section;
 pub struct RoadReport {
     /// Mean profile depth (mm).
     pub mpd_mm: f64,
+    /// Its predicted 1σ (mm; `docs/road.md`, "Uncertainty").
+    pub mpd_uncertainty_mm: f64,
     /// Estimated texture depth `0.2 + 0.8·MPD` (mm).
     pub etd_mm: f64,
     /// Mean segment depth of each segment (mm).
@@ -66,6 +68,7 @@ impl RoadReport {
     pub fn new(s: &RoadSolution, truth_mpd: Option<f64>) -> Self {
         RoadReport {
             mpd_mm: s.depth.mpd * 1e3,
+            mpd_uncertainty_mm: s.uncertainty * 1e3,
             etd_mm: s.depth.etd * 1e3,
             msd_mm: s.segments[..s.depth.segments.min(MAX_SEGMENTS)]
                 .iter()
@@ -88,8 +91,9 @@ impl RoadReport {
     /// One line: MPD, ETD, profile statistics, microtexture, truth.
     pub fn summary(&self) -> String {
         let mut s = format!(
-            "MPD = {:.3} mm, ETD = {:.3} mm; profile {} samples at {:.2} mm, {} drop-outs ({:.1} %), {} spikes, RMS {:.3} mm, tilt {:.1}°, height {:+.2} mm",
+            "MPD = {:.3} mm ± {:.3} mm, ETD = {:.3} mm; profile {} samples at {:.2} mm, {} drop-outs ({:.1} %), {} spikes, RMS {:.3} mm, tilt {:.1}°, height {:+.2} mm",
             self.mpd_mm,
+            self.mpd_uncertainty_mm,
             self.etd_mm,
             self.samples,
             self.spacing_mm,

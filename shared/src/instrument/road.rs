@@ -45,12 +45,33 @@ pub fn road_head_calibration(id: u32) -> Result<Calibration, CalibrationError> {
 pub struct Road;
 
 /// Settings of the road instrument.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RoadParams {
     /// From points to profile (window, height scale, refusal limits).
     pub profile: ProfileParams,
     /// The MPD chain (ISO 13473-1 defaults).
     pub mpd: MpdParams,
+    /// 1σ of one segment's MSD from errors tied to the texture rather than to the column
+    /// noise (metres): relief finer than the sheet's thickness across the line, which the
+    /// true centre-line profile holds and the stripe averages away, and speckle correlated
+    /// over millimetres along it (`docs/road.md`, "Uncertainty"). Default
+    /// [`SEGMENT_TEXTURE_SIGMA`].
+    pub segment_texture_sigma: Real,
+}
+
+/// Default [`RoadParams::segment_texture_sigma`]: fitted on the tuning seeds (3 000 000 on,
+/// 36 profiles of six surfaces): their MPD errors' RMS 8.2 µm against the column-noise
+/// prediction's 5.1 µm, `√(8.2² − 5.1²)` = 6.3 µm (`docs/accuracy.md`, road section).
+pub const SEGMENT_TEXTURE_SIGMA: Real = 6.3e-6;
+
+impl Default for RoadParams {
+    fn default() -> Self {
+        RoadParams {
+            profile: ProfileParams::default(),
+            mpd: MpdParams::default(),
+            segment_texture_sigma: SEGMENT_TEXTURE_SIGMA,
+        }
+    }
 }
 
 /// Most segments one profile holds (the road head's line spans ≈ 113 mm: one).
@@ -77,10 +98,11 @@ pub struct RoadSolution {
     pub micro: Option<Microtexture>,
     /// Stand-off: where plane 0 crosses the optical axis (metres).
     pub standoff: Real,
-    /// Predicted 1σ of the MPD (metres) from the profile's own noise: the column noise `σ_c`
-    /// from second differences, carried through the resampling (`√(spacing/Δ)`) and the
-    /// filter (its noise gain `√G`); each MSD's two peaks are independent filtered samples,
-    /// so `σ_MPD = σ_c √(spacing/Δ · G / 2) / √segments` (`docs/road.md`, "Uncertainty").
+    /// Predicted 1σ of the MPD (metres): the column noise `σ_c` from second differences,
+    /// carried through the resampling (`√(spacing/Δ)`) and the filter (its noise gain `√G`),
+    /// each MSD's two peaks independent filtered samples, and the texture-tied error
+    /// `σ_t` ([`RoadParams::segment_texture_sigma`]) of each segment:
+    /// `σ_MPD = √(σ_c² · spacing/Δ · G / 2 + σ_t²) / √segments` (`docs/road.md`, "Uncertainty").
     pub uncertainty: Real,
     /// Image quality flags.
     pub flags: Flags,
@@ -165,7 +187,7 @@ impl Instrument for Road {
         };
         let heights = &scratch.sigmas[..trace.len()];
         let micro = mpd::microtexture(trace, heights, peak, &params.mpd).ok();
-        let uncertainty = mpd_uncertainty(trace, &summary, &params.mpd, depth.valid_segments);
+        let uncertainty = mpd_uncertainty(trace, &summary, params, depth.valid_segments);
         Ok(RoadSolution {
             profile: summary,
             depth,
@@ -184,9 +206,10 @@ impl Instrument for Road {
 fn mpd_uncertainty(
     trace: &[crate::real::Vec2],
     summary: &ProfileSummary,
-    params: &MpdParams,
+    params: &RoadParams,
     segments: usize,
 ) -> Real {
+    let mpd = &params.mpd;
     let (mut sum, mut n) = (0.0, 0usize);
     for w in trace.windows(3) {
         if w.iter().all(|p| p.y.is_finite()) {
@@ -199,9 +222,11 @@ fn mpd_uncertainty(
         return Real::NAN;
     }
     let sigma_column = sqrt(sum / (6.0 * n as Real));
-    let gain = mpd::Biquad::butterworth_lowpass(params.spacing, params.lowpass_cutoff).noise_gain();
-    let per_sample = (summary.spacing / params.spacing).min(1.0);
-    sigma_column * sqrt(per_sample * gain / 2.0) / sqrt(segments as Real)
+    let gain = mpd::Biquad::butterworth_lowpass(mpd.spacing, mpd.lowpass_cutoff).noise_gain();
+    let per_sample = (summary.spacing / mpd.spacing).min(1.0);
+    let noise = sigma_column * sigma_column * per_sample * gain / 2.0;
+    let texture = params.segment_texture_sigma * params.segment_texture_sigma;
+    sqrt((noise + texture) / segments as Real)
 }
 
 impl From<&RoadSolution> for Measurement {

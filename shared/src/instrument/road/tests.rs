@@ -141,6 +141,24 @@ fn a_flat_road_reads_flat_to_well_within_the_resolution_target() {
 }
 
 #[test]
+fn the_uncertainty_carries_the_texture_term_beside_the_column_noise() {
+    // A noise-free flat road: the column-noise term is the 8-bit quantisation's alone, so
+    // the one segment's 1σ is the texture-tied term's, and without it far below.
+    let cal = road_head_calibration(7).unwrap();
+    let (off, on, _) = render_road(&cal, 0.0, |_| 0.0, |_| true);
+    let s = measure_road(&off, &on, &cal).unwrap();
+    assert_eq!(s.depth.valid_segments, 1);
+    let t = SEGMENT_TEXTURE_SIGMA;
+    assert!(
+        s.uncertainty >= t && s.uncertainty < 1.2 * t,
+        "{}",
+        s.uncertainty
+    );
+    let noise = sqrt(s.uncertainty * s.uncertainty - t * t);
+    assert!(noise < 0.5 * t, "column-noise term {noise}");
+}
+
+#[test]
 fn a_wet_patch_a_tilted_head_and_a_road_out_of_range_are_refused() {
     let cal = road_head_calibration(7).unwrap();
     // A 20 mm mirror-wet patch in the middle returns nothing. (The pipeline keeps one side
