@@ -370,6 +370,7 @@ fn solve_error_number(e: SolveError) -> u32 {
         SolveError::OneSection => 10,
         SolveError::NotSpherical => 11,
         SolveError::TwoObjects => 12,
+        SolveError::Unbounded => 13,
         // The wall solver's (numbers from 20 keep clear of other instruments').
         SolveError::SingleLine => 20,
         SolveError::NotPlanar => 21,
@@ -392,6 +393,7 @@ fn solve_error_of_number(n: u32) -> Option<SolveError> {
         10 => SolveError::OneSection,
         11 => SolveError::NotSpherical,
         12 => SolveError::TwoObjects,
+        13 => SolveError::Unbounded,
         20 => SolveError::SingleLine,
         21 => SolveError::NotPlanar,
         _ => return None,

@@ -68,6 +68,9 @@ pub enum SolveError {
     /// The lit and visible arc is too short (in angle seen from its centre) for the radius
     /// to be trusted (see `docs/cylinder.md`, "Choosing the method").
     ArcTooShort,
+    /// The reading's 1σ is above a third of its size: its 3σ interval reaches zero, so it
+    /// does not bound the object (`docs/cylinder.md` §6, rule 3, for any arc).
+    Unbounded,
     /// The solved radius is outside the plausible range given in the parameters.
     RadiusOutOfRange,
     /// A parameter is out of its documented domain (negative tolerance, zero iterations, …).
@@ -103,6 +106,10 @@ impl fmt::Display for SolveError {
             SolveError::ScratchTooSmall => "scratch buffer shorter than the point count",
             SolveError::ArcTooShort => {
                 "visible arc too short: the circle fit's σ exceeds a third of its radius"
+            }
+            SolveError::Unbounded => {
+                "the fit does not bound the size: its σ exceeds a third of the diameter (a faint \
+                 or broken stripe, or an axis the lines leave undetermined); aim again, nearer"
             }
             SolveError::RadiusOutOfRange => "radius outside the plausible range",
             SolveError::InvalidParameter => "solver parameter out of range",

@@ -358,6 +358,17 @@ fn non_round(
 /// bound the stem's size and the capture is refused.
 const SHORT_ARC_MAX_REL_SIGMA: Real = 1.0 / 3.0;
 
+/// The solution, if its 1σ bounds the stem's size: rule 3's bound (`docs/cylinder.md` §6)
+/// holds for every reading, not only a short arc's — above a third of the diameter the 3σ
+/// interval reaches zero and the number says nothing of the stem ([`SolveError::Unbounded`]).
+fn bounded(sol: CylinderSolution) -> Result<CylinderSolution, SolveError> {
+    if sol.uncertainty.is_finite() && sol.uncertainty <= SHORT_ARC_MAX_REL_SIGMA * sol.diameter {
+        Ok(sol)
+    } else {
+        Err(SolveError::Unbounded)
+    }
+}
+
 /// Choice between a three-tangent radius and a fit radius (`docs/cylinder.md`, "Choosing
 /// the method"): `(use_fit, inconsistent)`, or `None` when there is no trustworthy answer.
 fn choose(tt: Option<(Real, Real)>, fit: Option<(Real, Real, bool)>) -> Option<(bool, bool)> {
@@ -390,7 +401,8 @@ fn choose(tt: Option<(Real, Real)>, fit: Option<(Real, Real, bool)>) -> Option<(
 /// disagree beyond 3σ ([`Flags::INCONSISTENT`], occluded edge), and the fit with
 /// [`Flags::ARC_TOO_SHORT`] when the arc is short. Errors: [`SolveError::PlaneCount`] (no
 /// curve, or curves ≠ planes), [`SolveError::ScratchTooSmall`], [`SolveError::ArcTooShort`]
-/// (short arc and the fit's σ above a third of its radius), [`SolveError::RadiusOutOfRange`],
+/// (short arc and the fit's σ above a third of its radius), [`SolveError::Unbounded`] (any
+/// other reading whose σ is above a third of its diameter), [`SolveError::RadiusOutOfRange`],
 /// and the
 /// [`SolveError::NotConverged`] when both methods fail.
 pub fn solve(
@@ -434,8 +446,10 @@ pub fn solve(
         params,
         &mut scratch,
     )?;
-    let mut sol = if input.curves.len() >= 2 {
-        match solve_tilted(input, params, &mut scratch, &one) {
+    let sol = if input.curves.len() >= 2 {
+        // A cylinder fit whose σ does not bound the size (an axis the curves leave
+        // undetermined) is a failed tilt fit: plane 0's own reading stands in for it.
+        match solve_tilted(input, params, &mut scratch, &one).and_then(bounded) {
             Ok(s) => s,
             Err(_) => {
                 let mut s = finish_plane(&one, plane0, params)?;
@@ -453,6 +467,7 @@ pub fn solve(
     if !(r >= params.min_radius && r <= params.max_radius) {
         return Err(SolveError::RadiusOutOfRange);
     }
+    let mut sol = bounded(sol)?;
     if !(sol.distance >= params.range.0 && sol.distance <= params.range.1) {
         sol.flags.insert(Flags::RANGE_LIMIT);
     }
