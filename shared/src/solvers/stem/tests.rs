@@ -80,6 +80,16 @@ fn solve_transversal_stem() {
         assert!(sol.three_tangent_diameter.is_some() && sol.fit_diameter.is_some());
         assert_eq!(sol.n_points, curve.len());
         assert!((sol.distance - d).abs() < 0.01);
+        // Rule 3's bound, for any arc (`docs/cylinder.md` §6): a σ above a third of the
+        // diameter does not bound the stem.
+        assert_eq!(bounded(sol).map(|b| b.diameter), Ok(sol.diameter));
+        for sigma in [0.34 * sol.diameter, Real::INFINITY, Real::NAN] {
+            let loose = CylinderSolution {
+                uncertainty: sigma,
+                ..sol
+            };
+            assert_eq!(bounded(loose), Err(SolveError::Unbounded), "{sigma}");
+        }
     }
 }
 
