@@ -60,8 +60,8 @@ pub struct RoadParams {
 }
 
 /// Default [`RoadParams::segment_texture_sigma`]: fitted on the tuning seeds (3 000 000 on,
-/// 36 profiles of six surfaces): their MPD errors' RMS 8.2 µm against the column-noise
-/// prediction's 5.1 µm, `√(8.2² − 5.1²)` = 6.3 µm (`docs/accuracy.md`, road section).
+/// 36 profiles of six surfaces): their MPD errors' RMS 8.15 µm against the column-noise
+/// prediction's 5.14 µm, `√(8.15² − 5.14²)` = 6.3 µm (`docs/accuracy.md`, road section).
 pub const SEGMENT_TEXTURE_SIGMA: Real = 6.3e-6;
 
 impl Default for RoadParams {

@@ -108,8 +108,8 @@ impl fmt::Display for SolveError {
                 "visible arc too short: the circle fit's σ exceeds a third of its radius"
             }
             SolveError::Unbounded => {
-                "the fit does not bound the size: its σ exceeds a third of the diameter (a faint \
-                 or broken stripe, or an axis the lines leave undetermined); aim again, nearer"
+                "the reading does not bound the size: its σ exceeds a third of the diameter (a \
+                 faint, short or broken stripe); aim again, nearer"
             }
             SolveError::RadiusOutOfRange => "radius outside the plausible range",
             SolveError::InvalidParameter => "solver parameter out of range",

@@ -353,16 +353,17 @@ fn non_round(
         .then_some(e)
 }
 
-/// Largest relative 1σ of a short-arc fit that is still reported (`docs/cylinder.md` §6,
-/// rule 3): above it the fit's 3σ interval reaches a zero radius, so the reading does not
-/// bound the stem's size and the capture is refused.
-const SHORT_ARC_MAX_REL_SIGMA: Real = 1.0 / 3.0;
+/// Largest relative 1σ of a reading that is still reported (`docs/cylinder.md` §6, rule 3;
+/// first for short arcs, since session 10 for every reading, [`bounded`]): above it the 3σ
+/// interval reaches a zero radius, so the reading does not bound the stem's size and the
+/// capture is refused.
+const MAX_REL_SIGMA: Real = 1.0 / 3.0;
 
 /// The solution, if its 1σ bounds the stem's size: rule 3's bound (`docs/cylinder.md` §6)
 /// holds for every reading, not only a short arc's — above a third of the diameter the 3σ
 /// interval reaches zero and the number says nothing of the stem ([`SolveError::Unbounded`]).
 fn bounded(sol: CylinderSolution) -> Result<CylinderSolution, SolveError> {
-    if sol.uncertainty.is_finite() && sol.uncertainty <= SHORT_ARC_MAX_REL_SIGMA * sol.diameter {
+    if sol.uncertainty.is_finite() && sol.uncertainty <= MAX_REL_SIGMA * sol.diameter {
         Ok(sol)
     } else {
         Err(SolveError::Unbounded)
@@ -380,8 +381,7 @@ fn choose(tt: Option<(Real, Real)>, fit: Option<(Real, Real, bool)>) -> Option<(
     if short {
         // Rule 3: on a short arc the visible ends are not the tangent points (§5b), so the
         // three-tangent is never better than the fit: the fit with its honest σ, or nothing.
-        return (sf.is_finite() && sf <= SHORT_ARC_MAX_REL_SIGMA * rf.abs())
-            .then_some((true, inconsistent));
+        return (sf.is_finite() && sf <= MAX_REL_SIGMA * rf.abs()).then_some((true, inconsistent));
     }
     Some(match tt {
         Some((_, st)) if !inconsistent => (sf < st, false),
@@ -394,8 +394,8 @@ fn choose(tt: Option<(Real, Real)>, fit: Option<(Real, Real, bool)>) -> Option<(
 /// * One plane: three-tangent and robust circle fit; [`Flags::TILT_IGNORED`].
 /// * Two or more planes: cylinder fit (axis and radius) and the generalised three-tangent
 ///   method on each curve projected along the axis; [`CylinderSolution::tilt`] is set. If the
-///   cylinder fit fails, falls back to the one-plane solution of plane 0
-///   ([`Flags::TILT_FIT_FAILED`]).
+///   cylinder fit fails or its σ breaks rule 3's bound, falls back to the one-plane solution
+///   of plane 0 ([`Flags::TILT_FIT_FAILED`]).
 ///
 /// The reported diameter is the method with the smaller 1σ, except: the fit when the two
 /// disagree beyond 3σ ([`Flags::INCONSISTENT`], occluded edge), and the fit with
