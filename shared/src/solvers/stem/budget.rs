@@ -12,9 +12,12 @@ use crate::real::Float;
 use crate::real::{sqrt, Real, Vec2};
 
 /// Most points of one curve the whole-arc fit uses; a longer curve is binned
-/// ([`decimate`]). A 1 m stem at 1 m lights ≈ 700 columns; 256 bins of ≤ 3 columns keep the
-/// fit's cost at about a third of that with the same reading.
-pub const POINT_BUDGET: usize = 256;
+/// ([`decimate`]). A 1 m stem at 1 m lights ≈ 700 columns; 128 bins of ≤ 6 columns keep the
+/// fit's cost at about a fifth of that with the same reading: a bin's mean sits inside the
+/// arc by `(kΔ)²/(24R)` ≈ `d/(12·128²)` = 5 µm on a 1 m stem, and on the evaluation sets the
+/// change from 256 moved readings by a median 0.04σ, at most 0.40σ (`docs/error-model.md`
+/// §5c; issue 17, session 10).
+pub const POINT_BUDGET: usize = 128;
 
 /// Bins `points` (with their 1σ `sigmas`, same length) into at most `budget` consecutive
 /// groups of `k = ⌈n/budget⌉` points, in place: bin `j` is written to `points[j]` and its σ to
