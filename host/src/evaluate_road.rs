@@ -163,7 +163,12 @@ pub fn report(first_seed: u64, seeds: u64, repo: &Path, scratch: &Path) -> Resul
     for (i, (.., o)) in outcomes.iter().enumerate() {
         let f = scratch.join(format!("profile-{i}.csv"));
         if !o.profile.is_empty() {
-            write_profile_csv(&f, &o.profile, params.profile.window_start)?;
+            write_profile_csv(
+                &f,
+                &o.profile,
+                params.profile.window_start,
+                params.profile.window_length,
+            )?;
         }
         files.push(f);
     }

@@ -76,7 +76,13 @@ fn our_mpd_equals_captif_slp_on_identical_profiles() {
     for seed in 0..12 {
         let p = random_profile(seed);
         let f = dir.join(format!("p{seed}.csv"));
-        write_profile_csv(&f, &p, params.profile.window_start).unwrap();
+        write_profile_csv(
+            &f,
+            &p,
+            params.profile.window_start,
+            params.profile.window_length,
+        )
+        .unwrap();
         // Ours on the profile as written (6 decimals in mm, as captif-slp reads it).
         let text = std::fs::read_to_string(&f).unwrap();
         let back: Vec<Vec2> = text
@@ -93,6 +99,33 @@ fn our_mpd_equals_captif_slp_on_identical_profiles() {
         ours.push(mpd_of_profile(&back, &params).map(|r| r.0.mpd));
         files.push(f);
     }
+    // A simulated worn-concrete profile (seed 3 000 308) whose last sample, a drop-out, lies
+    // 5 µm past the window's end: written as our chain reads it, captif-slp agrees; with
+    // that sample in the file it read 0.011 mm low (an extra bin changed its filter's end).
+    let fixture = repo().join("tests/data/road-profile-past-window.csv");
+    let text = std::fs::read_to_string(&fixture).unwrap();
+    let p: Vec<Vec2> = text
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let (a, b) = l.split_once(',').unwrap();
+            Vec2::new(
+                a.parse::<f64>().unwrap() * 1e-3 + params.profile.window_start,
+                b.parse::<f64>().map(|v| v * 1e-3).unwrap_or(f64::NAN),
+            )
+        })
+        .collect();
+    assert!(p.last().unwrap().x > params.profile.window_start + params.profile.window_length);
+    let f = dir.join("past-window.csv");
+    write_profile_csv(
+        &f,
+        &p,
+        params.profile.window_start,
+        params.profile.window_length,
+    )
+    .unwrap();
+    ours.push(mpd_of_profile(&p, &params).map(|r| r.0.mpd));
+    files.push(f);
     let theirs = match captif_mpd(repo(), &files).unwrap() {
         Ok(m) => m,
         Err(reason) => {

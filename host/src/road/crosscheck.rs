@@ -12,10 +12,15 @@ use tangent_core::real::Vec2;
 pub const SCRIPT: &str = "tools/road_crosscheck.py";
 
 /// Writes a raw profile as the script reads it: positions from `start` (mm), heights (mm),
-/// drop-outs empty.
-pub fn write_profile_csv(path: &Path, profile: &[Vec2], start: f64) -> Result<()> {
+/// drop-outs empty — only the samples the MPD chain itself reads, those within
+/// `[start, start + length]`. A sample beyond the window (the road head's last column can
+/// fall a few µm past it) would make captif-slp open one more 0.5 mm bin, held at the last
+/// height if the sample is a drop-out, and that bin changes its filter's end: 0.011 mm on one
+/// worn-concrete profile (`docs/road.md`, "Cross-check against captif-slp").
+pub fn write_profile_csv(path: &Path, profile: &[Vec2], start: f64, length: f64) -> Result<()> {
     let mut text = String::from("distance_mm,relative_height_mm\n");
-    for p in profile {
+    let in_window = |p: &&Vec2| p.x >= start && p.x <= start + length;
+    for p in profile.iter().filter(in_window) {
         let s = (p.x - start) * 1e3;
         if p.y.is_finite() {
             text += &format!("{s:.6},{:.6}\n", p.y * 1e3);
