@@ -60,9 +60,10 @@ pub struct RoadParams {
 }
 
 /// Default [`RoadParams::segment_texture_sigma`]: fitted on the tuning seeds (3 000 000 on,
-/// 36 profiles of six surfaces): their MPD errors' RMS 8.15 µm against the column-noise
-/// prediction's 5.14 µm, `√(8.15² − 5.14²)` = 6.3 µm (`docs/accuracy.md`, road section).
-pub const SEGMENT_TEXTURE_SIGMA: Real = 6.3e-6;
+/// 84 profiles, 14 of each of six surfaces): their MPD errors' RMS 9.48 µm against the
+/// column-noise prediction's 5.75 µm, `√(9.48² − 5.75²)` = 7.5 µm (`docs/accuracy.md`, road
+/// section).
+pub const SEGMENT_TEXTURE_SIGMA: Real = 7.5e-6;
 
 impl Default for RoadParams {
     fn default() -> Self {
