@@ -66,6 +66,23 @@ fn random_profile(seed: u64) -> Vec<Vec2> {
     out
 }
 
+/// A profile CSV as `write_profile_csv` writes it (positions in mm from `start`, heights in
+/// mm, drop-outs empty), back in metres.
+fn read_profile_csv(path: &std::path::Path, start: f64) -> Vec<Vec2> {
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let (a, b) = l.split_once(',').unwrap();
+            Vec2::new(
+                a.parse::<f64>().unwrap() * 1e-3 + start,
+                b.parse::<f64>().map(|v| v * 1e-3).unwrap_or(f64::NAN),
+            )
+        })
+        .collect()
+}
+
 #[test]
 fn our_mpd_equals_captif_slp_on_identical_profiles() {
     let params = RoadParams::default();
@@ -73,29 +90,14 @@ fn our_mpd_equals_captif_slp_on_identical_profiles() {
     std::fs::create_dir_all(&dir).unwrap();
     let mut ours = Vec::new();
     let mut files = Vec::new();
+    let (start, length) = (params.profile.window_start, params.profile.window_length);
+    let write = |f: &std::path::Path, p: &[Vec2]| write_profile_csv(f, p, start, length).unwrap();
     for seed in 0..12 {
         let p = random_profile(seed);
         let f = dir.join(format!("p{seed}.csv"));
-        write_profile_csv(
-            &f,
-            &p,
-            params.profile.window_start,
-            params.profile.window_length,
-        )
-        .unwrap();
+        write(&f, &p);
         // Ours on the profile as written (6 decimals in mm, as captif-slp reads it).
-        let text = std::fs::read_to_string(&f).unwrap();
-        let back: Vec<Vec2> = text
-            .lines()
-            .skip(1)
-            .map(|l| {
-                let (a, b) = l.split_once(',').unwrap();
-                Vec2::new(
-                    a.parse::<f64>().unwrap() * 1e-3 + params.profile.window_start,
-                    b.parse::<f64>().map(|v| v * 1e-3).unwrap_or(f64::NAN),
-                )
-            })
-            .collect();
+        let back = read_profile_csv(&f, params.profile.window_start);
         ours.push(mpd_of_profile(&back, &params).map(|r| r.0.mpd));
         files.push(f);
     }
@@ -103,27 +105,10 @@ fn our_mpd_equals_captif_slp_on_identical_profiles() {
     // 5 µm past the window's end: written as our chain reads it, captif-slp agrees; with
     // that sample in the file it read 0.011 mm low (an extra bin changed its filter's end).
     let fixture = repo().join("tests/data/road-profile-past-window.csv");
-    let text = std::fs::read_to_string(&fixture).unwrap();
-    let p: Vec<Vec2> = text
-        .lines()
-        .skip(1)
-        .map(|l| {
-            let (a, b) = l.split_once(',').unwrap();
-            Vec2::new(
-                a.parse::<f64>().unwrap() * 1e-3 + params.profile.window_start,
-                b.parse::<f64>().map(|v| v * 1e-3).unwrap_or(f64::NAN),
-            )
-        })
-        .collect();
+    let p = read_profile_csv(&fixture, params.profile.window_start);
     assert!(p.last().unwrap().x > params.profile.window_start + params.profile.window_length);
     let f = dir.join("past-window.csv");
-    write_profile_csv(
-        &f,
-        &p,
-        params.profile.window_start,
-        params.profile.window_length,
-    )
-    .unwrap();
+    write(&f, &p);
     ours.push(mpd_of_profile(&p, &params).map(|r| r.0.mpd));
     files.push(f);
     let theirs = match captif_mpd(repo(), &files).unwrap() {
