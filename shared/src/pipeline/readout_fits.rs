@@ -17,7 +17,7 @@
 //! ([`crate::curve::locate_seeded`]). So the points are exactly those of the extraction after
 //! the frame, and a lookup that misses costs only the time it would have cost anyway.
 //!
-//! The work is bounded per block of [`super::BLOCK_ROWS`] rows ([`FITS_PER_BLOCK`]) so that
+//! The work is bounded per block of [`super::BLOCK_ROWS`] rows ([`BLOCK_WORK`]) so that
 //! the read-out stays within the pixel clock's budget, and segments whose brightest pixel is
 //! below every threshold the frame can still get (the floors with the largest difference seen
 //! so far) are not located at all.
@@ -31,13 +31,25 @@ use crate::real::Real;
 /// planes' curves across the 752 columns, and room for specks.
 pub const MAX_READOUT_FITS: usize = 2048;
 
-/// Most points located per block of [`super::BLOCK_ROWS`] rows. Measured on the emulated
-/// Cortex-M7 (`docs/performance.md`): a block costs ≈ 6.5 instructions per pixel of
-/// subtraction, histogram and candidate runs, the tracking of a stripe's candidate pixels up
-/// to ≈ 4 more, and a point ≈ 2,500 instructions (the column's samples and the Gaussian
-/// fit); 32 points keep the worst block near 14 instructions per pixel, inside the 18 cycles
-/// per pixel the 26.66 MHz pixel clock leaves at 480 MHz.
-pub const FITS_PER_BLOCK: usize = 32;
+/// Work one block of [`super::BLOCK_ROWS`] rows may spend on the read-out extraction, in
+/// instructions of the emulated Cortex-M7 (`docs/performance.md`, "Read-out budget"): the
+/// tracking of its candidate pixels ([`TRACK_COST`] each) and the points it locates
+/// ([`FIT_COST`] each). Measured there, a block's subtraction, histogram and candidate runs
+/// take ≈ 83,000 instructions (6.9 per pixel); with this the worst block stays near 15 per
+/// pixel, inside the 18 cycles per pixel the 26.66 MHz pixel clock leaves at 480 MHz. A
+/// block the stripe crosses spends most of it on tracking and locates few points; the blocks
+/// below the stripe, with nothing to track, locate up to 66 each. The budget only decides
+/// *when* a point is located: the points are the same ones either way.
+pub const BLOCK_WORK: u32 = 100_000;
+
+/// Instructions to track one candidate pixel (its column's segment: brightest pixel, end),
+/// measured on the emulated core with the candidate runs' scan (≈ 42–45).
+pub const TRACK_COST: u32 = 45;
+
+/// Instructions to locate one point during the read-out (the column's samples, the Gaussian
+/// fit and the block's scan for the segments whose rows are in), measured on the emulated
+/// core (≈ 1,450–1,560).
+pub const FIT_COST: u32 = 1_500;
 
 /// End of a column's fit list.
 const NO_FIT: u16 = u16::MAX;
@@ -132,8 +144,8 @@ pub(super) struct ReadoutFits {
     floors: Floors,
     /// Points in the table.
     used: usize,
-    /// Points this block may still locate.
-    budget: usize,
+    /// Work spent in this block so far ([`BLOCK_WORK`]'s units).
+    spent: u32,
     /// Largest candidate difference so far: a lower bound of the frame's largest difference.
     brightest: u32,
 }
@@ -160,7 +172,7 @@ impl ReadoutFits {
             },
             floors,
             used: 0,
-            budget: FITS_PER_BLOCK,
+            spent: 0,
             brightest: 0,
         }
     }
@@ -192,6 +204,9 @@ impl ReadoutFits {
             else {
                 continue;
             };
+            self.spent = self
+                .spent
+                .saturating_add(TRACK_COST.saturating_mul(values.len() as u32));
             for (x, (track, &v)) in (start..).zip(tracks.iter_mut().zip(values)) {
                 let v: u32 = v.into();
                 self.brightest = self.brightest.max(v);
@@ -231,7 +246,7 @@ impl ReadoutFits {
         let (columns, fits) = tables;
         let hw = self.params.half_window as usize;
         for (x, track) in columns.iter_mut().take(diff.width()).enumerate() {
-            if self.budget == 0 {
+            if !self.affordable() {
                 break;
             }
             let end = track.end as usize;
@@ -239,7 +254,12 @@ impl ReadoutFits {
                 self.locate(track, fits, diff, x, y);
             }
         }
-        self.budget = FITS_PER_BLOCK;
+        self.spent = 0;
+    }
+
+    /// Whether this block's work allows one more point.
+    fn affordable(&self) -> bool {
+        self.spent.saturating_add(FIT_COST) <= BLOCK_WORK
     }
 
     /// Locates `track`'s segment in column `x` if rows `..=y` hold its window, it can still
@@ -257,10 +277,14 @@ impl ReadoutFits {
         let complete = (seed + self.params.half_window as usize).min(last_row) <= y;
         let worth = track.best_value as u32 > self.floor();
         track.end = 0;
-        if !complete || !worth || self.budget == 0 || self.used >= fits.len().min(NO_FIT as usize) {
+        if !complete
+            || !worth
+            || !self.affordable()
+            || self.used >= fits.len().min(NO_FIT as usize)
+        {
             return;
         }
-        self.budget -= 1;
+        self.spent += FIT_COST;
         let (point, brightest) = curve::locate_seeded(diff, x, seed, &self.params, Real::INFINITY);
         let Some(slot) = fits.get_mut(self.used) else {
             return;
@@ -379,9 +403,11 @@ mod tests {
             assert_eq!(early_points, late_points, "amplitude {amplitude}");
             // A wall's stripe is level: every column's window completes in the same block,
             // and the per-block budget spreads the points over the blocks below it (stripes
-            // at rows ≈ 284 and 340: ≥ 8 blocks × FITS_PER_BLOCK).
+            // at rows ≈ 284 and 340: ≥ 8 blocks with nothing else to do), which hold all
+            // of one plane's 520 columns.
+            let per_empty_block = (BLOCK_WORK / FIT_COST) as usize;
             assert!(
-                located >= 8 * FITS_PER_BLOCK,
+                located >= (8 * per_empty_block).min(500 * planes),
                 "amplitude {amplitude}: {located} located"
             );
             if amplitude > 255.0 {
@@ -424,7 +450,8 @@ mod tests {
         early.block_done((&mut columns, &mut fits), &frame, 40);
         assert_eq!(early.used, 0, "specks below the floor are not located");
         assert!(columns.iter().all(|c| c.end == 0));
-        // Bright segments in every column: one block locates at most FITS_PER_BLOCK.
+        // Bright segments in every column: one block locates what its work leaves after
+        // tracking them.
         let mut bright = diff.clone();
         for x in 0..W {
             bright[3 * W + x] = 120;
@@ -432,6 +459,8 @@ mod tests {
         let frame = Frame::new(&bright[..], W, 480, W).unwrap();
         early.row((&mut columns, &mut fits), &frame, 3, [(0, W)].into_iter());
         early.block_done((&mut columns, &mut fits), &frame, 40);
-        assert_eq!(early.used, FITS_PER_BLOCK.min(fits.len()));
+        let affordable = ((BLOCK_WORK - TRACK_COST * W as u32) / FIT_COST) as usize;
+        assert!(affordable > 0 && affordable < W);
+        assert_eq!(early.used, affordable.min(fits.len()));
     }
 }
