@@ -49,7 +49,10 @@ const SLOPE_SPAN: usize = 4;
 /// Grows each plane's curve (`curve[..n]`, each plane's points contiguous and ordered by
 /// column, ranges in `plane_points`) outward from its first and last column, inserting the
 /// new points in column order and updating the ranges; returns the new point count. The free
-/// tail of `curve` is the scratch space: growth stops where it is full.
+/// tail of `curve` is the scratch space: growth stops where it is full. `located(params, x,
+/// row, saturation)` returns the point located during the read-out from seed `row` in column `x`
+/// where there is one (`super::readout_fits`, the same point the estimator gives here), so
+/// that a grown column whose stripe was a candidate is not located twice.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn grow_curves<P: Pixel>(
     diff: &Frame<P, &[P]>,
@@ -60,6 +63,7 @@ pub(super) fn grow_curves<P: Pixel>(
     extract: &ExtractParams,
     noise: Real,
     params: &GrowParams,
+    mut located: impl FnMut(&ExtractParams, usize, u16, Real) -> Option<Option<CurvePoint>>,
 ) -> usize {
     let level = params.min_snr * noise;
     if !(level > 0.0) {
@@ -71,7 +75,9 @@ pub(super) fn grow_curves<P: Pixel>(
             if e <= s || e > n {
                 continue;
             }
-            let g = grow_end(diff, curve, n, (s, e), leftward, extract, level, params);
+            let g = grow_end(
+                diff, curve, n, (s, e), leftward, extract, level, params, &mut located,
+            );
             if g == 0 {
                 continue;
             }
@@ -105,6 +111,7 @@ fn grow_end<P: Pixel>(
     extract: &ExtractParams,
     level: Real,
     params: &GrowParams,
+    located: &mut impl FnMut(&ExtractParams, usize, u16, Real) -> Option<Option<CurvePoint>>,
 ) -> usize {
     let (width, height) = (diff.width(), diff.height());
     let saturation = extract
@@ -146,7 +153,7 @@ fn grow_end<P: Pixel>(
         };
         let predicted = r_end + slope * (x as Real - x_end);
         let accepted = column_point(
-            diff, x as usize, predicted, w, height, extract, saturation, level,
+            diff, x as usize, predicted, w, height, extract, saturation, level, located,
         );
         match accepted {
             Some(mut point) => {
@@ -183,6 +190,7 @@ fn column_point<P: Pixel>(
     extract: &ExtractParams,
     saturation: Real,
     level: Real,
+    located: &mut impl FnMut(&ExtractParams, usize, u16, Real) -> Option<Option<CurvePoint>>,
 ) -> Option<CurvePoint> {
     if !predicted.is_finite() {
         return None;
@@ -202,7 +210,10 @@ fn column_point<P: Pixel>(
     if best.1 == lo || best.1 == hi || !(best.0 as Real >= level) {
         return None;
     }
-    let (point, _) = curve::locate_seeded(diff, x, best.1 as usize, extract, saturation);
+    let point = match located(extract, x, best.1 as u16, saturation) {
+        Some(point) => point,
+        None => curve::locate_seeded(diff, x, best.1 as usize, extract, saturation).0,
+    };
     point.filter(|p| (p.row - predicted).abs() <= w as Real)
 }
 

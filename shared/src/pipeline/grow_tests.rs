@@ -76,3 +76,92 @@ fn noise_beyond_the_stripe_is_not_grown() {
     // At most the stripe's own blurred edge column on each side.
     assert!(curve[0].column >= 298 && curve[e - s - 1].column <= 451);
 }
+
+/// Where the read-out located a grown column's point, growth takes it (`located`) instead of
+/// locating it again; where it did not, the estimator runs.
+#[test]
+fn growth_takes_the_points_located_during_the_readout() {
+    use crate::curve::{CurvePoint, ExtractParams};
+    use crate::image::Frame;
+    // A level stripe on row 20, 50 DN, columns 0..64 of a 64 × 40 difference frame.
+    let (w, h) = (64usize, 40usize);
+    let mut diff = std::vec![0u8; w * h];
+    for x in 0..w {
+        diff[19 * w + x] = 20;
+        diff[20 * w + x] = 50;
+        diff[21 * w + x] = 20;
+    }
+    let frame = Frame::new(&diff[..], w, h, w).unwrap();
+    let point = |column: u16, row: Real| CurvePoint {
+        column,
+        row,
+        amplitude: 50.0,
+        curve: 0,
+        saturated: false,
+        width: 1.0,
+    };
+    let grow = |marked: bool| {
+        let mut curve = std::vec![point(0, 0.0); 80];
+        for (k, x) in (28..36).enumerate() {
+            curve[k] = point(x, 20.0);
+        }
+        let mut planes = [(0usize, 8usize); crate::calibration::MAX_PLANES];
+        let n = grow_curves(
+            &frame,
+            &mut curve,
+            8,
+            &mut planes,
+            1,
+            &ExtractParams::default(),
+            1.0,
+            &GrowParams::default(),
+            // Columns below 10 "were located during the read-out" at a marked row.
+            |_, x, row, _| (marked && x < 10).then(|| Some(point(x as u16, row as Real + 0.25))),
+        );
+        curve.truncate(n);
+        curve
+    };
+    let plain = grow(false);
+    let marked = grow(true);
+    assert_eq!(plain.len(), w, "grown to every column of the frame");
+    for (p, m) in plain.iter().zip(&marked) {
+        assert_eq!(p.column, m.column);
+        if m.column < 10 {
+            assert_eq!(m.row, 20.25, "column {}: the read-out's point", m.column);
+        } else {
+            assert_eq!(m.row, p.row, "column {}: located here", m.column);
+        }
+    }
+    assert!((plain[0].row - 20.0).abs() < 1e-3);
+}
+
+/// The grown columns whose stripe was a candidate during the read-out take the point located
+/// then (`grow_curves`' `located`): the same points as locating them again after the frame.
+#[test]
+fn grown_points_from_the_readout_are_those_located_after_the_frame() {
+    let cal = calibration(1);
+    let (off, on, _) = highlight_pair();
+    let (off_f, on_f) = frames(&off, &on);
+    let config = PipelineConfig {
+        grow: Some(GrowParams::default()),
+        ..PipelineConfig::default()
+    };
+    let mut b = buffers(1);
+    let mut ws = b.workspace();
+    let early = extract_profile(&off_f, &on_f, &cal, &config, &mut ws).unwrap();
+    let (s, e) = early.plane_points[0];
+    let early_curve = ws.curve[s..e].to_vec();
+    // The faint sides (25 DN) are above the provisional threshold: the read-out located them.
+    let located_faint = ws
+        .readout_fits
+        .iter()
+        .filter(|f| f.found && f.amplitude > 10.0 && f.amplitude < 60.0)
+        .count();
+    assert!(located_faint > 100, "{located_faint} faint points located early");
+    let mut b = buffers(1);
+    let mut ws = b.workspace();
+    ws.column_tracks = &mut [];
+    let late = extract_profile(&off_f, &on_f, &cal, &config, &mut ws).unwrap();
+    assert_eq!(early, late);
+    assert_eq!(early_curve, ws.curve[s..e].to_vec());
+}

@@ -238,6 +238,15 @@ pub(super) fn after_segmentation<P: Pixel>(
             &extract_params(config, &diff, &seg.pair.stats),
             seg.pair.noise,
             grow,
+            |params, x, row, saturation| {
+                seg.readout.lookup(
+                    (&*ws.column_tracks, &*ws.readout_fits),
+                    params,
+                    x,
+                    row,
+                    saturation,
+                )
+            },
         ),
         None => n,
     };

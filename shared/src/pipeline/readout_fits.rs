@@ -83,7 +83,7 @@ impl ColumnTrack {
 pub struct ReadoutFit {
     /// Subpixel row, amplitude and stripe width of the point ([`CurvePoint`]).
     row: Real,
-    amplitude: Real,
+    pub(super) amplitude: Real,
     width: Real,
     /// The seed row it was located from.
     seed_row: u16,
@@ -93,7 +93,7 @@ pub struct ReadoutFit {
     /// Next point of the same column, or `NO_FIT`.
     next: u16,
     /// The estimator found a point (else: it failed there, which is kept too).
-    found: bool,
+    pub(super) found: bool,
 }
 
 impl ReadoutFit {
