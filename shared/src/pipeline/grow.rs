@@ -76,7 +76,15 @@ pub(super) fn grow_curves<P: Pixel>(
                 continue;
             }
             let g = grow_end(
-                diff, curve, n, (s, e), leftward, extract, level, params, &mut located,
+                diff,
+                curve,
+                n,
+                (s, e),
+                leftward,
+                extract,
+                level,
+                params,
+                &mut located,
             );
             if g == 0 {
                 continue;

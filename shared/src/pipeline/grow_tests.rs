@@ -157,7 +157,10 @@ fn grown_points_from_the_readout_are_those_located_after_the_frame() {
         .iter()
         .filter(|f| f.found && f.amplitude > 10.0 && f.amplitude < 60.0)
         .count();
-    assert!(located_faint > 100, "{located_faint} faint points located early");
+    assert!(
+        located_faint > 100,
+        "{located_faint} faint points located early"
+    );
     let mut b = buffers(1);
     let mut ws = b.workspace();
     ws.column_tracks = &mut [];

@@ -277,10 +277,7 @@ impl ReadoutFits {
         let complete = (seed + self.params.half_window as usize).min(last_row) <= y;
         let worth = track.best_value as u32 > self.floor();
         track.end = 0;
-        if !complete
-            || !worth
-            || !self.affordable()
-            || self.used >= fits.len().min(NO_FIT as usize)
+        if !complete || !worth || !self.affordable() || self.used >= fits.len().min(NO_FIT as usize)
         {
             return;
         }
