@@ -458,7 +458,11 @@ pub fn smooth(points: &mut [CurvePoint], params: &SmoothParams) -> Result<(), Cu
     if h < 2 {
         return Ok(());
     }
-    for c in 0..MAX_CURVES as u8 {
+    // The curves present, so that each absent one does not cost a scan of every point.
+    let present = points
+        .iter()
+        .fold(0u32, |m, p| m | 1u32.checked_shl(p.curve as u32).unwrap_or(0));
+    for c in (0..MAX_CURVES as u8).filter(|&c| present & (1 << c) != 0) {
         let mut start = points.iter().position(|p| p.curve == c);
         while let Some(s) = start {
             // The run: s, then successors while the columns are contiguous and rows close.
@@ -484,9 +488,12 @@ pub fn smooth(points: &mut [CurvePoint], params: &SmoothParams) -> Result<(), Cu
 
 /// Filters the `n` points of curve `c` starting at index `start` (one run).
 fn smooth_run(points: &mut [CurvePoint], c: u8, start: usize, n: usize, h: usize) {
-    // Ring of the run's original rows and indices: element k lives at slot k % RING; the
-    // filter at k reads k-h..=k+h, and loading k+h overwrites k+h-RING < k-h.
-    const RING: usize = 2 * MAX_SMOOTH_HALF_WINDOW as usize + 1;
+    // Ring of the run's original rows and indices: element k lives at slot k & MASK; the
+    // filter at k reads k-h..=k+h, and loading k+h overwrites k+h-RING < k-h. A power of
+    // two, so that a slot is a mask and not a division (this loop is the per-point cost of
+    // the smoothing on the device, `docs/performance.md`).
+    const RING: usize = (2 * MAX_SMOOTH_HALF_WINDOW as usize + 1).next_power_of_two();
+    const MASK: usize = RING - 1;
     let mut idx = [0usize; RING];
     let mut val = [0.0 as Real; RING];
     let Some(first) = points.get(start) else {
@@ -496,6 +503,10 @@ fn smooth_run(points: &mut [CurvePoint], c: u8, start: usize, n: usize, h: usize
     val[0] = first.row;
     let mut loaded = 1usize;
     let mut cursor = start;
+    // The coefficients depend on the half window alone, which changes only near the run's
+    // ends: computed when it changes, not per tap.
+    let mut coefficients = [0.0 as Real; RING];
+    let mut coefficients_half = 0usize;
     for k in 0..n {
         let half = h.min(k).min(n - 1 - k);
         while loaded <= k + half {
@@ -503,7 +514,7 @@ fn smooth_run(points: &mut [CurvePoint], c: u8, start: usize, n: usize, h: usize
                 return;
             };
             cursor = j;
-            let slot = loaded % RING;
+            let slot = loaded & MASK;
             idx[slot] = j;
             val[slot] = points.get(j).map_or(0.0, |p| p.row);
             loaded += 1;
@@ -512,12 +523,18 @@ fn smooth_run(points: &mut [CurvePoint], c: u8, start: usize, n: usize, h: usize
             // The quadratic through 3 points is the points themselves: nothing to do.
             continue;
         }
-        let mut acc = 0.0 as Real;
-        for j in -(half as isize)..=half as isize {
-            let slot = ((k as isize + j) as usize) % RING;
-            acc += savitzky_golay(half, j) * val[slot];
+        if half != coefficients_half {
+            for (j, w) in (-(half as isize)..=half as isize).zip(coefficients.iter_mut()) {
+                *w = savitzky_golay(half, j);
+            }
+            coefficients_half = half;
         }
-        if let Some(p) = points.get_mut(idx[k % RING]) {
+        // Taps k - half ..= k + half, in that order.
+        let mut acc = 0.0 as Real;
+        for (t, w) in coefficients.iter().take(2 * half + 1).enumerate() {
+            acc += w * val[(k - half + t) & MASK];
+        }
+        if let Some(p) = points.get_mut(idx[k & MASK]) {
             p.row = acc;
         }
     }
