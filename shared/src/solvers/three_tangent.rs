@@ -147,16 +147,26 @@ pub fn three_tangent(
     }
     let fwd = sum / len;
     let side = Vec2::new(fwd.y, -fwd.x);
-    let (mut psi_min, mut psi_max) = (Real::INFINITY, Real::NEG_INFINITY);
+    // The polar angle `atan2(side, along)` with `along > 0` is `atan(side/along)`, monotone
+    // in the ratio: the extremes are found on the ratio and only their two angles computed
+    // (an arctangent per point was a tenth of a long arc's solver on the device).
+    let (mut lowest, mut highest) = ((Real::INFINITY, 0.0, 1.0), (Real::NEG_INFINITY, 0.0, 1.0));
     for q in points {
         let along = q.dot(&fwd);
         if !(along > 0.0) {
             return Err(SolveError::Degenerate);
         }
-        let psi = q.dot(&side).atan2(along);
-        psi_min = psi_min.min(psi);
-        psi_max = psi_max.max(psi);
+        let across = q.dot(&side);
+        let ratio = across / along;
+        if ratio < lowest.0 {
+            lowest = (ratio, across, along);
+        }
+        if ratio > highest.0 {
+            highest = (ratio, across, along);
+        }
     }
+    let mut psi_min = lowest.1.atan2(lowest.2);
+    let mut psi_max = highest.1.atan2(highest.2);
     psi_min -= params.edge_extension;
     psi_max += params.edge_extension;
     let alpha = 0.5 * (psi_max - psi_min);
