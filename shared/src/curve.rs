@@ -431,6 +431,10 @@ fn savitzky_golay(m: usize, j: isize) -> Real {
 
 /// Index of the next point of curve `c` after `i`.
 fn next_of(points: &[CurvePoint], c: u8, i: usize) -> Option<usize> {
+    // A curve's points are usually consecutive: try the next one before searching.
+    if points.get(i + 1)?.curve == c {
+        return Some(i + 1);
+    }
     points
         .get(i + 1..)?
         .iter()
