@@ -463,9 +463,9 @@ pub fn smooth(points: &mut [CurvePoint], params: &SmoothParams) -> Result<(), Cu
         return Ok(());
     }
     // The curves present, so that each absent one does not cost a scan of every point.
-    let present = points
-        .iter()
-        .fold(0u32, |m, p| m | 1u32.checked_shl(p.curve as u32).unwrap_or(0));
+    let present = points.iter().fold(0u32, |m, p| {
+        m | 1u32.checked_shl(p.curve as u32).unwrap_or(0)
+    });
     for c in (0..MAX_CURVES as u8).filter(|&c| present & (1 << c) != 0) {
         let mut start = points.iter().position(|p| p.curve == c);
         while let Some(s) = start {

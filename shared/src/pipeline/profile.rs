@@ -205,6 +205,12 @@ pub(super) fn after_segmentation<P: Pixel>(
     let used = candidates.used_curves();
     probe(Stage::Selected);
 
+    // The points located during the read-out, for the extraction and the growth alike.
+    let readout_tables = (&*ws.column_tracks, &*ws.readout_fits);
+    let located = |params: &curve::ExtractParams, x: usize, row: u16, saturation: Real| {
+        seg.readout
+            .lookup(readout_tables, params, x, row, saturation)
+    };
     let n = extract_curves(
         &diff,
         &ws.runs[..seg.runs.min(ws.runs.len())],
@@ -214,15 +220,7 @@ pub(super) fn after_segmentation<P: Pixel>(
         config,
         ws.seeds,
         ws.curve,
-        |params, x, row, saturation| {
-            seg.readout.lookup(
-                (&*ws.column_tracks, &*ws.readout_fits),
-                params,
-                x,
-                row,
-                saturation,
-            )
-        },
+        located,
     )?;
     need("points", n, ws.points.len())?;
     probe(Stage::Extracted);
@@ -238,15 +236,7 @@ pub(super) fn after_segmentation<P: Pixel>(
             &extract_params(config, &diff, &seg.pair.stats),
             seg.pair.noise,
             grow,
-            |params, x, row, saturation| {
-                seg.readout.lookup(
-                    (&*ws.column_tracks, &*ws.readout_fits),
-                    params,
-                    x,
-                    row,
-                    saturation,
-                )
-            },
+            located,
         ),
         None => n,
     };
