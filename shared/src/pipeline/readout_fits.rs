@@ -32,14 +32,16 @@ use crate::real::Real;
 pub const MAX_READOUT_FITS: usize = 2048;
 
 /// Work one block of [`super::BLOCK_ROWS`] rows may spend on the read-out extraction, in
-/// instructions of the emulated Cortex-M7 (`docs/performance.md`, "Read-out budget"): the
-/// tracking of its candidate pixels ([`TRACK_COST`] each) and the points it locates
-/// ([`FIT_COST`] each). Measured there, a block's subtraction, histogram and candidate runs
-/// take ≈ 83,000 instructions (6.9 per pixel); with this the worst block stays near 15 per
-/// pixel, inside the 18 cycles per pixel the 26.66 MHz pixel clock leaves at 480 MHz. A
-/// block the stripe crosses spends most of it on tracking and locates few points; the blocks
-/// below the stripe, with nothing to track, locate up to 66 each. The budget only decides
-/// *when* a point is located: the points are the same ones either way.
+/// instructions of the emulated Cortex-M7 (`docs/performance.md`, "Read-out budget"). The
+/// tracking of its candidate pixels ([`TRACK_COST`] each) is charged first — it cannot be
+/// skipped, the segments must be followed as the rows pass, so it is not capped — and points
+/// ([`FIT_COST`] each) are located only while the charge stays within it. Measured there, a
+/// block's subtraction, histogram and candidate runs take ≈ 83,000 instructions (6.9 per
+/// pixel); with this the worst block of the bench's stems is 15.4 per pixel, inside the 18
+/// cycles per pixel the 26.66 MHz pixel clock leaves at 480 MHz. A block the stripe crosses
+/// spends most of it on tracking and locates few points; the blocks below the stripe, with
+/// nothing to track, locate up to 66 each. The budget only decides *when* a point is
+/// located: the points are the same ones either way.
 pub const BLOCK_WORK: u32 = 100_000;
 
 /// Instructions to track one candidate pixel (its column's segment: brightest pixel, end),
@@ -302,7 +304,7 @@ impl ReadoutFits {
     /// The point located during the read-out at column `x` from seed `row`, if there is one
     /// that holds at `saturation` and was located with `params`' estimator and window:
     /// `Some(None)` when the estimator failed there. For
-    /// [`crate::curve::extract_seeded_with`].
+    /// [`crate::curve::extract_seeded_with`] and the growth (`super::grow`).
     pub(super) fn lookup(
         &self,
         tables: (&[ColumnTrack], &[ReadoutFit]),

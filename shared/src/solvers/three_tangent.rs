@@ -150,18 +150,19 @@ pub fn three_tangent(
     // The polar angle `atan2(side, along)` with `along > 0` is `atan(side/along)`, monotone
     // in the ratio: the extremes are found on the ratio and only their two angles computed
     // (an arctangent per point was a tenth of a long arc's solver on the device).
-    let (mut lowest, mut highest) = ((Real::INFINITY, 0.0, 1.0), (Real::NEG_INFINITY, 0.0, 1.0));
-    for q in points {
+    // Seeded with the first point, so that a ratio that overflows to ±∞ still counts.
+    let (mut lowest, mut highest) = ((Real::NAN, 0.0, 1.0), (Real::NAN, 0.0, 1.0));
+    for (i, q) in points.iter().enumerate() {
         let along = q.dot(&fwd);
         if !(along > 0.0) {
             return Err(SolveError::Degenerate);
         }
         let across = q.dot(&side);
         let ratio = across / along;
-        if ratio < lowest.0 {
+        if i == 0 || ratio < lowest.0 {
             lowest = (ratio, across, along);
         }
-        if ratio > highest.0 {
+        if i == 0 || ratio > highest.0 {
             highest = (ratio, across, along);
         }
     }
