@@ -6,7 +6,8 @@
 //! emulated camera hands the laser-on frame over in line blocks, as the H743's DMA does; per
 //! pixel, against the pixel clock's budget) and after the last pixel (per stage) — and the
 //! trigger → reading latency from the sensor's timing, on the H743 board's read-out window
-//! (`h743::WINDOW`: the whole 752 × 480 frame).
+//! (`h743::WINDOW`: the whole 752 × 480 frame). Scenes with another calibration (the
+//! two-plane tilted stems) run in a second emulator run with their own.
 //! Under `-icount shift=0` QEMU advances its virtual clock 1 ns per
 //! guest instruction, and the firmware times the pipeline with SysTick (25 MHz: one tick per
 //! 40 instructions), so the microseconds it reports are thousands of instructions. The
@@ -52,6 +53,9 @@ const STAGES: [&str; 9] = [
     "cylinder solver",
 ];
 
+/// One scene's frames: name, width, height, laser-off and laser-on pixels (8-bit).
+type Frames = (String, usize, usize, Vec<u8>, Vec<u8>);
+
 fn main() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let elf = root.join("firmware/target/thumbv7em-none-eabihf/release/tangent-qemu");
@@ -69,6 +73,9 @@ fn main() {
         "cyl-d300-z050-shade",
         "cyl-d600-z150-shade",
         "cyl-d1000-z300-shade",
+        // Tilted stems, two planes (their own calibration: a second run of the emulator).
+        "cyl-d300-z150-tilt20-away-2p",
+        "cyl-d300-z100-tilt30-left-2p",
     ];
     let temp = tempfile::tempdir().expect("temp dir");
     let kept = std::env::var_os("FIRMWARE_BENCH_DIR").map(PathBuf::from);
@@ -77,16 +84,18 @@ fn main() {
     }
     let dir = kept.unwrap_or_else(|| temp.path().to_path_buf());
 
-    let mut calibration = None;
-    // Per capture: name, and the 8-bit off/on frames (width, height, bytes).
-    let mut frames = Vec::new();
-    for e in corpus::entries()
-        .into_iter()
-        .filter(|e| names.contains(&e.name.as_str()))
-    {
+    // Scenes grouped by calibration (its wire record), in the order above: one emulator run
+    // per group, since the firmware takes one calibration.
+    let mut groups: Vec<(Vec<u8>, Vec<Frames>)> = Vec::new();
+    for name in names {
+        let Some(e) = corpus::entries().into_iter().find(|e| e.name == name) else {
+            eprintln!("{name}: not in the simulator's corpus");
+            std::process::exit(2);
+        };
         let (capture, _) = simulate(&e.spec).expect("simulate");
-        // One calibration for all (every chosen capture uses the one-plane reference).
-        calibration.get_or_insert(capture.calibration.clone());
+        let mut rec = [0u8; calibration_record::MAX_RECORD];
+        let n = calibration_record::encode(&WireCalibration::from(&capture.calibration), &mut rec)
+            .expect("record");
         let (_, on) = capture.on_frames().next().expect("on frame");
         let to8 = |pgm: &tangent_host::pgm::Pgm| -> Vec<u8> {
             let bits = pgm.bit_depth() as u32;
@@ -95,22 +104,27 @@ fn main() {
                 .map(|v| (v >> bits.saturating_sub(8)) as u8)
                 .collect()
         };
-        frames.push((
+        let frames = (
             e.name.clone(),
             on.width,
             on.height,
             to8(capture.off_frame()),
             to8(on),
-        ));
+        );
+        match groups.iter_mut().find(|(r, _)| r[..] == rec[..n]) {
+            Some((_, list)) => list.push(frames),
+            None => groups.push((rec[..n].to_vec(), vec![frames])),
+        }
     }
-    let cal = calibration.expect("captures rendered");
-    let mut rec = [0u8; calibration_record::MAX_RECORD];
-    let n = calibration_record::encode(&WireCalibration::from(&cal), &mut rec).expect("record");
-    let cal_path = dir.join("calib.bin");
-    std::fs::write(&cal_path, &rec[..n]).expect("write calibration");
 
     let mut failed = false;
-    {
+    for (group, (record, frames)) in groups.iter().enumerate() {
+        let cal_path = dir.join(if group == 0 {
+            "calib.bin".to_string()
+        } else {
+            format!("calib-{group}.bin")
+        });
+        std::fs::write(&cal_path, record).expect("write calibration");
         let (label, window) = (
             "H743 layout: 752 × 480, streamed in 16-row blocks",
             Some(WINDOW),
@@ -120,7 +134,7 @@ fn main() {
             args += &format!(" --window {row}");
         }
         let mut sizes = Vec::new();
-        for (name, width, height, off, on) in &frames {
+        for (name, width, height, off, on) in frames {
             let (first, rows) = window.unwrap_or((0, *height));
             let tag = if window.is_some() { "-window" } else { "" };
             for (kind, data) in [("off", off), ("on", on)] {
@@ -138,7 +152,11 @@ fn main() {
             .expect("run qemu-system-arm");
         failed |= !out.status.success();
         let text = String::from_utf8_lossy(&out.stderr).into_owned();
-        println!("## {label}\n\n{text}");
+        println!(
+            "## {label} (calibration {}: {})\n\n{text}",
+            group + 1,
+            cal_path.display()
+        );
         println!(
             "| capture | pixels | during read-out | per pixel | worst block, per pixel | after the last pixel | at 480 MHz, 1 IPC | trigger → reading | result |"
         );
