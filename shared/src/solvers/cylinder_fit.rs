@@ -107,10 +107,22 @@ fn cyl_accumulate<W: Fn(usize, usize, Vec3) -> Real>(
             let (g1, g2) = (g.dot(&e1), g.dot(&e2));
             let j = V5::new(-g1, -g2, -wu * g1, -wu * g2, -1.0);
             let d = rho - st.r;
-            jtj += j * j.transpose() * weight;
+            // The upper triangle of `j·jᵀ·w` (each entry the very product `(jₐ·j_b)·w` the
+            // full outer product forms, `jₐ·j_b = j_b·jₐ` exactly), mirrored below: 15
+            // entries per point instead of 25.
+            for a in 0..5 {
+                for b in a..5 {
+                    jtj[(a, b)] += j[a] * j[b] * weight;
+                }
+            }
             jtd += j * (weight * d);
             cost += weight * d * d;
             n += 1;
+        }
+    }
+    for a in 0..5 {
+        for b in 0..a {
+            jtj[(a, b)] = jtj[(b, a)];
         }
     }
     (jtj, jtd, cost, n)

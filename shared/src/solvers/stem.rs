@@ -583,7 +583,14 @@ fn solve_tilted(
             .map_or(Vec3::zeros(), |f| f.direction(*x) * *s),
         _ => Vec3::zeros(),
     };
-    let fit = fit_cylinder_weighted(input.curves, point_noise, init, &params.robust)?.fit;
+    let fit = fit_cylinder_weighted(
+        input.curves,
+        point_noise,
+        init,
+        &params.robust,
+        scratch.values,
+    )?
+    .fit;
     let cyl = fit.cylinder;
     let plane0 = &input.planes[0];
     // Generalised three-tangent on every curve; mean radius, σ of the mean of the

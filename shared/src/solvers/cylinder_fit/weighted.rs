@@ -17,6 +17,9 @@ use crate::solvers::circle::RobustParams;
 use crate::solvers::lm::{self, Evaluated};
 use crate::solvers::SolveError;
 
+/// Most curves whose weights [`fit_cylinder_weighted`] keeps in its table (the planes).
+const MAX_CURVES: usize = crate::calibration::MAX_PLANES;
+
 /// Result of [`fit_cylinder_weighted`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct WeightedCylinderFit {
@@ -62,11 +65,18 @@ fn tukey(u: Real) -> Real {
 /// scratch for a median over all curves; the first round's mean includes the outliers, which
 /// only makes it more lenient), `c` = `params.tuning`; LM inside each round. Start from
 /// [`super::initial_cylinder`]. Errors as [`super::fit_cylinder`].
+///
+/// The weights are frozen within a round, so they are computed once per round into
+/// `weights` (one value per point of all curves, in order) and each LM step reads them — as
+/// the one-plane fit does (`docs/performance.md`): re-deriving each point's noise direction
+/// at every step was half of a tilted stem's solver on the device. With `weights` shorter
+/// than the points, each step computes them again (the same numbers).
 pub fn fit_cylinder_weighted(
     curves: &[&[Vec3]],
     noise: impl Fn(usize, usize) -> Vec3,
     initial: Cylinder,
     params: &RobustParams,
+    weights: &mut [Real],
 ) -> Result<WeightedCylinderFit, SolveError> {
     params.lm.validate()?;
     if !(params.tuning.is_finite() && params.tuning > 0.0) || params.max_rounds == 0 {
@@ -84,6 +94,17 @@ pub fn fit_cylinder_weighted(
             (Real::INFINITY, Vec3::zeros())
         }
     };
+    // Where each curve's weights start in `weights`, if they all fit.
+    let total: usize = curves.iter().map(|c| c.len()).sum();
+    let offsets = (total <= weights.len() && curves.len() <= MAX_CURVES).then(|| {
+        let mut offsets = [0usize; MAX_CURVES];
+        let mut at = 0;
+        for (o, c) in offsets.iter_mut().zip(curves) {
+            *o = at;
+            at += c.len();
+        }
+        offsets
+    });
     let mut st = start;
     let mut cutoff = Real::INFINITY;
     let mut iterations = 0;
@@ -108,13 +129,34 @@ pub fn fit_cylinder_weighted(
         cutoff = params.tuning * s;
         let frozen = st;
         let c = cutoff;
-        let weight = |k: usize, i: usize, y: Vec3| {
+        let compute = |k: usize, i: usize, y: Vec3| {
             let (s, g) = point_noise(k, i);
             let (d, sd) = residual(&frozen, y, s, g);
             if !sd.is_finite() {
                 return 0.0;
             }
             tukey(d / (sd * c)) / (sd * sd)
+        };
+        // `y` as `cyl_accumulate` forms it, so the table holds the very values.
+        let cached = offsets.is_some();
+        if cached {
+            let mut slots = weights.iter_mut();
+            for (k, curve) in curves.iter().enumerate() {
+                for (i, x) in curve.iter().enumerate() {
+                    if let Some(w) = slots.next() {
+                        *w = compute(k, i, (x - mean) / scale);
+                    }
+                }
+            }
+        }
+        let table = &*weights;
+        let weight = |k: usize, i: usize, y: Vec3| match offsets {
+            Some(offsets) => offsets
+                .get(k)
+                .and_then(|o| table.get(o + i))
+                .copied()
+                .unwrap_or(0.0),
+            None => compute(k, i, y),
         };
         let problem = CylinderProblem {
             curves,
