@@ -94,9 +94,11 @@ pub fn fit_cylinder_weighted(
             (Real::INFINITY, Vec3::zeros())
         }
     };
-    // Where each curve's weights start in `weights`, if they all fit.
+    // Where each curve's weights start in `weights`, if they all fit with room for each
+    // point's residual σ beside them (`weights[total..]`: the scale pass keeps `d` and `σ_d`
+    // for the round's weights, which are formed from the same two numbers).
     let total: usize = curves.iter().map(|c| c.len()).sum();
-    let offsets = (total <= weights.len() && curves.len() <= MAX_CURVES).then(|| {
+    let offsets = (2 * total <= weights.len() && curves.len() <= MAX_CURVES).then(|| {
         let mut offsets = [0usize; MAX_CURVES];
         let mut at = 0;
         for (o, c) in offsets.iter_mut().zip(curves) {
@@ -111,10 +113,17 @@ pub fn fit_cylinder_weighted(
     for round in 0..=params.max_rounds {
         // Scale from the previous round's points with weight (all, in the first round).
         let (mut sum, mut k_in) = (0.0, 0usize);
+        let (kept_d, kept_sd) = weights.split_at_mut(total.min(weights.len()));
+        let (mut kept_d, mut kept_sd) = (kept_d.iter_mut(), kept_sd.iter_mut());
         for (k, curve) in curves.iter().enumerate() {
             for (i, x) in curve.iter().enumerate() {
                 let (s, g) = point_noise(k, i);
                 let (d, sd) = residual(&st, (x - mean) / scale, s, g);
+                if offsets.is_some() {
+                    if let (Some(kd), Some(ks)) = (kept_d.next(), kept_sd.next()) {
+                        (*kd, *ks) = (d, sd);
+                    }
+                }
                 let u = (d / sd).abs();
                 if sd.is_finite() && u < cutoff {
                     sum += u;
@@ -137,16 +146,18 @@ pub fn fit_cylinder_weighted(
             }
             tukey(d / (sd * c)) / (sd * sd)
         };
-        // `y` as `cyl_accumulate` forms it, so the table holds the very values.
-        let cached = offsets.is_some();
-        if cached {
-            let mut slots = weights.iter_mut();
-            for (k, curve) in curves.iter().enumerate() {
-                for (i, x) in curve.iter().enumerate() {
-                    if let Some(w) = slots.next() {
-                        *w = compute(k, i, (x - mean) / scale);
-                    }
-                }
+        // The round's weights from the scale pass's `d` and `σ_d` (the residuals at this
+        // round's frozen cylinder, `y` formed as `cyl_accumulate` forms it): the very values
+        // `compute` gives.
+        if offsets.is_some() {
+            let (kept_d, kept_sd) = weights.split_at_mut(total.min(weights.len()));
+            for (w, &sd) in kept_d.iter_mut().zip(kept_sd.iter()) {
+                let d = *w;
+                *w = if sd.is_finite() {
+                    tukey(d / (sd * c)) / (sd * sd)
+                } else {
+                    0.0
+                };
             }
         }
         let table = &*weights;
