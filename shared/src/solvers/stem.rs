@@ -182,12 +182,17 @@ struct PlaneResult {
     n: usize,
 }
 
+/// `with_ellipse`: run the non-roundness test (`non_round`); only the one-plane reading
+/// ([`finish_plane`]) uses its ellipse, so a two-plane solve defers it to the fallback — on
+/// a tilted stem the level section is elliptic by the tilt, the test always fits the ellipse
+/// and that fit was a tenth of the solver on the device (`docs/performance.md`).
 fn solve_plane(
     curve: &[Vec3],
     sigmas: &[Real],
     plane: &LaserPlane,
     params: &CylinderParams,
     scratch: &mut Scratch<'_>,
+    with_ellipse: bool,
 ) -> Result<PlaneResult, SolveError> {
     let n = to_plane(curve, plane, scratch.points)?.len();
     // The level section of a vertical stem (docs/cylinder.md, "One plane: the level section").
@@ -257,7 +262,9 @@ fn solve_plane(
         if arc < params.min_arc_angle {
             flags.insert(Flags::ARC_TOO_SHORT);
         }
-        ellipse = non_round(pts, &f, rc.cutoff, params);
+        if with_ellipse {
+            ellipse = non_round(pts, &f, rc.cutoff, params);
+        }
         // The normal-residual pull of noise along the line of sight, removed to second order
         // (docs/error-model.md §5e, "The pull to second order"); the tests above judged the
         // fitted circle itself.
@@ -439,19 +446,30 @@ pub fn solve(
         return Err(SolveError::ScratchTooSmall);
     }
     let plane0 = &input.planes[0];
+    let two_planes = input.curves.len() >= 2;
     let one = solve_plane(
         input.curves[0],
         input.sigmas[0],
         plane0,
         params,
         &mut scratch,
+        !two_planes,
     )?;
-    let sol = if input.curves.len() >= 2 {
+    let sol = if two_planes {
         // A cylinder fit whose σ does not bound the size (an axis the curves leave
-        // undetermined) is a failed tilt fit: plane 0's own reading stands in for it.
+        // undetermined) is a failed tilt fit: plane 0's own reading stands in for it, with
+        // the non-roundness test the first pass deferred (the same result otherwise).
         match solve_tilted(input, params, &mut scratch, &one).and_then(bounded) {
             Ok(s) => s,
             Err(_) => {
+                let one = solve_plane(
+                    input.curves[0],
+                    input.sigmas[0],
+                    plane0,
+                    params,
+                    &mut scratch,
+                    true,
+                )?;
                 let mut s = finish_plane(&one, plane0, params)?;
                 s.flags.insert(Flags::TILT_FIT_FAILED);
                 s.flags.insert(Flags::TILT_IGNORED);
