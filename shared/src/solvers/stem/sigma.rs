@@ -10,7 +10,8 @@
 use crate::real::Float;
 use crate::real::{norm, sqrt, Real, Vec2, Vec3, PI};
 
-use super::{CylinderParams, Scratch};
+use super::budget::decimate;
+use super::{budget_split, point_budget, CylinderParams, Scratch};
 use crate::laser_plane::LaserPlane;
 use crate::noise;
 use crate::solvers::circle;
@@ -171,26 +172,57 @@ pub(super) fn projected_data_sigma(
 ) -> Option<(circle::Circle, Real, Real)> {
     let source = plane.source;
     let projected = project_along_axis(curve, source, axis, scratch.points).ok()?;
-    let (u, e1, e2, pts) = (projected.axis, projected.e1, projected.e2, projected.points);
+    let (u, e1, e2, n) = (
+        projected.axis,
+        projected.e1,
+        projected.e2,
+        projected.points.len(),
+    );
     // Back from the projection to the laser plane: `x = s + q₁e₁ + q₂e₂ + t·u` with
     // `n·(x − s) = 0` (the source lies in the plane).
     let nu = plane.normal.dot(&u);
     if !(nu.abs() > 1e-6) {
         return None;
     }
-    let near_sigma = |q: Vec2| {
+    let to_plane = |q: Vec2| {
         let w = e1 * q.x + e2 * q.y;
-        let x = source + w - u * (plane.normal.dot(&w) / nu);
-        let g = noise::displacement_per_pixel(plane, params.focal_px, x)
+        source + w - u * (plane.normal.dot(&w) / nu)
+    };
+    let near_sigma = |q: Vec2| {
+        let g = noise::displacement_per_pixel(plane, params.focal_px, to_plane(q))
             .unwrap_or_else(|_| Vec3::zeros());
         norm(&(Vec2::new(g.dot(&e1), g.dot(&e2)) * params.noise.image_px()))
     };
     let field = noise::DisplacementField::of(plane);
-    let noise_of = |i: usize| {
-        let g = field.direction(curve[i]) * sigmas[i];
-        Vec2::new(g.dot(&e1), g.dot(&e2))
+    // A long curve is binned to the point budget as in one plane (`solve_plane`,
+    // docs/error-model.md "Point budget"): each bin's noise is its σ along the field's
+    // direction at the bin's point, mapped back to the laser plane.
+    let budget = point_budget(params, scratch.values.len());
+    let rc = match budget_split(n, budget, scratch.values.len()) {
+        Some(m) => {
+            let (binned, rest) = scratch.values.split_at_mut(m);
+            let m = decimate(&mut scratch.points[..n], sigmas, binned, budget);
+            let (pts, binned) = (&scratch.points[..m], &binned[..m]);
+            let noise_of = |i: usize| {
+                let g = field.direction(to_plane(pts[i])) * binned[i];
+                Vec2::new(g.dot(&e1), g.dot(&e2))
+            };
+            robust_circle(pts, near_sigma, noise_of, params, rest)?
+        }
+        None => {
+            let noise_of = |i: usize| {
+                let g = field.direction(curve[i]) * sigmas[i];
+                Vec2::new(g.dot(&e1), g.dot(&e2))
+            };
+            robust_circle(
+                &scratch.points[..n],
+                near_sigma,
+                noise_of,
+                params,
+                scratch.values,
+            )?
+        }
     };
-    let rc = robust_circle(pts, near_sigma, noise_of, params, scratch.values)?;
     let s = rc.data_sigma.hypot(rc.bending);
     s.is_finite()
         .then_some((rc.fit.circle, s, rc.fit.rms_residual))
