@@ -308,6 +308,65 @@ fn budget_keeps_the_reading() {
     std::println!("largest change of the reading: {worst:.3} σ");
 }
 
+/// On two planes the point budget bins only the projected sections of the data-driven σ
+/// (`sigma::projected_data_sigma`): the cylinder fit, and so the diameter, is the same to the
+/// bit, and the σ moves by little (`docs/error-model.md` §5c: at most 25 % on the tilted
+/// evaluation stems).
+#[test]
+fn budget_on_two_planes_keeps_the_diameter() {
+    let (p0, p1) = planes();
+    let deg = PI / 180.0;
+    let all = CylinderParams {
+        point_budget: usize::MAX,
+        ..CylinderParams::default()
+    };
+    let budget = CylinderParams::default();
+    let truth = tilted_cylinder(-10.0 * deg, 25.0 * deg, 0.35, Vec2::new(0.0, 1.2), &p0);
+    let (mut c0, mut c1) = (std::vec::Vec::new(), std::vec::Vec::new());
+    section(&truth, &p0, 1500, &mut c0);
+    section(&truth, &p1, 1500, &mut c1);
+    assert!(
+        c0.len().min(c1.len()) > 2 * POINT_BUDGET,
+        "{} {}",
+        c0.len(),
+        c1.len()
+    );
+    let mut rng = Rng::new(5);
+    for x in c0.iter_mut().chain(c1.iter_mut()) {
+        *x += Vec3::new(
+            rng.gauss() as Real,
+            rng.gauss() as Real,
+            rng.gauss() as Real,
+        ) * 3e-4;
+    }
+    let (s0, s1) = (sigmas_of(&c0, &p0, &all), sigmas_of(&c1, &p1, &all));
+    let mut pts = std::vec![Vec2::zeros(); 1500];
+    let mut vals = std::vec![0.0; 6000];
+    let mut read = |params: &CylinderParams| {
+        solve(
+            &CylinderInput {
+                curves: &[&c0, &c1],
+                sigmas: &[&s0, &s1],
+                planes: &[p0, p1],
+            },
+            params,
+            Scratch {
+                points: &mut pts,
+                values: &mut vals,
+            },
+        )
+        .unwrap()
+    };
+    let (a, b) = (read(&all), read(&budget));
+    assert!(
+        a.tilt.is_some() && !a.flags.contains(Flags::TILT_IGNORED),
+        "{a:?}"
+    );
+    assert_eq!(a.diameter, b.diameter, "all {a:?}\nbudget {b:?}");
+    let ratio = b.uncertainty / a.uncertainty;
+    assert!(ratio > 0.75 && ratio < 1.25, "all {a:?}\nbudget {b:?}");
+}
+
 /// Rule 3 (`docs/cylinder.md` §6): a short arc reports the fit with its σ, never the
 /// three-tangent, and is refused once the fit's σ exceeds a third of its radius.
 #[test]
