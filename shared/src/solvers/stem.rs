@@ -447,14 +447,17 @@ pub fn solve(
     }
     let plane0 = &input.planes[0];
     let two_planes = input.curves.len() >= 2;
-    let one = solve_plane(
-        input.curves[0],
-        input.sigmas[0],
-        plane0,
-        params,
-        &mut scratch,
-        !two_planes,
-    )?;
+    let plane0_reading = |scratch: &mut Scratch<'_>, with_ellipse: bool| {
+        solve_plane(
+            input.curves[0],
+            input.sigmas[0],
+            plane0,
+            params,
+            scratch,
+            with_ellipse,
+        )
+    };
+    let one = plane0_reading(&mut scratch, !two_planes)?;
     let sol = if two_planes {
         // A cylinder fit whose σ does not bound the size (an axis the curves leave
         // undetermined) is a failed tilt fit: plane 0's own reading stands in for it, with
@@ -462,14 +465,7 @@ pub fn solve(
         match solve_tilted(input, params, &mut scratch, &one).and_then(bounded) {
             Ok(s) => s,
             Err(_) => {
-                let one = solve_plane(
-                    input.curves[0],
-                    input.sigmas[0],
-                    plane0,
-                    params,
-                    &mut scratch,
-                    true,
-                )?;
+                let one = plane0_reading(&mut scratch, true)?;
                 let mut s = finish_plane(&one, plane0, params)?;
                 s.flags.insert(Flags::TILT_FIT_FAILED);
                 s.flags.insert(Flags::TILT_IGNORED);

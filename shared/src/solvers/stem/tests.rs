@@ -257,6 +257,30 @@ fn edge_bias_sigma_measures_the_fade_gap() {
     );
 }
 
+/// [`solve`] on `curves` with scratch for curves of up to 1,600 points.
+fn read_with(
+    curves: &[&[Vec3]],
+    sigmas: &[&[Real]],
+    planes: &[LaserPlane],
+    params: &CylinderParams,
+) -> CylinderSolution {
+    let mut pts = std::vec![Vec2::zeros(); 1600];
+    let mut vals = std::vec![0.0; 6400];
+    solve(
+        &CylinderInput {
+            curves,
+            sigmas,
+            planes,
+        },
+        params,
+        Scratch {
+            points: &mut pts,
+            values: &mut vals,
+        },
+    )
+    .unwrap()
+}
+
 /// The point budget bins a long arc without moving the reading (`docs/error-model.md`, "Point
 /// budget"): a 1 m stem at 1 m (≈ 700 columns) read with every point and with the default
 /// budget differ by far less than the reading's σ, and the σ stays the same within 10 %.
@@ -270,8 +294,6 @@ fn budget_keeps_the_reading() {
     let budget = CylinderParams::default();
     let mut rng = Rng::new(3);
     let mut curve = std::vec::Vec::new();
-    let mut pts = std::vec![Vec2::zeros(); 1600];
-    let mut vals = std::vec![0.0; 4 * 1600];
     let mut worst: Real = 0.0;
     for (d, diam) in [(1.0, 1.0), (0.6, 0.6), (1.2, 0.8)] {
         let (d, diam): (Real, Real) = (d, diam);
@@ -279,21 +301,7 @@ fn budget_keeps_the_reading() {
         noisy_columns(&p0, &c, all.noise.image_px(), &mut rng, &mut curve);
         assert!(curve.len() > 2 * POINT_BUDGET, "{}", curve.len());
         let sigmas = sigmas_of(&curve, &p0, &all);
-        let mut read = |params: &CylinderParams| {
-            solve(
-                &CylinderInput {
-                    curves: &[&curve],
-                    sigmas: &[&sigmas],
-                    planes: &[p0],
-                },
-                params,
-                Scratch {
-                    points: &mut pts,
-                    values: &mut vals,
-                },
-            )
-            .unwrap()
-        };
+        let read = |params: &CylinderParams| read_with(&[&curve], &[&sigmas], &[p0], params);
         let (a, b) = (read(&all), read(&budget));
         let random = a.fit_uncertainty.unwrap();
         worst = worst.max((a.diameter - b.diameter).abs() / random);
@@ -340,23 +348,7 @@ fn budget_on_two_planes_keeps_the_diameter() {
         ) * 3e-4;
     }
     let (s0, s1) = (sigmas_of(&c0, &p0, &all), sigmas_of(&c1, &p1, &all));
-    let mut pts = std::vec![Vec2::zeros(); 1500];
-    let mut vals = std::vec![0.0; 6000];
-    let mut read = |params: &CylinderParams| {
-        solve(
-            &CylinderInput {
-                curves: &[&c0, &c1],
-                sigmas: &[&s0, &s1],
-                planes: &[p0, p1],
-            },
-            params,
-            Scratch {
-                points: &mut pts,
-                values: &mut vals,
-            },
-        )
-        .unwrap()
-    };
+    let read = |params: &CylinderParams| read_with(&[&c0, &c1], &[&s0, &s1], &[p0, p1], params);
     let (a, b) = (read(&all), read(&budget));
     assert!(
         a.tilt.is_some() && !a.flags.contains(Flags::TILT_IGNORED),
