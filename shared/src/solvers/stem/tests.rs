@@ -93,6 +93,18 @@ fn solve_transversal_stem() {
     }
 }
 
+/// Adds 0.3 mm of isotropic Gaussian noise to every point of two sections.
+fn jitter(c0: &mut [Vec3], c1: &mut [Vec3], seed: u64) {
+    let mut rng = Rng::new(seed);
+    for x in c0.iter_mut().chain(c1.iter_mut()) {
+        *x += Vec3::new(
+            rng.gauss() as Real,
+            rng.gauss() as Real,
+            rng.gauss() as Real,
+        ) * 3e-4;
+    }
+}
+
 #[test]
 fn solve_tilted_stem_two_planes() {
     let (p0, p1) = planes();
@@ -102,14 +114,7 @@ fn solve_tilted_stem_two_planes() {
     let (mut c0, mut c1) = (std::vec::Vec::new(), std::vec::Vec::new());
     section(&truth, &p0, 1500, &mut c0);
     section(&truth, &p1, 1500, &mut c1);
-    let mut rng = Rng::new(9);
-    for x in c0.iter_mut().chain(c1.iter_mut()) {
-        *x += Vec3::new(
-            rng.gauss() as Real,
-            rng.gauss() as Real,
-            rng.gauss() as Real,
-        ) * 3e-4;
-    }
+    jitter(&mut c0, &mut c1, 9);
     let mut pts = std::vec![Vec2::zeros(); 1500];
     let mut vals = std::vec![0.0; 6000];
     let sol = solve(
@@ -339,14 +344,7 @@ fn budget_on_two_planes_keeps_the_diameter() {
         c0.len(),
         c1.len()
     );
-    let mut rng = Rng::new(5);
-    for x in c0.iter_mut().chain(c1.iter_mut()) {
-        *x += Vec3::new(
-            rng.gauss() as Real,
-            rng.gauss() as Real,
-            rng.gauss() as Real,
-        ) * 3e-4;
-    }
+    jitter(&mut c0, &mut c1, 5);
     let (s0, s1) = (sigmas_of(&c0, &p0, &all), sigmas_of(&c1, &p1, &all));
     let read = |params: &CylinderParams| read_with(&[&c0, &c1], &[&s0, &s1], &[p0, p1], params);
     let (a, b) = (read(&all), read(&budget));
