@@ -51,6 +51,8 @@ impl Instrument for Stem {
         let scratch = stem::Scratch {
             points: scratch.points,
             values: scratch.values,
+            bins: scratch.bins,
+            bin_sigmas: scratch.bin_sigmas,
         };
         let mut solution = stem::solve(&input, params, scratch)?;
         solution

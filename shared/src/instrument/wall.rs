@@ -198,13 +198,7 @@ pub fn measure_with_crossing<P: Pixel>(
         points: &crossing_ws.points[s..e],
         sigmas: &crossing_ws.sigmas[s..e],
     };
-    let points = PlanePoints::new(&profile, on.max_value(), calibration_across, ws.points)
-        .with_curve(ws.curve);
-    let scratch = Scratch {
-        sigmas: ws.sigmas,
-        points: ws.scratch_points,
-        values: ws.scratch_values,
-    };
+    let (points, scratch) = super::lend(&profile, on.max_value(), calibration_across, ws);
     let solution = solve_walls(&points, Some(crossing), params, scratch)?;
     Ok((Measured { solution, profile }, (s, e)))
 }

@@ -28,7 +28,7 @@ use crate::noise::{self, NoiseModel};
 mod budget;
 mod level;
 mod sigma;
-use budget::decimate;
+use budget::bin_curves;
 pub use budget::POINT_BUDGET;
 use level::LevelMap;
 use sigma::{
@@ -83,7 +83,7 @@ pub struct CylinderParams {
     /// [`Flags::ELLIPTIC`] (smaller ones are within what a round stem's bark and the stripe
     /// extraction's coherent bending produce; `docs/cylinder.md`, "Elliptic stems").
     pub elliptic_min_eccentricity: Real,
-    /// Most points of one curve the one-plane whole-arc fit uses; longer curves are binned
+    /// Most points of one curve the solver uses; longer curves are binned
     /// (`docs/error-model.md`, "Point budget"; default [`POINT_BUDGET`]). `usize::MAX` fits
     /// every point.
     pub point_budget: usize,
@@ -127,16 +127,21 @@ impl Default for CylinderParams {
     }
 }
 
-/// Caller-owned working memory of [`solve`]: `points` at least as long as the longest curve;
-/// `values` at least as long, and holding the whole-arc fit's
-/// [`circle::WEIGHTED_SCRATCH_PER_POINT`] values per fitted point — plane 0's curve is binned
-/// to the point budget, lowered to what `values` holds (one more value per bin: its σ); with
-/// two or more planes, every point of the longest curve (the projected fits).
+/// Caller-owned working memory of [`solve`]. Each curve longer than the point budget is
+/// binned into `bins` first (the budget lowered to what `points` and `values` hold); then
+/// `points` must be at least as long as the longest curve the solver works on, and `values`
+/// must hold the whole-arc fits' [`circle::WEIGHTED_SCRATCH_PER_POINT`] values per point of
+/// it.
 pub struct Scratch<'a> {
     /// In-plane / projected points.
     pub points: &'a mut [Vec2],
     /// Residual magnitudes (robust scale).
     pub values: &'a mut [Real],
+    /// The bins of the curves longer than the point budget (up to the budget per curve); a
+    /// curve there is no room left for is used whole.
+    pub bins: &'a mut [Vec3],
+    /// The bins' 1σ, beside `bins`.
+    pub bin_sigmas: &'a mut [Real],
 }
 
 /// The diameter of one capture, with how it was obtained and how far to trust it.
@@ -228,18 +233,7 @@ fn solve_plane(
     };
     // Robust fit, scale floor = predicted point noise at the arc's nearest point; each data
     // point's noise vector is its stored σ along the field's direction.
-    // A long arc is binned to the point budget first (docs/error-model.md, "Point budget");
-    // the bins' σ go to the front of `values`, the fit's scratch after them.
-    let budget = point_budget(params, scratch.values.len());
-    let (pts, sigmas, values): (&[Vec2], &[Real], &mut [Real]) =
-        match budget_split(n, budget, scratch.values.len()) {
-            Some(m) => {
-                let (binned, rest) = scratch.values.split_at_mut(m);
-                let m = decimate(&mut scratch.points[..n], sigmas, binned, budget);
-                (&scratch.points[..m], &binned[..m], rest)
-            }
-            None => (&scratch.points[..n], sigmas, &mut scratch.values[..]),
-        };
+    let values = &mut scratch.values[..];
     let mut ellipse = None;
     let field = noise::DisplacementField::of(plane);
     let noise_of =
@@ -293,42 +287,14 @@ fn solve_plane(
     })
 }
 
-/// Number of bins when a curve of `n` points is binned to `budget` and `values` (its length)
-/// holds both the bins' σ and the fit's scratch; `None` to fit every point (short enough, or
-/// no room).
-fn budget_split(n: usize, budget: usize, values: usize) -> Option<usize> {
-    if n <= budget || budget == 0 {
-        return None;
-    }
-    let m = n.div_ceil(n.div_ceil(budget));
-    (values >= (1 + WEIGHTED_SCRATCH_PER_POINT) * m).then_some(m)
-}
-
-/// The point budget of the one-plane fit: [`CylinderParams::point_budget`], lowered to what
-/// `values` (its length) holds with the bins' σ and the fit's scratch (a workspace sized for
-/// a narrow frame bins its longer curves rather than refusing them).
-fn point_budget(params: &CylinderParams, values: usize) -> usize {
+/// The point budget: [`CylinderParams::point_budget`], lowered to what the scratch's
+/// `points` and `values` (their lengths) hold for the whole-arc fits (a workspace sized for a
+/// narrow frame bins its longer curves rather than refusing them).
+fn point_budget(params: &CylinderParams, points: usize, values: usize) -> usize {
     params
         .point_budget
-        .min(values / (1 + WEIGHTED_SCRATCH_PER_POINT))
-}
-
-/// Length of [`Scratch::values`] that [`solve`] needs for `curves`: the whole-arc fit's
-/// scratch for plane 0's curve (after binning to `budget`, with the bins' σ) and, with two or
-/// more planes, for each curve projected along the axis (every point).
-fn values_needed(curves: &[&[Vec3]], budget: usize) -> usize {
-    let first = curves.first().map_or(0, |c| c.len());
-    let one_plane = match budget_split(first, budget, usize::MAX) {
-        Some(m) => (1 + WEIGHTED_SCRATCH_PER_POINT) * m,
-        None => WEIGHTED_SCRATCH_PER_POINT * first,
-    };
-    let longest = curves.iter().map(|c| c.len()).max().unwrap_or(0);
-    let projected = if curves.len() >= 2 {
-        WEIGHTED_SCRATCH_PER_POINT * longest
-    } else {
-        0
-    };
-    one_plane.max(projected).max(longest)
+        .min(points)
+        .min(values / WEIGHTED_SCRATCH_PER_POINT)
 }
 
 /// The ellipse fitted to the circle fit's inliers when the section is detectably not round
@@ -415,11 +381,12 @@ fn choose(tt: Option<(Real, Real)>, fit: Option<(Real, Real, bool)>) -> Option<(
 pub fn solve(
     input: &CylinderInput<'_>,
     params: &CylinderParams,
-    mut scratch: Scratch<'_>,
+    scratch: Scratch<'_>,
 ) -> Result<CylinderSolution, SolveError> {
     if input.curves.is_empty()
         || input.curves.len() != input.planes.len()
         || input.sigmas.len() != input.curves.len()
+        || input.curves.len() > MAX_PLANES
     {
         return Err(SolveError::PlaneCount);
     }
@@ -438,10 +405,32 @@ pub fn solve(
     {
         return Err(SolveError::InvalidParameter);
     }
+    // Every method works on at most the point budget per curve (docs/error-model.md, "Point
+    // budget"); the measured points are what the reading reports it used.
+    let Scratch {
+        points,
+        values,
+        bins,
+        bin_sigmas,
+    } = scratch;
+    let budget = point_budget(params, points.len(), values.len());
+    let (curves, sigmas) = bin_curves(input.curves, input.sigmas, budget, bins, bin_sigmas);
+    let planes = input.curves.len();
+    let measured = |k: usize| input.curves.get(k).map_or(0, |c| c.len());
+    let input = &CylinderInput {
+        curves: &curves[..planes],
+        sigmas: &sigmas[..planes],
+        planes: input.planes,
+    };
+    let mut scratch = Scratch {
+        points,
+        values,
+        bins: &mut [],
+        bin_sigmas: &mut [],
+    };
     let longest = input.curves.iter().map(|c| c.len()).max().unwrap_or(0);
     if scratch.points.len() < longest
-        || scratch.values.len()
-            < values_needed(input.curves, point_budget(params, scratch.values.len()))
+        || scratch.values.len() < (WEIGHTED_SCRATCH_PER_POINT * longest).max(longest)
     {
         return Err(SolveError::ScratchTooSmall);
     }
@@ -482,6 +471,11 @@ pub fn solve(
         return Err(SolveError::RadiusOutOfRange);
     }
     let mut sol = bounded(sol)?;
+    sol.n_points = if sol.tilt.is_some() {
+        (0..planes).map(measured).sum()
+    } else {
+        measured(0)
+    };
     if !(sol.distance >= params.range.0 && sol.distance <= params.range.1) {
         sol.flags.insert(Flags::RANGE_LIMIT);
     }

@@ -4,59 +4,183 @@
 //! inverse-variance weighted mean of its points with σ `(Σσᵢ⁻²)^(−1/2)`. A bin of `k` points
 //! spans `k` columns, where the arc's curvature moves the mean off the circle by at most the
 //! sagitta `(k·Δ)²/(8R)` (Δ the point spacing): below 1 µm for `k·Δ` = 5 mm on a 2 cm radius
-//! — far below the points' σ. The fit's cost is then bounded by the budget whatever the arc's
-//! length, and the reading does not move (test `budget_keeps_the_reading`).
+//! — far below the points' σ. Every method of the solver (three-tangent, circle and cylinder
+//! fits, the projected sections, the non-roundness test) then works on at most the budget per
+//! curve whatever the arc's length, and the reading does not move (tests
+//! `budget_keeps_the_reading`, `budget_on_two_planes_keeps_the_reading`).
 
+use crate::calibration::MAX_PLANES;
 #[allow(unused_imports)]
 use crate::real::Float;
-use crate::real::{sqrt, Real, Vec2};
+use crate::real::{sqrt, Real, Vec3};
 
-/// Most points of one curve the whole-arc fit uses; a longer curve is binned
-/// ([`decimate`]). A 1 m stem at 1 m lights ≈ 700 columns; 128 bins of ≤ 6 columns keep the
-/// fit's cost at about a fifth of that with the same reading: a bin's mean sits inside the
-/// arc by `(kΔ)²/(24R)` ≈ `d/(12·128²)` = 5 µm on a 1 m stem, and on the evaluation sets the
-/// change from 256 moved readings by a median 0.04σ, at most 0.40σ (`docs/error-model.md`
-/// §5c; issue 17, session 10).
+/// Most points of one curve the solver uses; a longer curve is binned ([`bin_curves`]). A
+/// 1 m stem at 1 m lights ≈ 700 columns; 128 bins of ≤ 6 columns keep the fits' cost at about
+/// a fifth of that with the same reading: a bin's mean sits inside the arc by `(kΔ)²/(24R)` ≈
+/// `d/(12·128²)` = 5 µm on a 1 m stem (`docs/error-model.md` §5c; issue 17, sessions 10 and
+/// 12).
 pub const POINT_BUDGET: usize = 128;
 
-/// Bins `points` (with their 1σ `sigmas`, same length) into at most `budget` consecutive
-/// groups of `k = ⌈n/budget⌉` points, in place: bin `j` is written to `points[j]` and its σ to
-/// `sigmas_out[j]`. Returns the number of bins `m`. With `n ≤ budget` the points are kept and
-/// their σ copied. Points with a non-positive or non-finite σ are left out of their bin; a bin
-/// with none keeps its unweighted mean with an infinite σ (no weight in the fit).
-pub(super) fn decimate(
-    points: &mut [Vec2],
-    sigmas: &[Real],
-    sigmas_out: &mut [Real],
+/// Fewest bins a budget may ask for: the two ends and one between them.
+const MIN_BUDGET: usize = 3;
+
+/// Per curve, the points (and their 1σ) the solver works on.
+pub(super) type Curves<'a> = ([&'a [Vec3]; MAX_PLANES], [&'a [Real]; MAX_PLANES]);
+
+/// Each curve of `curves` (with its points' 1σ `sigmas`, same lengths; at most
+/// [`MAX_PLANES`]) longer than `budget` binned into `bins` and `bin_sigmas`, one after the
+/// other ([`bin_curve`]); a curve within the budget, or one there is no room left for, is
+/// taken as it is.
+pub(super) fn bin_curves<'a>(
+    curves: &[&'a [Vec3]],
+    sigmas: &[&'a [Real]],
     budget: usize,
-) -> usize {
-    let n = points.len().min(sigmas.len());
-    let budget = budget.max(1);
-    let k = n.div_ceil(budget).max(1);
-    let m = n.div_ceil(k);
-    if sigmas_out.len() < m {
-        return 0;
+    mut bins: &'a mut [Vec3],
+    mut bin_sigmas: &'a mut [Real],
+) -> Curves<'a> {
+    let budget = budget.max(MIN_BUDGET);
+    let mut out: Curves<'a> = ([&[]; MAX_PLANES], [&[]; MAX_PLANES]);
+    for (k, (&curve, &sigma)) in curves.iter().zip(sigmas).enumerate().take(MAX_PLANES) {
+        let n = curve.len().min(sigma.len());
+        let m = binned_len(n, budget);
+        if m < n && m <= bins.len() && m <= bin_sigmas.len() {
+            let (points, rest) = core::mem::take(&mut bins).split_at_mut(m);
+            let (point_sigmas, rest_sigmas) = core::mem::take(&mut bin_sigmas).split_at_mut(m);
+            bin_curve(
+                &curve[..n],
+                &sigma[..n],
+                bin_width(n, budget),
+                points,
+                point_sigmas,
+            );
+            (bins, bin_sigmas) = (rest, rest_sigmas);
+            out.0[k] = points;
+            out.1[k] = point_sigmas;
+        } else {
+            out.0[k] = curve;
+            out.1[k] = sigma;
+        }
     }
-    for j in 0..m {
-        let (lo, hi) = (j * k, ((j + 1) * k).min(n));
-        let (mut sum, mut wsum, mut plain) = (Vec2::zeros(), 0.0, Vec2::zeros());
-        for i in lo..hi {
-            plain += points[i];
-            let s = sigmas[i];
+    out
+}
+
+/// Number of points a curve of `n` points is binned to under `budget`: `n` if it fits, else
+/// the two ends and `⌈(n − 2)/k⌉` bins of [`bin_width`] `k` points between.
+fn binned_len(n: usize, budget: usize) -> usize {
+    if n <= budget.max(MIN_BUDGET) {
+        return n;
+    }
+    2 + (n - 2).div_ceil(bin_width(n, budget))
+}
+
+/// Points per bin between the ends when a curve of `n` points is binned to `budget`:
+/// `k = ⌈(n − 2)/(budget − 2)⌉` (budget at least 3).
+fn bin_width(n: usize, budget: usize) -> usize {
+    n.saturating_sub(2)
+        .div_ceil(budget.max(MIN_BUDGET) - 2)
+        .max(1)
+}
+
+/// Bins `points` (1σ `sigmas`) into `out` (and the bins' σ into `out_sigmas`), `k` points
+/// per bin between the ends ([`bin_width`]; `out` as long as [`binned_len`] says). The first and last points stay bins of their own: the three-tangent
+/// method's grazing rays are the arc's extreme polar angles, which lie at its ends, and a
+/// bin there would move them inwards by half its width. Points with a non-positive or
+/// non-finite σ are left out of their bin; a bin with none keeps its unweighted mean with an
+/// infinite σ (no weight in the fits).
+fn bin_curve(
+    points: &[Vec3],
+    sigmas: &[Real],
+    k: usize,
+    out: &mut [Vec3],
+    out_sigmas: &mut [Real],
+) {
+    let n = points.len().min(sigmas.len());
+    let m = out.len().min(out_sigmas.len());
+    if n < 2 || m < 2 || k == 0 {
+        return;
+    }
+    let mut bin = |j: usize, lo: usize, hi: usize| {
+        let (mut sum, mut wsum, mut plain) = (Vec3::zeros(), 0.0, Vec3::zeros());
+        for (p, &s) in points[lo..hi].iter().zip(&sigmas[lo..hi]) {
+            plain += p;
             if s > 0.0 && s.is_finite() {
                 let w = 1.0 / (s * s);
-                sum += points[i] * w;
+                sum += p * w;
                 wsum += w;
             }
         }
-        // `j ≤ lo`: the bin's own points are read before it is written.
         if wsum > 0.0 {
-            points[j] = sum / wsum;
-            sigmas_out[j] = 1.0 / sqrt(wsum);
+            out[j] = sum / wsum;
+            out_sigmas[j] = 1.0 / sqrt(wsum);
         } else {
-            points[j] = plain / (hi - lo) as Real;
-            sigmas_out[j] = Real::INFINITY;
+            out[j] = plain / (hi - lo) as Real;
+            out_sigmas[j] = Real::INFINITY;
         }
+    };
+    bin(0, 0, 1);
+    // `m − 2 = ⌈(n − 2)/k⌉` bins: the last one starts before `n − 1`.
+    for j in 1..m - 1 {
+        let lo = (1 + (j - 1) * k).min(n - 2);
+        bin(j, lo, (lo + k).min(n - 1));
     }
-    m
+    bin(m - 1, n - 1, n);
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use super::*;
+
+    /// The ends stay themselves, every point lands in exactly one bin, and a bin is the
+    /// inverse-variance mean of its points with σ `(Σσ⁻²)^(−1/2)`.
+    #[test]
+    fn bins_keep_the_ends_and_weigh_by_inverse_variance() {
+        let n = 301;
+        let points: std::vec::Vec<Vec3> = (0..n).map(|i| Vec3::new(i as Real, 0.0, 1.0)).collect();
+        let sigmas: std::vec::Vec<Real> = (0..n).map(|i| 1.0 + (i % 2) as Real).collect();
+        let m = binned_len(n, 128);
+        assert!(m <= 128 && m > 64, "{m}");
+        let mut out = std::vec![Vec3::zeros(); m];
+        let mut out_s = std::vec![0.0; m];
+        bin_curve(&points, &sigmas, bin_width(n, 128), &mut out, &mut out_s);
+        assert_eq!(out[0], points[0]);
+        assert_eq!(out[m - 1], points[n - 1]);
+        assert_eq!((out_s[0], out_s[m - 1]), (sigmas[0], sigmas[n - 1]));
+        // k = ⌈299/126⌉ = 3: bin 1 holds points 1, 2, 3 (σ 2, 1, 2).
+        let w = [0.25, 1.0, 0.25];
+        let mean = (1.0 * w[0] + 2.0 * w[1] + 3.0 * w[2]) / 1.5;
+        assert!(
+            (out[1].x - mean).abs() < 1e-12 as Real * 10.0,
+            "{:?}",
+            out[1]
+        );
+        assert!((out_s[1] - 1.0 / sqrt(1.5)).abs() < 1e-6);
+        // Bins in order, strictly inside the ends.
+        assert!(out.windows(2).all(|w| w[0].x < w[1].x));
+        // A curve within the budget, or without room, is taken as it is.
+        let (mut bins, mut bs) = (std::vec![Vec3::zeros(); 10], std::vec![0.0; 10]);
+        let short = &points[..100];
+        let (c, s) = bin_curves(
+            &[short, &points],
+            &[&sigmas[..100], &sigmas],
+            128,
+            &mut bins,
+            &mut bs,
+        );
+        assert_eq!(c[0].len(), 100);
+        assert_eq!((c[1].len(), s[1].len()), (n, n));
+    }
+
+    /// A bin whose points have no usable σ keeps their plain mean and carries no weight.
+    #[test]
+    fn a_bin_without_sigma_has_no_weight() {
+        let points = [Vec3::new(0.0, 0.0, 1.0); 10];
+        let sigmas = [0.0; 10];
+        let m = binned_len(10, 4);
+        let mut out = std::vec![Vec3::zeros(); m];
+        let mut out_s = std::vec![0.0; m];
+        bin_curve(&points, &sigmas, bin_width(10, 4), &mut out, &mut out_s);
+        assert!(out.iter().all(|p| *p == points[0]));
+        assert!(out_s.iter().all(|s| s.is_infinite()));
+    }
 }

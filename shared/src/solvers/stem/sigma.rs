@@ -10,8 +10,7 @@
 use crate::real::Float;
 use crate::real::{norm, sqrt, Real, Vec2, Vec3, PI};
 
-use super::budget::decimate;
-use super::{budget_split, point_budget, CylinderParams, Scratch};
+use super::{CylinderParams, Scratch};
 use crate::laser_plane::LaserPlane;
 use crate::noise;
 use crate::solvers::circle;
@@ -194,35 +193,17 @@ pub(super) fn projected_data_sigma(
         norm(&(Vec2::new(g.dot(&e1), g.dot(&e2)) * params.noise.image_px()))
     };
     let field = noise::DisplacementField::of(plane);
-    // A long curve is binned to the point budget as in one plane (`solve_plane`,
-    // docs/error-model.md "Point budget"): each bin's noise is its σ along the field's
-    // direction at the bin's point, mapped back to the laser plane.
-    let budget = point_budget(params, scratch.values.len());
-    let rc = match budget_split(n, budget, scratch.values.len()) {
-        Some(m) => {
-            let (binned, rest) = scratch.values.split_at_mut(m);
-            let m = decimate(&mut scratch.points[..n], sigmas, binned, budget);
-            let (pts, binned) = (&scratch.points[..m], &binned[..m]);
-            let noise_of = |i: usize| {
-                let g = field.direction(to_plane(pts[i])) * binned[i];
-                Vec2::new(g.dot(&e1), g.dot(&e2))
-            };
-            robust_circle(pts, near_sigma, noise_of, params, rest)?
-        }
-        None => {
-            let noise_of = |i: usize| {
-                let g = field.direction(curve[i]) * sigmas[i];
-                Vec2::new(g.dot(&e1), g.dot(&e2))
-            };
-            robust_circle(
-                &scratch.points[..n],
-                near_sigma,
-                noise_of,
-                params,
-                scratch.values,
-            )?
-        }
+    let noise_of = |i: usize| {
+        let g = field.direction(curve[i]) * sigmas[i];
+        Vec2::new(g.dot(&e1), g.dot(&e2))
     };
+    let rc = robust_circle(
+        &scratch.points[..n],
+        near_sigma,
+        noise_of,
+        params,
+        scratch.values,
+    )?;
     let s = rc.data_sigma.hypot(rc.bending);
     s.is_finite()
         .then_some((rc.fit.circle, s, rc.fit.rms_residual))

@@ -61,6 +61,8 @@ fn solve_transversal_stem() {
             Scratch {
                 points: &mut pts,
                 values: &mut vals,
+                bins: &mut std::vec![Vec3::zeros(); MAX_PLANES * POINT_BUDGET],
+                bin_sigmas: &mut std::vec![0.0; MAX_PLANES * POINT_BUDGET],
             },
         )
         .unwrap();
@@ -127,6 +129,8 @@ fn solve_tilted_stem_two_planes() {
         Scratch {
             points: &mut pts,
             values: &mut vals,
+            bins: &mut std::vec![Vec3::zeros(); MAX_PLANES * POINT_BUDGET],
+            bin_sigmas: &mut std::vec![0.0; MAX_PLANES * POINT_BUDGET],
         },
     )
     .unwrap();
@@ -149,6 +153,8 @@ fn solve_tilted_stem_two_planes() {
         Scratch {
             points: &mut pts,
             values: &mut vals,
+            bins: &mut std::vec![Vec3::zeros(); MAX_PLANES * POINT_BUDGET],
+            bin_sigmas: &mut std::vec![0.0; MAX_PLANES * POINT_BUDGET],
         },
     )
     .unwrap();
@@ -172,6 +178,8 @@ fn solve_errors() {
         Scratch {
             points: &mut pts,
             values: &mut vals,
+            bins: &mut std::vec![Vec3::zeros(); MAX_PLANES * POINT_BUDGET],
+            bin_sigmas: &mut std::vec![0.0; MAX_PLANES * POINT_BUDGET],
         },
     );
     assert_eq!(r.err(), Some(SolveError::PlaneCount));
@@ -185,6 +193,8 @@ fn solve_errors() {
         Scratch {
             points: &mut pts,
             values: &mut vals,
+            bins: &mut std::vec![Vec3::zeros(); MAX_PLANES * POINT_BUDGET],
+            bin_sigmas: &mut std::vec![0.0; MAX_PLANES * POINT_BUDGET],
         },
     );
     assert_eq!(r.err(), Some(SolveError::ScratchTooSmall));
@@ -210,6 +220,8 @@ fn solve_errors() {
         Scratch {
             points: &mut pts,
             values: &mut vals,
+            bins: &mut std::vec![Vec3::zeros(); MAX_PLANES * POINT_BUDGET],
+            bin_sigmas: &mut std::vec![0.0; MAX_PLANES * POINT_BUDGET],
         },
     );
     assert_eq!(r.err(), Some(SolveError::RadiusOutOfRange));
@@ -281,6 +293,8 @@ fn read_with(
         Scratch {
             points: &mut pts,
             values: &mut vals,
+            bins: &mut std::vec![Vec3::zeros(); MAX_PLANES * POINT_BUDGET],
+            bin_sigmas: &mut std::vec![0.0; MAX_PLANES * POINT_BUDGET],
         },
     )
     .unwrap()
@@ -321,12 +335,12 @@ fn budget_keeps_the_reading() {
     std::println!("largest change of the reading: {worst:.3} σ");
 }
 
-/// On two planes the point budget bins only the projected sections of the data-driven σ
-/// (`sigma::projected_data_sigma`): the cylinder fit, and so the diameter, is the same to the
-/// bit, and the σ moves by little (`docs/error-model.md` §5c: at most 25 % on the tilted
-/// evaluation stems).
+/// On two planes the point budget bins both curves before every method (cylinder fit,
+/// projected sections, generalised three-tangent): a 70 cm stem tilted 27° at 1.2 m read with
+/// every point (≈ 1000 per curve) and with the budget differs by far less than the reading's
+/// σ, and the σ stays the same within 10 %.
 #[test]
-fn budget_on_two_planes_keeps_the_diameter() {
+fn budget_on_two_planes_keeps_the_reading() {
     let (p0, p1) = planes();
     let deg = PI / 180.0;
     let all = CylinderParams {
@@ -352,9 +366,18 @@ fn budget_on_two_planes_keeps_the_diameter() {
         a.tilt.is_some() && !a.flags.contains(Flags::TILT_IGNORED),
         "{a:?}"
     );
-    assert_eq!(a.diameter, b.diameter, "all {a:?}\nbudget {b:?}");
+    let random = a.fit_uncertainty.unwrap();
+    assert!(
+        (a.diameter - b.diameter).abs() < 0.2 * random,
+        "all {a:?}\nbudget {b:?}"
+    );
     let ratio = b.uncertainty / a.uncertainty;
-    assert!(ratio > 0.75 && ratio < 1.25, "all {a:?}\nbudget {b:?}");
+    assert!(ratio > 0.9 && ratio < 1.1, "all {a:?}\nbudget {b:?}");
+    assert_eq!(b.n_points, c0.len() + c1.len());
+    std::println!(
+        "two planes: change {:.3} σ, σ ratio {ratio:.3}",
+        (a.diameter - b.diameter).abs() / random
+    );
 }
 
 /// Rule 3 (`docs/cylinder.md` §6): a short arc reports the fit with its σ, never the
