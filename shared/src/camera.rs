@@ -445,6 +445,7 @@ impl Camera {
     }
 
     /// Distorted pixel → ideal normalised coordinates `(x/z, y/z)` of its ray.
+    #[inline]
     pub fn pixel_to_normalised(&self, pixel: Vec2) -> Result<Vec2, CameraError> {
         if !(pixel.x.is_finite() && pixel.y.is_finite()) {
             return Err(CameraError::NonFinite);
@@ -461,6 +462,7 @@ impl Camera {
 
     /// Distorted pixel → direction `(x, y, 1)` of its ray in the camera frame (not unit:
     /// its `z` is 1, so a point at depth `z` on the ray is `z·ray`).
+    #[inline]
     pub fn pixel_to_ray(&self, pixel: Vec2) -> Result<Vec3, CameraError> {
         let n = self.pixel_to_normalised(pixel)?;
         Ok(Vec3::new(n.x, n.y, 1.0))

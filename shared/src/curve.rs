@@ -496,8 +496,6 @@ fn smooth_run(points: &mut [CurvePoint], c: u8, start: usize, n: usize, h: usize
     // filter at k reads k-h..=k+h, and loading k+h overwrites k+h-RING < k-h. A power of
     // two, so that a slot is a mask and not a division (this loop is the per-point cost of
     // the smoothing on the device, `docs/performance.md`).
-    const RING: usize = (2 * MAX_SMOOTH_HALF_WINDOW as usize + 1).next_power_of_two();
-    const MASK: usize = RING - 1;
     let mut idx = [0usize; RING];
     let mut val = [0.0 as Real; RING];
     let Some(first) = points.get(start) else {
@@ -533,15 +531,36 @@ fn smooth_run(points: &mut [CurvePoint], c: u8, start: usize, n: usize, h: usize
             }
             coefficients_half = half;
         }
-        // Taps k - half ..= k + half, in that order.
-        let mut acc = 0.0 as Real;
-        for (t, w) in coefficients.iter().take(2 * half + 1).enumerate() {
-            acc += w * val[(k - half + t) & MASK];
-        }
+        // Taps k - half ..= k + half, in that order. The common full windows are unrolled
+        // (this loop's iterator was most of the smoothing's cost on the device); the sum is
+        // formed in the same order either way.
+        let first = k - half;
+        let acc = match 2 * half + 1 {
+            5 => taps(&coefficients, &val, first, 5),
+            7 => taps(&coefficients, &val, first, 7),
+            9 => taps(&coefficients, &val, first, 9),
+            n => taps(&coefficients, &val, first, n),
+        };
         if let Some(p) = points.get_mut(idx[k & MASK]) {
             p.row = acc;
         }
     }
+}
+
+/// Slots of [`smooth_run`]'s ring of rows (a power of two: a slot is a mask).
+const RING: usize = (2 * MAX_SMOOTH_HALF_WINDOW as usize + 1).next_power_of_two();
+/// `RING − 1`.
+const MASK: usize = RING - 1;
+
+/// `Σ_{t<n} c_t·v[(first + t) mod RING]`, summed in order of `t`. Inlined, so that a
+/// literal `n` unrolls it.
+#[inline(always)]
+fn taps(c: &[Real; RING], v: &[Real; RING], first: usize, n: usize) -> Real {
+    let mut acc = 0.0 as Real;
+    for t in 0..n.min(RING) {
+        acc += c[t] * v[(first + t) & MASK];
+    }
+    acc
 }
 
 /// Stores `point` at `out[*n]` and counts it, or says the caller's buffer is full.

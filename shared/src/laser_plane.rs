@@ -286,6 +286,7 @@ impl LaserPlane {
     /// [`LaserPlaneError::RayParallel`] if `|n·ray| ≤ 16·ε·|ray|` (the angle between ray and
     /// plane is at the rounding level) or the ray is zero / not finite;
     /// [`LaserPlaneError::BehindCamera`] if `t ≤ 0`.
+    #[inline]
     pub fn intersect_ray(&self, ray: Vec3) -> Result<Vec3, LaserPlaneError> {
         let len = norm(&ray);
         if !(len.is_finite() && len > 0.0) {
@@ -415,6 +416,7 @@ impl std::error::Error for TriangulationError {}
 
 /// Triangulates one (distorted) pixel of the laser curve: undistort → ray → intersection
 /// with the laser plane. Returns the 3-D point in the camera frame (metres).
+#[inline]
 pub fn triangulate(
     camera: &Camera,
     plane: &LaserPlane,
