@@ -187,17 +187,16 @@ struct PlaneResult {
     n: usize,
 }
 
-/// `with_ellipse`: run the non-roundness test (`non_round`); only the one-plane reading
-/// ([`finish_plane`]) uses its ellipse, so a two-plane solve defers it to the fallback — on
-/// a tilted stem the level section is elliptic by the tilt, the test always fits the ellipse
-/// and that fit was a tenth of the solver on the device (`docs/performance.md`).
+/// The one-plane reading of `curve` in the level section: three-tangent, the whole-arc robust
+/// circle fit and the non-roundness test. A two-plane solve runs it only as its fallback (its
+/// arc length comes from plane 0's projected section, `solve_tilted`): on the device it was
+/// a fifth of a tilted stem's solver (`docs/performance.md`).
 fn solve_plane(
     curve: &[Vec3],
     sigmas: &[Real],
     plane: &LaserPlane,
     params: &CylinderParams,
     scratch: &mut Scratch<'_>,
-    with_ellipse: bool,
 ) -> Result<PlaneResult, SolveError> {
     let n = to_plane(curve, plane, scratch.points)?.len();
     // The level section of a vertical stem (docs/cylinder.md, "One plane: the level section").
@@ -256,9 +255,7 @@ fn solve_plane(
         if arc < params.min_arc_angle {
             flags.insert(Flags::ARC_TOO_SHORT);
         }
-        if with_ellipse {
-            ellipse = non_round(pts, &f, rc.cutoff, params);
-        }
+        ellipse = non_round(pts, &f, rc.cutoff, params);
         // The normal-residual pull of noise along the line of sight, removed to second order
         // (docs/error-model.md §5e, "The pull to second order"); the tests above judged the
         // fitted circle itself.
@@ -436,25 +433,16 @@ pub fn solve(
     }
     let plane0 = &input.planes[0];
     let two_planes = input.curves.len() >= 2;
-    let plane0_reading = |scratch: &mut Scratch<'_>, with_ellipse: bool| {
-        solve_plane(
-            input.curves[0],
-            input.sigmas[0],
-            plane0,
-            params,
-            scratch,
-            with_ellipse,
-        )
+    let plane0_reading = |scratch: &mut Scratch<'_>| {
+        solve_plane(input.curves[0], input.sigmas[0], plane0, params, scratch)
     };
-    let one = plane0_reading(&mut scratch, !two_planes)?;
     let sol = if two_planes {
         // A cylinder fit whose σ does not bound the size (an axis the curves leave
-        // undetermined) is a failed tilt fit: plane 0's own reading stands in for it, with
-        // the non-roundness test the first pass deferred (the same result otherwise).
-        match solve_tilted(input, params, &mut scratch, &one).and_then(bounded) {
+        // undetermined) is a failed tilt fit: plane 0's own reading stands in for it.
+        match solve_tilted(input, params, &mut scratch).and_then(bounded) {
             Ok(s) => s,
             Err(_) => {
-                let one = plane0_reading(&mut scratch, true)?;
+                let one = plane0_reading(&mut scratch)?;
                 let mut s = finish_plane(&one, plane0, params)?;
                 s.flags.insert(Flags::TILT_FIT_FAILED);
                 s.flags.insert(Flags::TILT_IGNORED);
@@ -462,6 +450,7 @@ pub fn solve(
             }
         }
     } else {
+        let one = plane0_reading(&mut scratch)?;
         let mut s = finish_plane(&one, plane0, params)?;
         s.flags.insert(Flags::TILT_IGNORED);
         s
@@ -576,7 +565,6 @@ fn solve_tilted(
     input: &CylinderInput<'_>,
     params: &CylinderParams,
     scratch: &mut Scratch<'_>,
-    one: &PlaneResult,
 ) -> Result<CylinderSolution, SolveError> {
     let init = initial_cylinder(input.curves, input.planes, scratch.points)?;
     // Whole-arc weighted fit (docs/cylinder.md, "Whole-arc fit"): each point's own σ along
@@ -612,13 +600,25 @@ fn solve_tilted(
     // Σ of the per-curve edge-fade bias σ's: a bias, common to the curves, so it is
     // averaged, not reduced as independent noise.
     let mut edge_sum = 0.0;
-    for ((curve, sigmas), plane) in input.curves.iter().zip(input.sigmas).zip(input.planes) {
+    // Plane 0's visible arc, seen from the axis (its projected section's fitted centre).
+    let mut arc0 = None;
+    for (index, ((curve, sigmas), plane)) in input
+        .curves
+        .iter()
+        .zip(input.sigmas)
+        .zip(input.planes)
+        .enumerate()
+    {
         // The data-driven terms of the one-plane path on the projected curve
         // (docs/cylinder.md, "Data-driven σ of the two-plane result").
         let extra = projected_data_sigma(curve, sigmas, plane, cyl.axis, params, scratch);
-        if let Some((_, sf, _)) = extra {
+        if let Some((c, sf, _)) = extra {
             fit_s2sum += sf * sf;
             kf += 1;
+            if index == 0 {
+                // `scratch.points` still holds the projected curve.
+                arc0 = Some(arc_angle(&scratch.points[..curve.len()], c.centre));
+            }
         }
         if let Ok(t) = generalised_three_tangent(
             curve,
@@ -665,7 +665,7 @@ fn solve_tilted(
     if tt.is_none() {
         flags.insert(Flags::THREE_TANGENT_FAILED);
     }
-    let short = one.flags.contains(Flags::ARC_TOO_SHORT);
+    let short = arc0.is_some_and(|arc| arc < params.min_arc_angle);
     if short {
         flags.insert(Flags::ARC_TOO_SHORT);
     }
