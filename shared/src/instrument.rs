@@ -123,46 +123,38 @@ impl<'a> PlanePoints<'a> {
 /// Memory a solver is lent by the workspace ([`lend`]).
 #[derive(Debug)]
 pub struct Scratch<'a> {
-    /// `Workspace::sigmas` up to the profile's points: their 1σ, for
-    /// [`PlanePoints::sigmas`] (kept after the run).
+    /// `Workspace::sigmas`: the points' 1σ, for [`PlanePoints::sigmas`] (kept after the
+    /// run), as many as the workspace holds (the road instrument's profile trace is longer
+    /// than its points).
     pub sigmas: &'a mut [Real],
     /// 2-D points (in-plane or projected), as many as the workspace holds.
     pub points: &'a mut [Vec2],
     /// Values (residuals, weights), as many as the workspace holds.
     pub values: &'a mut [Real],
-    /// `Workspace::points` past the profile's: 3-D points a solver may write (the stem's
-    /// bins of a long curve).
+    /// `Workspace::points` past the profile's ([`Profile::extent`]): 3-D points a solver may
+    /// write (the stem's bins of a long curve).
     pub bins: &'a mut [Vec3],
-    /// `Workspace::sigmas` past the profile's points, beside `bins`.
-    pub bin_sigmas: &'a mut [Real],
 }
 
 /// The points of every plane that [`extract_profile`] left in `ws` ([`PlanePoints`], with
 /// their curve points; `full_scale`: the laser-on frame's [`Frame::max_value`]) and the
-/// memory their solver is lent: the solver scratch, and the workspace's 3-D points and σ
-/// past the profile's.
+/// memory their solver is lent: the σ and solver scratch buffers, and the workspace's 3-D
+/// points past the profile's.
 pub fn lend<'w, P: Pixel>(
     profile: &'w Profile,
     full_scale: u32,
     calibration: &'w Calibration,
     ws: &'w mut Workspace<'_, P>,
 ) -> (PlanePoints<'w>, Scratch<'w>) {
-    let used = profile
-        .plane_points
-        .iter()
-        .take(profile.planes)
-        .map(|&(_, end)| end)
-        .max()
-        .unwrap_or(0);
-    let (points, bins) = ws.points.split_at_mut(used.min(ws.points.len()));
-    let (sigmas, bin_sigmas) = ws.sigmas.split_at_mut(used.min(ws.sigmas.len()));
+    let (points, bins) = ws
+        .points
+        .split_at_mut(profile.extent().min(ws.points.len()));
     let points = PlanePoints::new(profile, full_scale, calibration, points).with_curve(ws.curve);
     let scratch = Scratch {
-        sigmas,
+        sigmas: ws.sigmas,
         points: ws.scratch_points,
         values: ws.scratch_values,
         bins,
-        bin_sigmas,
     };
     (points, scratch)
 }

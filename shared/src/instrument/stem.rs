@@ -41,7 +41,10 @@ impl Instrument for Stem {
         if points.profile.touches_edge {
             return Err(PipelineError::OutsideFrame);
         }
-        let sigmas = points.sigmas(&params.noise, params.focal_px, scratch.sigmas)?;
+        // The points' σ up to the profile's extent, the bins' σ after them.
+        let extent = points.profile.extent().min(scratch.sigmas.len());
+        let (sigmas, bin_sigmas) = scratch.sigmas.split_at_mut(extent);
+        let sigmas = points.sigmas(&params.noise, params.focal_px, sigmas)?;
         let curves = points.curves();
         let input = CylinderInput {
             curves,
@@ -52,7 +55,7 @@ impl Instrument for Stem {
             points: scratch.points,
             values: scratch.values,
             bins: scratch.bins,
-            bin_sigmas: scratch.bin_sigmas,
+            bin_sigmas,
         };
         let mut solution = stem::solve(&input, params, scratch)?;
         solution

@@ -147,3 +147,25 @@ fn a_missing_line_is_the_spheres_one_section_refusal() {
         "{advice}"
     );
 }
+
+/// What `lend` lends: the points up to the profile's extent, the 3-D points past it as the
+/// solver's bins, and the σ and scratch buffers whole (the road's profile trace is longer
+/// than its points).
+#[test]
+fn lend_splits_the_points_at_the_profile_and_lends_the_rest_whole() {
+    let cal = calibration(1);
+    let (off, on) = render(&cal, &[0], 1.2, 300..450, 150.0, 12);
+    let (off_f, on_f) = frames(&off, &on);
+    let mut b = buffers(1);
+    let mut ws = b.workspace();
+    let (points_len, sigmas_len, values_len) =
+        (ws.points.len(), ws.sigmas.len(), ws.scratch_values.len());
+    let profile =
+        extract_profile(&off_f, &on_f, &cal, &PipelineConfig::default(), &mut ws).unwrap();
+    assert_eq!(profile.extent(), 150);
+    let (points, scratch) = lend(&profile, on_f.max_value(), &cal, &mut ws);
+    assert_eq!(points.curves()[0].len(), 150);
+    assert_eq!(scratch.bins.len(), points_len - 150);
+    assert_eq!(scratch.sigmas.len(), sigmas_len);
+    assert_eq!(scratch.values.len(), values_len);
+}

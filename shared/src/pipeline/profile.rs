@@ -60,6 +60,17 @@ impl Profile {
         }
     }
 
+    /// Where the planes' points end in the workspace's per-point buffers: every entry past it
+    /// is free for the solver.
+    pub fn extent(&self) -> usize {
+        self.plane_points
+            .iter()
+            .take(self.planes)
+            .map(|&(_, end)| end)
+            .max()
+            .unwrap_or(0)
+    }
+
     /// Quality flags that the image alone tells (saturation, ambient light, other objects, a
     /// stripe only the faint search found);
     /// `full_scale` is the laser-on frame's [`Frame::max_value`].

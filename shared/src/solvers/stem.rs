@@ -84,8 +84,8 @@ pub struct CylinderParams {
     /// extraction's coherent bending produce; `docs/cylinder.md`, "Elliptic stems").
     pub elliptic_min_eccentricity: Real,
     /// Most points of one curve the solver uses; longer curves are binned
-    /// (`docs/error-model.md`, "Point budget"; default [`POINT_BUDGET`]). `usize::MAX` fits
-    /// every point.
+    /// (`docs/error-model.md`, "Point budget"; default [`POINT_BUDGET`]). `0` or `usize::MAX`
+    /// fits every point; 1 and 2 count as 3 (the curve's ends and one bin between).
     pub point_budget: usize,
 }
 
@@ -160,7 +160,8 @@ pub struct CylinderSolution {
     pub flags: Flags,
     /// RMS residual of the fit (metres), 0 if it failed.
     pub fit_rms: Real,
-    /// Points used (all curves).
+    /// Measured points the reading used: plane 0's for a one-plane reading, every plane's for
+    /// a two-plane one (before the point budget's binning).
     pub n_points: usize,
     /// Three-tangent diameter (plane 0, or generalised), if it succeeded.
     pub three_tangent_diameter: Option<Real>,
@@ -665,6 +666,14 @@ fn solve_tilted(
     if tt.is_none() {
         flags.insert(Flags::THREE_TANGENT_FAILED);
     }
+    // Without a projected fit, the arc is seen from the fitted axis itself.
+    let arc0 = arc0.or_else(|| {
+        let projected =
+            project_along_axis(input.curves[0], plane0.source, cyl.axis, scratch.points).ok()?;
+        let w = cyl.point - plane0.source;
+        let axis_at = Vec2::new(w.dot(&projected.e1), w.dot(&projected.e2));
+        Some(arc_angle(projected.points, axis_at))
+    });
     let short = arc0.is_some_and(|arc| arc < params.min_arc_angle);
     if short {
         flags.insert(Flags::ARC_TOO_SHORT);
