@@ -39,7 +39,9 @@ use super::SolveError;
 
 mod pull;
 pub mod weighted;
-pub use weighted::{fit_weighted, weighted_radius_sigma, WeightedFit, WEIGHTED_SCRATCH_PER_POINT};
+pub use weighted::{
+    fit_weighted, weighted_radius_sigma, Pull, WeightedFit, WEIGHTED_SCRATCH_PER_POINT,
+};
 
 /// A circle: centre and radius (same units as the points).
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -148,6 +148,9 @@ struct CylinderProblem<'a, W> {
     mean: Vec3,
     scale: Real,
     weight: &'a W,
+    /// An accepted step lowering the cost by less than this ends the fit (0: only a short
+    /// step does); see [`LeastSquares::settled`].
+    settle: Real,
 }
 
 impl<W: Fn(usize, usize, Vec3) -> Real> LeastSquares<5> for CylinderProblem<'_, W> {
@@ -171,6 +174,24 @@ impl<W: Fn(usize, usize, Vec3) -> Real> LeastSquares<5> for CylinderProblem<'_, 
     fn step_scale(&self, st: &CylState) -> Real {
         1.0 + norm(&st.p) + st.r
     }
+
+    fn settled(&self, before: Real, after: Real) -> bool {
+        before - after < self.settle
+    }
+}
+
+/// The step `δ` (in [`cyl_step`]'s coordinates at `from`) that moves `from` to `to`, to first
+/// order: the axis point's and direction's moves on `from`'s basis and the radius's change.
+fn cyl_delta(from: &CylState, to: &CylState) -> V5 {
+    let (e1, e2) = basis(from.u);
+    let (dp, du) = (to.p - from.p, to.u - from.u);
+    V5::new(
+        dp.dot(&e1),
+        dp.dot(&e2),
+        du.dot(&e1),
+        du.dot(&e2),
+        to.r - from.r,
+    )
 }
 
 /// The points centred on their centroid and scaled to unit RMS distance, and the initial
@@ -253,6 +274,7 @@ pub fn fit_cylinder(
         mean,
         scale,
         weight: &unit,
+        settle: 0.0,
     };
     let start = Evaluated::at(&problem, st)?;
     let (min, iterations) = lm::minimise(&problem, start, params)?;

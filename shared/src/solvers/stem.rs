@@ -239,7 +239,15 @@ fn solve_plane(
     let noise_of =
         |i: usize| level.to_level(field.direction_in_plane(level.to_plane(pts[i])) * sigmas[i]);
     let near_sigma = |q: Vec2| norm(&noise_at(q));
-    let fit = robust_circle(pts, near_sigma, noise_of, params, values).map(|rc| {
+    let fit = robust_circle(
+        pts,
+        near_sigma,
+        noise_of,
+        params,
+        circle::Pull::Evaluate,
+        values,
+    )
+    .map(|rc| {
         let mut f = rc.fit;
         // The whole-arc fit's σ: the points' own σ, inflated by χ² and the residuals'
         // correlation along the stripe (docs/error-model.md, "Correlation along the stripe").

@@ -318,7 +318,15 @@ fn weighted_fit_keeps_noisy_ends_rejects_a_branch_and_states_its_sigma() {
             .unwrap()
             .circle;
         let noise = |i: usize| dir(pts[i]) * sigma_of(i);
-        let w = fit_weighted(&pts, noise, init, &RobustParams::default(), &mut scratch).unwrap();
+        let w = fit_weighted(
+            &pts,
+            noise,
+            init,
+            &RobustParams::default(),
+            Pull::Evaluate,
+            &mut scratch,
+        )
+        .unwrap();
         if trial < 5 {
             assert!(w.fit.inliers <= n - 10 && w.fit.inliers >= n - 14, "{w:?}");
             assert!((w.fit.circle.radius - c.radius).abs() < 4.0 * w.sigma_radius);
@@ -379,7 +387,15 @@ fn weighted_fit_sigma_follows_correlated_noise() {
         }
         let init = fit_hyper(&pts).unwrap();
         let noise = |i: usize| dir(pts[i]) * sigma;
-        let w = fit_weighted(&pts, noise, init, &RobustParams::default(), &mut scratch).unwrap();
+        let w = fit_weighted(
+            &pts,
+            noise,
+            init,
+            &RobustParams::default(),
+            Pull::Evaluate,
+            &mut scratch,
+        )
+        .unwrap();
         assert!(w.correlation_length > 3.0, "{w:?}");
         radii.push(w.fit.circle.radius as f64);
         stated.push(w.sigma_radius as f64);
@@ -442,8 +458,15 @@ fn weighted_fit_states_its_line_of_sight_pull() {
             let init = fit_hyper(&pts).unwrap();
             // The stated σ is the raw per-column σ, as the pipeline's points carry.
             let noise = |i: usize| pts[i] / crate::real::norm(&pts[i]) * sigma;
-            let w =
-                fit_weighted(&pts, noise, init, &RobustParams::default(), &mut scratch).unwrap();
+            let w = fit_weighted(
+                &pts,
+                noise,
+                init,
+                &RobustParams::default(),
+                Pull::Evaluate,
+                &mut scratch,
+            )
+            .unwrap();
             err.push((w.fit.circle.radius - c.radius) as f64);
             pull.push(w.radius_pull as f64);
         }
@@ -491,7 +514,15 @@ fn weighted_fit_rounds_end_within_a_few_steps() {
         }
         let init = fit_hyper(&pts).unwrap();
         let noise = |i: usize| dir(pts[i]) * sigma;
-        let w = fit_weighted(&pts, noise, init, &RobustParams::default(), &mut scratch).unwrap();
+        let w = fit_weighted(
+            &pts,
+            noise,
+            init,
+            &RobustParams::default(),
+            Pull::Evaluate,
+            &mut scratch,
+        )
+        .unwrap();
         assert!(
             (w.fit.circle.radius - c.radius).abs() < 4.0 * w.sigma_radius,
             "{w:?}"

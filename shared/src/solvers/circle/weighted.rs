@@ -53,9 +53,20 @@ pub struct WeightedFit {
     /// Expected bias of `fit.circle.radius` under the points' own noise along their noise
     /// directions, to second order (`docs/error-model.md` §5e, "The pull to second order"):
     /// `E[r̂] − r`, evaluated at the fitted circle with the residuals' own variance and autocorrelation;
-    /// 0 when it cannot be evaluated. The fit's radius is not corrected here: subtracting it
-    /// is the caller's choice.
+    /// 0 when it cannot be evaluated or was not asked for ([`Pull::Skip`]). The fit's radius
+    /// is not corrected here: subtracting it is the caller's choice.
     pub radius_pull: Real,
+}
+
+/// Whether [`fit_weighted`] evaluates [`WeightedFit::radius_pull`]: the second-order expansion
+/// costs as much as two rounds of the fit (`docs/performance.md`), and a caller that only
+/// takes the fit's σ (the two-plane solve's projected sections) has no use for it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Pull {
+    /// Evaluate the expected bias of the radius.
+    Evaluate,
+    /// Leave it at 0.
+    Skip,
 }
 
 /// σ of point `i`'s orthogonal residual (normalised units) about a circle centred at `centre`.
@@ -88,12 +99,14 @@ pub const WEIGHTED_SCRATCH_PER_POINT: usize = 4;
 /// `|uᵢ|` for the median, then the round's weights: frozen within a round, each LM step reads
 /// them instead of evaluating the noise model again (`docs/performance.md`).
 ///
-/// Points with a non-positive or non-finite σ are left out. Errors as [`super::fit_robust`].
+/// Points with a non-positive or non-finite σ are left out. `pull` says whether the radius's
+/// expected bias is evaluated. Errors as [`super::fit_robust`].
 pub fn fit_weighted(
     points: &[Vec2],
     noise: impl Fn(usize) -> Vec2,
     initial: Circle,
     params: &RobustParams,
+    pull: Pull,
     scratch: &mut [Real],
 ) -> Result<WeightedFit, SolveError> {
     params.lm.validate()?;
@@ -214,20 +227,25 @@ pub fn fit_weighted(
     );
     let mut rho = [0.0; MAX_CORRELATION_LAG + 1];
     let correlation = correlation_length(points, &norm, theta, buf, &mut rho);
-    // The weights again (the correlation overwrote them) for the pull's expansion.
-    points_noise.weights(points, &norm, theta, cs, buf);
-    let arc = FittedArc {
-        points,
-        norm: &norm,
-        theta,
-        sigmas: points_noise.sigmas,
-        dir_x: points_noise.dir_x,
-        dir_y: points_noise.dir_y,
-        weights: buf,
-        rho: &rho[..correlation.1],
-        lateral_floor: LATERAL_FLOOR,
+    let radius_pull = match pull {
+        Pull::Skip => 0.0,
+        Pull::Evaluate => {
+            // The weights again (the correlation overwrote them) for the pull's expansion.
+            points_noise.weights(points, &norm, theta, cs, buf);
+            let arc = FittedArc {
+                points,
+                norm: &norm,
+                theta,
+                sigmas: points_noise.sigmas,
+                dir_x: points_noise.dir_x,
+                dir_y: points_noise.dir_y,
+                weights: buf,
+                rho: &rho[..correlation.1],
+                lateral_floor: LATERAL_FLOOR,
+            };
+            expected_bias(&arc).map_or(0.0, |b| b.z * norm.scale)
+        }
     };
-    let radius_pull = expected_bias(&arc).map_or(0.0, |b| b.z * norm.scale);
     let correlation = correlation.0;
     let factor = (chi2_dof * correlation).max(1.0);
     let sigma_radius = model * sqrt(factor);

@@ -10,9 +10,10 @@ use crate::real::Float;
 use crate::real::{norm, sqrt, Real, Vec3};
 
 use super::{
-    cyl_accumulate, normalise, CylState, Cylinder, CylinderFit, CylinderProblem, Normalised,
+    cyl_accumulate, cyl_delta, normalise, CylState, Cylinder, CylinderFit, CylinderProblem,
+    Normalised,
 };
-use crate::solvers::circle::weighted::LATERAL_FLOOR;
+use crate::solvers::circle::weighted::{LATERAL_FLOOR, SETTLED_CHI2};
 use crate::solvers::circle::RobustParams;
 use crate::solvers::lm::{self, Evaluated};
 use crate::solvers::SolveError;
@@ -64,7 +65,10 @@ fn tukey(u: Real) -> Real {
 /// scale `s = max(1.2533·mean|uᵢ|, 1)` over the previous round's points with weight (no
 /// scratch for a median over all curves; the first round's mean includes the outliers, which
 /// only makes it more lenient), `c` = `params.tuning`; LM inside each round. Start from
-/// [`super::initial_cylinder`]. Errors as [`super::fit_cylinder`].
+/// [`super::initial_cylinder`]. Converged in the data's own units, as the one-plane fit
+/// ([`SETTLED_CHI2`]: the cost is a χ²): an LM step lowering it by less, or a round moving the
+/// cylinder by `δ` with `δᵀJᵀWJδ` below it, moves the cylinder by less than 1 % of its model
+/// σ. Errors as [`super::fit_cylinder`].
 ///
 /// The weights are frozen within a round, so they are computed once per round into
 /// `weights` (one value per point of all curves, in order) and each LM step reads them — as
@@ -174,14 +178,18 @@ pub fn fit_cylinder_weighted(
             mean,
             scale,
             weight: &weight,
+            settle: SETTLED_CHI2,
         };
         let begin = Evaluated::at(&problem, st)?;
         let (min, it) = lm::minimise(&problem, begin, &params.lm)?;
         iterations = it;
         let next = min.params;
         let change = norm(&(next.p - st.p)) + norm(&(next.u - st.u)) + (next.r - st.r).abs();
+        let delta = cyl_delta(&st, &next);
         st = next;
-        if change <= params.lm.tolerance * (1.0 + norm(&st.p) + st.r) {
+        if change <= params.lm.tolerance * (1.0 + norm(&st.p) + st.r)
+            || delta.dot(&(min.normal.jtj * delta)) < SETTLED_CHI2
+        {
             break;
         }
         if round == params.max_rounds && change > 1e-3 * st.r {

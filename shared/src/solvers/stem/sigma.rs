@@ -202,6 +202,8 @@ pub(super) fn projected_data_sigma(
         near_sigma,
         noise_of,
         params,
+        // Only the fit's σ is taken from a projected section.
+        circle::Pull::Skip,
         scratch.values,
     )?;
     let s = rc.data_sigma.hypot(rc.bending);
@@ -224,19 +226,20 @@ pub(super) struct RobustCircle {
     /// Radius σ from a coherent bending of the curve ([`bending_sigma`]).
     pub(super) bending: Real,
     /// Expected bias of the fit's radius from the noise along the line of sight
-    /// ([`circle::WeightedFit::radius_pull`]).
+    /// ([`circle::WeightedFit::radius_pull`]; 0 with [`circle::Pull::Skip`]).
     pub(super) pull: Real,
 }
 
 /// [`RobustCircle`] of `pts`: Hyper start ([`start_circle`]), robust fit with the scale floor `near_sigma` of the
 /// start's point nearest the source (origin), the residual sandwich and the bending term with
-/// the points' noise vectors `noise(i)`. `None` when a fit fails or the start circle is
+/// the points' noise vectors `noise(i)`; the radius's pull only when `pull` asks for it. `None` when a fit fails or the start circle is
 /// centred on the source.
 pub(super) fn robust_circle(
     pts: &[Vec2],
     near_sigma: impl Fn(Vec2) -> Real,
     noise: impl Fn(usize) -> Vec2,
     params: &CylinderParams,
+    pull: circle::Pull,
     values: &mut [Real],
 ) -> Option<RobustCircle> {
     let init = start_circle(pts)?;
@@ -250,7 +253,7 @@ pub(super) fn robust_circle(
     rp.min_scale = rp.min_scale.max(s_point);
     // Whole-arc fit (docs/cylinder.md, "Whole-arc fit"): every point with its own σ along
     // its noise direction, none trimmed but real outliers.
-    let wf = circle::fit_weighted(pts, &noise, init, &rp, values).ok()?;
+    let wf = circle::fit_weighted(pts, &noise, init, &rp, pull, values).ok()?;
     let fit = wf.fit;
     let cutoff = rp.tuning * fit.rms_residual.max(rp.min_scale);
     let bending = bending_sigma(&fit, pts, noise);
