@@ -21,6 +21,10 @@ use crate::solvers::SolveError;
 /// Most curves whose weights [`fit_cylinder_weighted`] keeps in its table (the planes).
 const MAX_CURVES: usize = crate::calibration::MAX_PLANES;
 
+/// Reals of `weights` [`fit_cylinder_weighted`] uses per point to keep its tables: the
+/// residual, its σ (the round's weight), the point's σ and its unit noise direction.
+pub const NOISE_PER_POINT: usize = 6;
+
 /// Result of [`fit_cylinder_weighted`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct WeightedCylinderFit {
@@ -73,8 +77,9 @@ fn tukey(u: Real) -> Real {
 /// The weights are frozen within a round, so they are computed once per round into
 /// `weights` (one value per point of all curves, in order) and each LM step reads them — as
 /// the one-plane fit does (`docs/performance.md`): re-deriving each point's noise direction
-/// at every step was half of a tilted stem's solver on the device. With `weights` shorter
-/// than the points, each step computes them again (the same numbers).
+/// at every step was half of a tilted stem's solver on the device. Each point's noise is
+/// evaluated once per fit into `weights` too. With `weights` shorter than
+/// [`NOISE_PER_POINT`] per point, each step computes them again (the same numbers).
 pub fn fit_cylinder_weighted(
     curves: &[&[Vec3]],
     noise: impl Fn(usize, usize) -> Vec3,
@@ -89,7 +94,7 @@ pub fn fit_cylinder_weighted(
     let Normalised {
         mean, scale, start, ..
     } = normalise(curves, initial)?;
-    let point_noise = |k: usize, i: usize| {
+    let unit_noise = |k: usize, i: usize| {
         let g = noise(k, i) / scale;
         let s = norm(&g);
         if s > 0.0 && s.is_finite() {
@@ -99,18 +104,44 @@ pub fn fit_cylinder_weighted(
         }
     };
     // Where each curve's weights start in `weights`, if they all fit with room for each
-    // point's residual σ beside them (`weights[total..]`: the scale pass keeps `d` and `σ_d`
-    // for the round's weights, which are formed from the same two numbers).
+    // point's residual and its σ beside them (`weights[total..2·total]`: the scale pass keeps
+    // `d` and `σ_d` for the round's weights, which are formed from the same two numbers) and
+    // for each point's σ and unit noise direction (`weights[2·total..6·total]`, evaluated once
+    // per fit: the noise model's direction was a fifth of a tilted stem's solve when every
+    // round evaluated it again).
     let total: usize = curves.iter().map(|c| c.len()).sum();
-    let offsets = (2 * total <= weights.len() && curves.len() <= MAX_CURVES).then(|| {
-        let mut offsets = [0usize; MAX_CURVES];
-        let mut at = 0;
-        for (o, c) in offsets.iter_mut().zip(curves) {
-            *o = at;
-            at += c.len();
+    let offsets =
+        (NOISE_PER_POINT * total <= weights.len() && curves.len() <= MAX_CURVES).then(|| {
+            let mut offsets = [0usize; MAX_CURVES];
+            let mut at = 0;
+            for (o, c) in offsets.iter_mut().zip(curves) {
+                *o = at;
+                at += c.len();
+            }
+            offsets
+        });
+    let (weights, noise_table) = weights.split_at_mut((2 * total).min(weights.len()));
+    if offsets.is_some() {
+        let mut cells = noise_table.chunks_exact_mut(4);
+        for (k, curve) in curves.iter().enumerate() {
+            for i in 0..curve.len() {
+                if let Some(cell) = cells.next() {
+                    let (s, g) = unit_noise(k, i);
+                    cell.copy_from_slice(&[s, g.x, g.y, g.z]);
+                }
+            }
         }
-        offsets
-    });
+    }
+    let noise_table = &*noise_table;
+    let point_noise = |k: usize, i: usize| match offsets {
+        Some(offsets) => offsets
+            .get(k)
+            .and_then(|o| noise_table.get(4 * (o + i)..4 * (o + i) + 4))
+            .map_or((Real::INFINITY, Vec3::zeros()), |c| {
+                (c[0], Vec3::new(c[1], c[2], c[3]))
+            }),
+        None => unit_noise(k, i),
+    };
     let mut st = start;
     let mut cutoff = Real::INFINITY;
     let mut iterations = 0;
