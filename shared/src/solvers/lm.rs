@@ -15,8 +15,11 @@
 //!   the cost changes by less than its rounding while the gradient is still resolved, and this
 //!   reaches `ε/λ_min` instead of `√(ε/λ_min)`, which matters in `f32`. Then `λ ← max(λ/10,
 //!   10⁻¹²)`; a rejected or out-of-domain candidate sets `λ ← max(10λ, ε)`;
-//! * a rejected step whose predicted gain `−2δᵀJᵀr − δᵀJᵀJδ` the problem calls settled
-//!   ([`LeastSquares::settled`]) ends the iteration at the current parameters;
+//! * a step whose predicted gain `−2δᵀJᵀr − δᵀJᵀJδ` the problem calls settled
+//!   ([`LeastSquares::settled`]) ends the iteration at the current parameters before it is
+//!   evaluated (it would move them by less than the problem resolves; a rejected step's
+//!   successors only shorten it, and in `f32` the cost's own rounding, `8ε·cost`, can exceed
+//!   the settling gain, so each would be one more evaluation to reach λ > 10¹⁶);
 //! * it stops converged after an accepted step shorter than `tolerance·scale(θ)` (or one the
 //!   problem calls [`LeastSquares::settled`]), or when `λ > 10¹⁶` after a rejection (every
 //!   direction raises the cost even with a vanishing step: the minimum to rounding), and fails
@@ -139,7 +142,8 @@ pub trait LeastSquares<const N: usize> {
     fn step_scale(&self, p: &Self::Params) -> Real;
     /// Whether an accepted step from cost `before` to `after` ends the iteration although it
     /// is not small (a fit that needs the cost settled, not the last ulp of a flat valley);
-    /// also asked for a rejected step with `after` its predicted cost. Default: never.
+    /// also asked for each step before it is evaluated, with `after` its predicted cost.
+    /// Default: never.
     fn settled(&self, _before: Real, _after: Real) -> bool {
         false
     }
@@ -189,6 +193,13 @@ pub fn minimise<const N: usize, L: LeastSquares<N>>(
         else {
             continue;
         };
+        // A step whose predicted gain the problem already calls settled is not worth its
+        // evaluation: taken, it would move the parameters by less than the problem resolves
+        // (for a χ² cost, a fraction of their σ), and it would end the iteration anyway.
+        let gain = predicted_gain(&current.normal, &delta);
+        if problem.settled(current.normal.cost, current.normal.cost - gain) {
+            return Ok((current, it));
+        }
         let candidate = problem.step(&current.params, &delta);
         let accepted = match problem.evaluate(&candidate) {
             Ok((normal, extra)) if improves(&current.normal, &normal) => Some(Evaluated {
@@ -209,14 +220,6 @@ pub fn minimise<const N: usize, L: LeastSquares<N>>(
                 }
             }
             None => {
-                // A rejected step whose predicted gain the problem already calls settled ends
-                // the iteration: raising λ only shortens the step and its gain further (in
-                // `f32` the cost's own rounding, `8ε·cost`, can exceed the settling gain, and
-                // every further rejection would be one more evaluation to reach λ > 10¹⁶).
-                let gain = predicted_gain(&current.normal, &delta);
-                if problem.settled(current.normal.cost, current.normal.cost - gain) {
-                    return Ok((current, it));
-                }
                 lambda = (lambda * 10.0).max(Real::EPSILON);
                 if lambda > 1e16 {
                     return Ok((current, it));
