@@ -611,6 +611,10 @@ fn solve_tilted(
     let mut edge_sum = 0.0;
     // Plane 0's visible arc, seen from the axis (its projected section's fitted centre).
     let mut arc0 = None;
+    // Non-roundness in the plane perpendicular to the fitted axis (where a round stem's
+    // section is a circle whatever the tilt), judged on plane 0's projected section as the
+    // one-plane path judges its section: against the whole-arc fit, with its cutoff.
+    let mut ellipse = None;
     for (index, ((curve, sigmas), plane)) in input
         .curves
         .iter()
@@ -620,14 +624,19 @@ fn solve_tilted(
     {
         // The data-driven terms of the one-plane path on the projected curve
         // (docs/cylinder.md, "Data-driven σ of the two-plane result").
-        let extra = projected_data_sigma(curve, sigmas, plane, cyl.axis, params, scratch);
-        if let Some((c, sf, _)) = extra {
+        let extra = projected_data_sigma(curve, sigmas, plane, cyl.axis, params, scratch)
+            .map(|(rc, sf)| {
+                if index == 0 {
+                    // `scratch.points` still holds the projected curve.
+                    let pts = &scratch.points[..curve.len()];
+                    arc0 = Some(arc_angle(pts, rc.fit.circle.centre));
+                    ellipse = non_round(pts, &rc.fit, rc.cutoff, params);
+                }
+                (rc.fit.circle, sf)
+            });
+        if let Some((_, sf)) = extra {
             fit_s2sum += sf * sf;
             kf += 1;
-            if index == 0 {
-                // `scratch.points` still holds the projected curve.
-                arc0 = Some(arc_angle(&scratch.points[..curve.len()], c.centre));
-            }
         }
         if let Ok(t) = generalised_three_tangent(
             curve,
@@ -638,7 +647,7 @@ fn solve_tilted(
         ) {
             let s_point = one_point_sigma(plane, params, t.nearest_distance);
             // Fade-out of the projected edges, judged against the projected fit.
-            let edge = extra.map_or(0.0, |(c, sf, _)| edge_bias_sigma(&t, &c, sf));
+            let edge = extra.map_or(0.0, |(c, sf)| edge_bias_sigma(&t, &c, sf));
             rsum += t.radius;
             s2sum += three_tangent_variance(&t, s_point, params);
             edge_sum += edge;
@@ -704,17 +713,8 @@ fn solve_tilted(
         _ => (cyl.radius, fit_sigma, Method::CylinderFit),
     };
     let c0 = plane0.to_plane_coords(centre);
-    // Non-roundness in the plane perpendicular to the fitted axis (where a round stem's
-    // section is a circle whatever the tilt), on plane 0's curve.
     // An elliptic section reports the mean of its axes (`docs/cylinder.md`, "Elliptic stems").
-    let (diameter, method, uncertainty, axes) = match projected_non_round(
-        input.curves[0],
-        plane0.source,
-        cyl.axis,
-        params,
-        scratch,
-        point_sigma,
-    ) {
+    let (diameter, method, uncertainty, axes) = match ellipse {
         Some(e) => {
             let (d, s) = elliptic_diameter(&e, cal_rel)?;
             flags.insert(Flags::ELLIPTIC);
@@ -739,28 +739,6 @@ fn solve_tilted(
         centre,
         axes,
     })
-}
-
-/// [`non_round`] on `curve` projected along `axis` onto the plane perpendicular to it (origin
-/// at `source`, [`project_along_axis`]), with a robust circle fit whose scale floor is
-/// `point_sigma`.
-fn projected_non_round(
-    curve: &[Vec3],
-    source: Vec3,
-    axis: Vec3,
-    params: &CylinderParams,
-    scratch: &mut Scratch<'_>,
-    point_sigma: Real,
-) -> Option<EllipseFit> {
-    let pts = project_along_axis(curve, source, axis, scratch.points)
-        .ok()?
-        .points;
-    let init = circle::fit_hyper(pts).ok()?;
-    let mut rp = params.robust;
-    rp.min_scale = rp.min_scale.max(point_sigma);
-    let f = circle::fit_robust(pts, init, &rp, scratch.values).ok()?;
-    let cutoff = rp.tuning * f.rms_residual.max(rp.min_scale);
-    non_round(pts, &f, cutoff, params)
 }
 
 #[cfg(test)]

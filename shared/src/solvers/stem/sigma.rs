@@ -159,8 +159,8 @@ pub fn edge_bias_sigma(t: &ThreeTangent, circle: &circle::Circle, sigma_fit: Rea
 /// the true section): the one-plane path's [`robust_circle`] terms, `max(σ_GN, σ_sandwich)` in
 /// quadrature with the coherent bending (`docs/cylinder.md`, "Data-driven σ of the two-plane
 /// result"). A data point's noise vector is its stored σ along its direction, projected.
-/// Returns the projected circle, that σ and the fit's RMS residual; `None` when the
-/// projection or fit fails.
+/// Returns the projected fit ([`RobustCircle`]) and that σ, with the projected points left in
+/// `scratch.points`; `None` when the projection or fit fails.
 pub(super) fn projected_data_sigma(
     curve: &[Vec3],
     sigmas: &[Real],
@@ -168,7 +168,7 @@ pub(super) fn projected_data_sigma(
     axis: Vec3,
     params: &CylinderParams,
     scratch: &mut Scratch<'_>,
-) -> Option<(circle::Circle, Real, Real)> {
+) -> Option<(RobustCircle, Real)> {
     let source = plane.source;
     let projected = project_along_axis(curve, source, axis, scratch.points).ok()?;
     let (u, e1, e2, n) = (
@@ -207,8 +207,7 @@ pub(super) fn projected_data_sigma(
         scratch.values,
     )?;
     let s = rc.data_sigma.hypot(rc.bending);
-    s.is_finite()
-        .then_some((rc.fit.circle, s, rc.fit.rms_residual))
+    s.is_finite().then_some((rc, s))
 }
 
 /// The whole-arc circle fit with its data-driven σ terms (`docs/error-model.md`, "Data-driven fit
