@@ -59,7 +59,7 @@ type M5 = SMatrix<Real, 5, 5>;
 type V5 = SVector<Real, 5>;
 
 mod weighted;
-pub use weighted::{fit_cylinder_weighted, WeightedCylinderFit};
+pub use weighted::{fit_cylinder_weighted, WeightedCylinderFit, CYLINDER_SCRATCH_PER_POINT};
 
 /// Two unit vectors completing `u` to an orthonormal basis.
 fn basis(u: Vec3) -> (Vec3, Vec3) {
@@ -80,45 +80,40 @@ struct CylState {
     r: Real,
 }
 
-fn cyl_accumulate<W: Fn(usize, usize, Vec3) -> Real>(
-    curves: &[&[Vec3]],
-    mean: Vec3,
-    scale: Real,
+/// The normal equations `JᵀWJ`, `JᵀWd`, the cost `Σwd²` and the number of points with
+/// weight, over normalised points `y` with their weights `w` (points without weight skipped).
+fn cyl_accumulate(
+    points: impl Iterator<Item = (Vec3, Real)>,
     st: &CylState,
-    weight: &W,
 ) -> (M5, V5, Real, usize) {
     let (e1, e2) = basis(st.u);
     let mut jtj = M5::zeros();
     let mut jtd = V5::zeros();
     let mut cost = 0.0;
     let mut n = 0;
-    for (k, curve) in curves.iter().enumerate() {
-        for (i, x) in curve.iter().enumerate() {
-            let y = (x - mean) / scale;
-            let weight = weight(k, i, y);
-            if !(weight > 0.0) {
-                continue;
-            }
-            let w = y - st.p;
-            let wu = w.dot(&st.u);
-            let q = w - st.u * wu;
-            let rho = norm(&q);
-            let g = if rho > 0.0 { q / rho } else { Vec3::zeros() };
-            let (g1, g2) = (g.dot(&e1), g.dot(&e2));
-            let j = V5::new(-g1, -g2, -wu * g1, -wu * g2, -1.0);
-            let d = rho - st.r;
-            // The upper triangle of `j·jᵀ·w` (each entry the very product `(jₐ·j_b)·w` the
-            // full outer product forms, `jₐ·j_b = j_b·jₐ` exactly), mirrored below: 15
-            // entries per point instead of 25.
-            for a in 0..5 {
-                for b in a..5 {
-                    jtj[(a, b)] += j[a] * j[b] * weight;
-                }
-            }
-            jtd += j * (weight * d);
-            cost += weight * d * d;
-            n += 1;
+    for (y, weight) in points {
+        if !(weight > 0.0) {
+            continue;
         }
+        let w = y - st.p;
+        let wu = w.dot(&st.u);
+        let q = w - st.u * wu;
+        let rho = norm(&q);
+        let g = if rho > 0.0 { q / rho } else { Vec3::zeros() };
+        let (g1, g2) = (g.dot(&e1), g.dot(&e2));
+        let j = V5::new(-g1, -g2, -wu * g1, -wu * g2, -1.0);
+        let d = rho - st.r;
+        // The upper triangle of `j·jᵀ·w` (each entry the very product `(jₐ·j_b)·w` the
+        // full outer product forms, `jₐ·j_b = j_b·jₐ` exactly), mirrored below: 15
+        // entries per point instead of 25.
+        for a in 0..5 {
+            for b in a..5 {
+                jtj[(a, b)] += j[a] * j[b] * weight;
+            }
+        }
+        jtd += j * (weight * d);
+        cost += weight * d * d;
+        n += 1;
     }
     for a in 0..5 {
         for b in 0..a {
@@ -142,24 +137,21 @@ fn cyl_step(st: &CylState, step: &V5) -> CylState {
     }
 }
 
-/// The cylinder fit as a [`LeastSquares`] problem on the centred, scaled points.
-struct CylinderProblem<'a, W> {
-    curves: &'a [&'a [Vec3]],
-    mean: Vec3,
-    scale: Real,
-    weight: &'a W,
+/// The cylinder fit as a [`LeastSquares`] problem on the centred, scaled points: `points()`
+/// yields each point with its weight ([`cyl_accumulate`]).
+struct CylinderProblem<P> {
+    points: P,
     /// An accepted step lowering the cost by less than this ends the fit (0: only a short
     /// step does); see [`LeastSquares::settled`].
     settle: Real,
 }
 
-impl<W: Fn(usize, usize, Vec3) -> Real> LeastSquares<5> for CylinderProblem<'_, W> {
+impl<P: Fn() -> I, I: Iterator<Item = (Vec3, Real)>> LeastSquares<5> for CylinderProblem<P> {
     type Params = CylState;
     type Extra = ();
 
     fn evaluate(&self, st: &CylState) -> Result<(NormalEquations<5>, ()), SolveError> {
-        let (jtj, jtr, cost, n) =
-            cyl_accumulate(self.curves, self.mean, self.scale, st, self.weight);
+        let (jtj, jtr, cost, n) = cyl_accumulate((self.points)(), st);
         if n < 6 {
             return Err(SolveError::TooFewPoints);
         }
@@ -268,12 +260,13 @@ pub fn fit_cylinder(
         start: st,
         n,
     } = normalise(curves, initial)?;
-    let unit = |_: usize, _: usize, _: Vec3| 1.0;
     let problem = CylinderProblem {
-        curves,
-        mean,
-        scale,
-        weight: &unit,
+        points: || {
+            curves
+                .iter()
+                .flat_map(|c| c.iter())
+                .map(move |x| ((x - mean) / scale, 1.0))
+        },
         settle: 0.0,
     };
     let start = Evaluated::at(&problem, st)?;

@@ -13,7 +13,10 @@ use crate::real::Float;
 use crate::real::{norm, sqrt, Real, Vec2, Vec3, PI};
 
 use super::circle::{self, RobustParams, WEIGHTED_SCRATCH_PER_POINT};
-use super::cylinder_fit::{fit_cylinder_weighted, initial_cylinder, project_along_axis, to_plane};
+use super::cylinder_fit::{
+    fit_cylinder_weighted, initial_cylinder, project_along_axis, to_plane,
+    CYLINDER_SCRATCH_PER_POINT,
+};
 use super::ellipse::{self, EllipseFit};
 use super::lm::LmParams;
 use super::result::{Flags, Method, Tilt};
@@ -295,12 +298,19 @@ fn solve_plane(
 
 /// The point budget: [`CylinderParams::point_budget`], lowered to what the scratch's
 /// `points` and `values` (their lengths) hold for the whole-arc fits (a workspace sized for a
-/// narrow frame bins its longer curves rather than refusing them).
-fn point_budget(params: &CylinderParams, points: usize, values: usize) -> usize {
+/// narrow frame bins its longer curves rather than refusing them): each curve's circle fit,
+/// and with two or more `curves` the cylinder fit over all of them.
+fn point_budget(params: &CylinderParams, points: usize, values: usize, curves: usize) -> usize {
+    let cylinder = if curves >= 2 {
+        values / (CYLINDER_SCRATCH_PER_POINT * curves)
+    } else {
+        usize::MAX
+    };
     params
         .point_budget
         .min(points)
         .min(values / WEIGHTED_SCRATCH_PER_POINT)
+        .min(cylinder)
 }
 
 /// The ellipse fitted to the circle fit's inliers when the section is detectably not round
@@ -419,7 +429,7 @@ pub fn solve(
         bins,
         bin_sigmas,
     } = scratch;
-    let budget = point_budget(params, points.len(), values.len());
+    let budget = point_budget(params, points.len(), values.len(), input.curves.len());
     let (curves, sigmas) = bin_curves(input.curves, input.sigmas, budget, bins, bin_sigmas);
     let planes = input.curves.len();
     let measured = |k: usize| input.curves.get(k).map_or(0, |c| c.len());
@@ -435,8 +445,10 @@ pub fn solve(
         bin_sigmas: &mut [],
     };
     let longest = input.curves.iter().map(|c| c.len()).max().unwrap_or(0);
+    let total: usize = input.curves.iter().map(|c| c.len()).sum();
     if scratch.points.len() < longest
         || scratch.values.len() < (WEIGHTED_SCRATCH_PER_POINT * longest).max(longest)
+        || (planes >= 2 && scratch.values.len() < CYLINDER_SCRATCH_PER_POINT * total)
     {
         return Err(SolveError::ScratchTooSmall);
     }
@@ -624,8 +636,8 @@ fn solve_tilted(
     {
         // The data-driven terms of the one-plane path on the projected curve
         // (docs/cylinder.md, "Data-driven σ of the two-plane result").
-        let extra = projected_data_sigma(curve, sigmas, plane, cyl.axis, params, scratch)
-            .map(|(rc, sf)| {
+        let extra = projected_data_sigma(curve, sigmas, plane, cyl.axis, params, scratch).map(
+            |(rc, sf)| {
                 if index == 0 {
                     // `scratch.points` still holds the projected curve.
                     let pts = &scratch.points[..curve.len()];
@@ -633,7 +645,8 @@ fn solve_tilted(
                     ellipse = non_round(pts, &rc.fit, rc.cutoff, params);
                 }
                 (rc.fit.circle, sf)
-            });
+            },
+        );
         if let Some((_, sf)) = extra {
             fit_s2sum += sf * sf;
             kf += 1;

@@ -18,12 +18,9 @@ use crate::solvers::circle::RobustParams;
 use crate::solvers::lm::{self, Evaluated};
 use crate::solvers::SolveError;
 
-/// Most curves whose weights [`fit_cylinder_weighted`] keeps in its table (the planes).
-const MAX_CURVES: usize = crate::calibration::MAX_PLANES;
-
-/// Reals of `weights` [`fit_cylinder_weighted`] uses per point to keep its tables: the
-/// residual, its σ (the round's weight), the point's σ and its unit noise direction.
-pub const NOISE_PER_POINT: usize = 6;
+/// Reals of scratch [`fit_cylinder_weighted`] needs per point: its normalised coordinates, its
+/// σ and unit noise direction, its residual (then its weight) and the residual's σ.
+pub const CYLINDER_SCRATCH_PER_POINT: usize = 9;
 
 /// Result of [`fit_cylinder_weighted`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -72,20 +69,20 @@ fn tukey(u: Real) -> Real {
 /// [`super::initial_cylinder`]. Converged in the data's own units, as the one-plane fit
 /// ([`SETTLED_CHI2`]: the cost is a χ²): an LM step lowering it by less, or a round moving the
 /// cylinder by `δ` with `δᵀJᵀWJδ` below it, moves the cylinder by less than 1 % of its model
-/// σ. Errors as [`super::fit_cylinder`].
+/// σ. Errors as [`super::fit_cylinder`]; [`SolveError::ScratchTooSmall`] when `scratch` holds
+/// fewer than [`CYLINDER_SCRATCH_PER_POINT`] values per point.
 ///
-/// The weights are frozen within a round, so they are computed once per round into
-/// `weights` (one value per point of all curves, in order) and each LM step reads them — as
-/// the one-plane fit does (`docs/performance.md`): re-deriving each point's noise direction
-/// at every step was half of a tilted stem's solver on the device. Each point's noise is
-/// evaluated once per fit into `weights` too. With `weights` shorter than
-/// [`NOISE_PER_POINT`] per point, each step computes them again (the same numbers).
+/// Everything a point contributes that does not change within the fit or within a round is
+/// evaluated once into `scratch` — as the one-plane fit does (`docs/performance.md`): its
+/// normalised coordinates and its noise (σ and unit direction) once per fit, its weight once
+/// per round; each LM step reads them. Re-deriving a point's noise direction at every step was
+/// half of a tilted stem's solver on the device.
 pub fn fit_cylinder_weighted(
     curves: &[&[Vec3]],
     noise: impl Fn(usize, usize) -> Vec3,
     initial: Cylinder,
     params: &RobustParams,
-    weights: &mut [Real],
+    scratch: &mut [Real],
 ) -> Result<WeightedCylinderFit, SolveError> {
     params.lm.validate()?;
     if !(params.tuning.is_finite() && params.tuning > 0.0) || params.max_rounds == 0 {
@@ -94,76 +91,62 @@ pub fn fit_cylinder_weighted(
     let Normalised {
         mean, scale, start, ..
     } = normalise(curves, initial)?;
-    let unit_noise = |k: usize, i: usize| {
-        let g = noise(k, i) / scale;
-        let s = norm(&g);
-        if s > 0.0 && s.is_finite() {
-            (s, g / s)
-        } else {
-            (Real::INFINITY, Vec3::zeros())
-        }
-    };
-    // Where each curve's weights start in `weights`, if they all fit with room for each
-    // point's residual and its σ beside them (`weights[total..2·total]`: the scale pass keeps
-    // `d` and `σ_d` for the round's weights, which are formed from the same two numbers) and
-    // for each point's σ and unit noise direction (`weights[2·total..6·total]`, evaluated once
-    // per fit: the noise model's direction was a fifth of a tilted stem's solve when every
-    // round evaluated it again).
     let total: usize = curves.iter().map(|c| c.len()).sum();
-    let offsets =
-        (NOISE_PER_POINT * total <= weights.len() && curves.len() <= MAX_CURVES).then(|| {
-            let mut offsets = [0usize; MAX_CURVES];
-            let mut at = 0;
-            for (o, c) in offsets.iter_mut().zip(curves) {
-                *o = at;
-                at += c.len();
-            }
-            offsets
-        });
-    let (weights, noise_table) = weights.split_at_mut((2 * total).min(weights.len()));
-    if offsets.is_some() {
-        let mut cells = noise_table.chunks_exact_mut(4);
+    let scratch = scratch
+        .get_mut(..CYLINDER_SCRATCH_PER_POINT * total)
+        .ok_or(SolveError::ScratchTooSmall)?;
+    // Per point: `y` (3), σ and unit noise direction (4), the residual `d` at the round's
+    // frozen cylinder and then the round's weight (1), the residual's σ (1).
+    let (ys, rest) = scratch.split_at_mut(3 * total);
+    let (noises, rest) = rest.split_at_mut(4 * total);
+    let (weights, residual_sigmas) = rest.split_at_mut(total);
+    {
+        let mut cells = ys.chunks_exact_mut(3).zip(noises.chunks_exact_mut(4));
         for (k, curve) in curves.iter().enumerate() {
-            for i in 0..curve.len() {
-                if let Some(cell) = cells.next() {
-                    let (s, g) = unit_noise(k, i);
-                    cell.copy_from_slice(&[s, g.x, g.y, g.z]);
-                }
+            for (i, x) in curve.iter().enumerate() {
+                let Some((y, cell)) = cells.next() else { break };
+                let v = (x - mean) / scale;
+                y.copy_from_slice(&[v.x, v.y, v.z]);
+                let g = noise(k, i) / scale;
+                let s = norm(&g);
+                let (s, g) = if s > 0.0 && s.is_finite() {
+                    (s, g / s)
+                } else {
+                    (Real::INFINITY, Vec3::zeros())
+                };
+                cell.copy_from_slice(&[s, g.x, g.y, g.z]);
             }
         }
     }
-    let noise_table = &*noise_table;
-    let point_noise = |k: usize, i: usize| match offsets {
-        Some(offsets) => offsets
-            .get(k)
-            .and_then(|o| noise_table.get(4 * (o + i)..4 * (o + i) + 4))
-            .map_or((Real::INFINITY, Vec3::zeros()), |c| {
-                (c[0], Vec3::new(c[1], c[2], c[3]))
-            }),
-        None => unit_noise(k, i),
+    let (ys, noises) = (&*ys, &*noises);
+    let points = || {
+        ys.chunks_exact(3)
+            .zip(noises.chunks_exact(4))
+            .map(|(y, c)| {
+                (
+                    Vec3::new(y[0], y[1], y[2]),
+                    c[0],
+                    Vec3::new(c[1], c[2], c[3]),
+                )
+            })
     };
     let mut st = start;
     let mut cutoff = Real::INFINITY;
     let mut iterations = 0;
     for round in 0..=params.max_rounds {
-        // Scale from the previous round's points with weight (all, in the first round).
+        // Scale from the previous round's points with weight (all, in the first round); the
+        // residuals and their σ at this round's frozen cylinder kept for its weights.
         let (mut sum, mut k_in) = (0.0, 0usize);
-        let (kept_d, kept_sd) = weights.split_at_mut(total.min(weights.len()));
-        let (mut kept_d, mut kept_sd) = (kept_d.iter_mut(), kept_sd.iter_mut());
-        for (k, curve) in curves.iter().enumerate() {
-            for (i, x) in curve.iter().enumerate() {
-                let (s, g) = point_noise(k, i);
-                let (d, sd) = residual(&st, (x - mean) / scale, s, g);
-                if offsets.is_some() {
-                    if let (Some(kd), Some(ks)) = (kept_d.next(), kept_sd.next()) {
-                        (*kd, *ks) = (d, sd);
-                    }
-                }
-                let u = (d / sd).abs();
-                if sd.is_finite() && u < cutoff {
-                    sum += u;
-                    k_in += 1;
-                }
+        for (((y, s, g), d_out), sd_out) in points()
+            .zip(weights.iter_mut())
+            .zip(residual_sigmas.iter_mut())
+        {
+            let (d, sd) = residual(&st, y, s, g);
+            (*d_out, *sd_out) = (d, sd);
+            let u = (d / sd).abs();
+            if sd.is_finite() && u < cutoff {
+                sum += u;
+                k_in += 1;
             }
         }
         if k_in < 6 {
@@ -171,44 +154,21 @@ pub fn fit_cylinder_weighted(
         }
         let s = (1.2533 * sum / k_in as Real).max(1.0);
         cutoff = params.tuning * s;
-        let frozen = st;
-        let c = cutoff;
-        let compute = |k: usize, i: usize, y: Vec3| {
-            let (s, g) = point_noise(k, i);
-            let (d, sd) = residual(&frozen, y, s, g);
-            if !sd.is_finite() {
-                return 0.0;
-            }
-            tukey(d / (sd * c)) / (sd * sd)
-        };
-        // The round's weights from the scale pass's `d` and `σ_d` (the residuals at this
-        // round's frozen cylinder, `y` formed as `cyl_accumulate` forms it): the very values
-        // `compute` gives.
-        if offsets.is_some() {
-            let (kept_d, kept_sd) = weights.split_at_mut(total.min(weights.len()));
-            for (w, &sd) in kept_d.iter_mut().zip(kept_sd.iter()) {
-                let d = *w;
-                *w = if sd.is_finite() {
-                    tukey(d / (sd * c)) / (sd * sd)
-                } else {
-                    0.0
-                };
-            }
+        for (w, &sd) in weights.iter_mut().zip(residual_sigmas.iter()) {
+            let d = *w;
+            *w = if sd.is_finite() {
+                tukey(d / (sd * cutoff)) / (sd * sd)
+            } else {
+                0.0
+            };
         }
         let table = &*weights;
-        let weight = |k: usize, i: usize, y: Vec3| match offsets {
-            Some(offsets) => offsets
-                .get(k)
-                .and_then(|o| table.get(o + i))
-                .copied()
-                .unwrap_or(0.0),
-            None => compute(k, i, y),
-        };
         let problem = CylinderProblem {
-            curves,
-            mean,
-            scale,
-            weight: &weight,
+            points: || {
+                ys.chunks_exact(3)
+                    .zip(table.iter())
+                    .map(|(y, w)| (Vec3::new(y[0], y[1], y[2]), *w))
+            },
             settle: SETTLED_CHI2,
         };
         let begin = Evaluated::at(&problem, st)?;
@@ -227,16 +187,27 @@ pub fn fit_cylinder_weighted(
             return Err(SolveError::NotConverged);
         }
     }
-    let frozen = st;
-    let weight = |k: usize, i: usize, y: Vec3| {
-        let (s, g) = point_noise(k, i);
-        let (d, sd) = residual(&frozen, y, s, g);
-        if !sd.is_finite() {
-            return 0.0;
+    // The weights at the result (the last round's cutoff), and the unweighted RMS of the
+    // points with weight.
+    let mut ss = 0.0;
+    for ((y, s, g), w) in points().zip(weights.iter_mut()) {
+        let (d, sd) = residual(&st, y, s, g);
+        *w = if sd.is_finite() {
+            tukey(d / (sd * cutoff)) / (sd * sd)
+        } else {
+            0.0
+        };
+        if *w > 0.0 {
+            ss += d * d;
         }
-        tukey(d / (sd * cutoff)) / (sd * sd)
-    };
-    let (jtj, _, chi2, used) = cyl_accumulate(curves, mean, scale, &st, &weight);
+    }
+    let table = &*weights;
+    let (jtj, _, chi2, used) = cyl_accumulate(
+        ys.chunks_exact(3)
+            .zip(table.iter())
+            .map(|(y, w)| (Vec3::new(y[0], y[1], y[2]), *w)),
+        &st,
+    );
     let r = st.r.abs();
     if !(r > 0.0 && r.is_finite()) || used < 6 {
         return Err(SolveError::Degenerate);
@@ -246,17 +217,6 @@ pub fn fit_cylinder_weighted(
     let inv = jtj.try_inverse().ok_or(SolveError::Degenerate)?;
     let sigma_radius = sqrt((inv[(4, 4)] * f).max(0.0)) * scale;
     let sigma_axis = sqrt((inv[(2, 2)] * f).max((inv[(3, 3)] * f).max(0.0)));
-    // Unweighted RMS of the points with weight.
-    let mut ss = 0.0;
-    for (k, curve) in curves.iter().enumerate() {
-        for (i, x) in curve.iter().enumerate() {
-            let y = (x - mean) / scale;
-            if weight(k, i, y) > 0.0 {
-                let (d, _) = residual(&st, y, 1.0, Vec3::zeros());
-                ss += d * d;
-            }
-        }
-    }
     Ok(WeightedCylinderFit {
         fit: CylinderFit {
             cylinder: Cylinder {
