@@ -40,7 +40,7 @@ use super::SolveError;
 mod pull;
 pub mod weighted;
 pub use weighted::{
-    fit_weighted, weighted_radius_sigma, Pull, WeightedFit, WEIGHTED_SCRATCH_PER_POINT,
+    fit_weighted, weighted_at, weighted_radius_sigma, Pull, WeightedFit, WEIGHTED_SCRATCH_PER_POINT,
 };
 
 /// A circle: centre and radius (same units as the points).

@@ -35,8 +35,8 @@ use budget::bin_curves;
 pub use budget::POINT_BUDGET;
 use level::LevelMap;
 use sigma::{
-    arc_angle, elliptic_diameter, noise_vector, one_point_sigma, projected_data_sigma,
-    robust_circle, three_tangent_variance,
+    arc_angle, elliptic_diameter, noise_vector, one_point_sigma, projected_section, robust_circle,
+    three_tangent_variance,
 };
 pub use sigma::{edge_bias_sigma, BENDING_FRACTION};
 
@@ -621,11 +621,10 @@ fn solve_tilted(
     // Σ of the per-curve edge-fade bias σ's: a bias, common to the curves, so it is
     // averaged, not reduced as independent noise.
     let mut edge_sum = 0.0;
-    // Plane 0's visible arc, seen from the axis (its projected section's fitted centre).
+    // Plane 0's visible arc, seen from the axis.
     let mut arc0 = None;
     // Non-roundness in the plane perpendicular to the fitted axis (where a round stem's
-    // section is a circle whatever the tilt), judged on plane 0's projected section as the
-    // one-plane path judges its section: against the whole-arc fit, with its cutoff.
+    // section is a circle whatever the tilt), judged on plane 0's projected section.
     let mut ellipse = None;
     for (index, ((curve, sigmas), plane)) in input
         .curves
@@ -636,17 +635,14 @@ fn solve_tilted(
     {
         // The data-driven terms of the one-plane path on the projected curve
         // (docs/cylinder.md, "Data-driven σ of the two-plane result").
-        let extra = projected_data_sigma(curve, sigmas, plane, cyl.axis, params, scratch).map(
-            |(rc, sf)| {
-                if index == 0 {
-                    // `scratch.points` still holds the projected curve.
-                    let pts = &scratch.points[..curve.len()];
-                    arc0 = Some(arc_angle(pts, rc.fit.circle.centre));
-                    ellipse = non_round(pts, &rc.fit, rc.cutoff, params);
-                }
-                (rc.fit.circle, sf)
-            },
-        );
+        let section = projected_section(curve, sigmas, plane, &cyl, index == 0, params, scratch);
+        let extra = section.map(|p| {
+            if index == 0 {
+                arc0 = Some(p.arc);
+                ellipse = p.ellipse;
+            }
+            (p.circle, p.sigma)
+        });
         if let Some((_, sf)) = extra {
             fit_s2sum += sf * sf;
             kf += 1;

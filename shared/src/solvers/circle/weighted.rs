@@ -109,6 +109,34 @@ pub fn fit_weighted(
     pull: Pull,
     scratch: &mut [Real],
 ) -> Result<WeightedFit, SolveError> {
+    weighted(points, noise, initial, params, pull, true, scratch)
+}
+
+/// [`fit_weighted`]'s assessment of a given `circle` without moving it: the robust scale and
+/// weights about `circle`, its residual RMS, reduced χ², correlation length and radius σ, as
+/// if a fit had converged there (`iterations` 0, no pull). For a circle fixed by other data
+/// (the two-plane cylinder's section, `docs/cylinder.md`, "Data-driven σ of the two-plane
+/// result"), where a fit of its own would cost as much and move the circle by less than its σ.
+pub fn weighted_at(
+    points: &[Vec2],
+    noise: impl Fn(usize) -> Vec2,
+    circle: Circle,
+    params: &RobustParams,
+    scratch: &mut [Real],
+) -> Result<WeightedFit, SolveError> {
+    weighted(points, noise, circle, params, Pull::Skip, false, scratch)
+}
+
+/// [`fit_weighted`] (`iterate`) or [`weighted_at`] (not).
+fn weighted(
+    points: &[Vec2],
+    noise: impl Fn(usize) -> Vec2,
+    initial: Circle,
+    params: &RobustParams,
+    pull: Pull,
+    iterate: bool,
+    scratch: &mut [Real],
+) -> Result<WeightedFit, SolveError> {
     params.lm.validate()?;
     if !(params.tuning.is_finite() && params.tuning > 0.0) || params.max_rounds == 0 {
         return Err(SolveError::InvalidParameter);
@@ -170,6 +198,9 @@ pub fn fit_weighted(
             return Err(SolveError::Degenerate);
         }
         cs = params.tuning * scale;
+        if !iterate {
+            break;
+        }
         points_noise.weights(points, &norm, theta, cs, buf);
         let weights: &[Real] = buf;
         let weight = |i: usize, _: Vec2| weights.get(i).copied().unwrap_or(0.0);

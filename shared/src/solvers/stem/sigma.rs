@@ -14,8 +14,8 @@ use super::{CylinderParams, Scratch};
 use crate::laser_plane::LaserPlane;
 use crate::noise;
 use crate::solvers::circle;
-use crate::solvers::cylinder_fit::project_along_axis;
-use crate::solvers::ellipse::EllipseFit;
+use crate::solvers::cylinder_fit::{project_along_axis, Cylinder};
+use crate::solvers::ellipse::{self, EllipseFit};
 use crate::solvers::three_tangent::ThreeTangent;
 use crate::solvers::SolveError;
 
@@ -154,29 +154,52 @@ pub fn edge_bias_sigma(t: &ThreeTangent, circle: &circle::Circle, sigma_fit: Rea
     }
 }
 
-/// Data-driven radius σ of one curve projected along `axis` onto the plane perpendicular to
-/// it (origin at `plane.source`, [`project_along_axis`]; the projected lit arc is an arc of
-/// the true section): the one-plane path's [`robust_circle`] terms, `max(σ_GN, σ_sandwich)` in
-/// quadrature with the coherent bending (`docs/cylinder.md`, "Data-driven σ of the two-plane
-/// result"). A data point's noise vector is its stored σ along its direction, projected.
-/// Returns the projected fit ([`RobustCircle`]) and that σ, with the projected points left in
-/// `scratch.points`; `None` when the projection or fit fails.
-pub(super) fn projected_data_sigma(
+/// One curve of a two-plane reading projected along the fitted axis ([`projected_section`]).
+pub(super) struct ProjectedSection {
+    /// The section's data-driven radius σ: the one-plane terms about the cylinder's section,
+    /// `data_sigma` in quadrature with the coherent bending.
+    pub(super) sigma: Real,
+    /// The cylinder's section in the projection's frame (origin at the plane's source).
+    pub(super) circle: circle::Circle,
+    /// The visible arc seen from the axis (radians, [`arc_angle`]).
+    pub(super) arc: Real,
+    /// The section's non-roundness ([`super::non_round`] against its own whole-arc fit), if
+    /// it was asked for and found.
+    pub(super) ellipse: Option<EllipseFit>,
+}
+
+/// Data-driven radius σ of one curve projected along the cylinder's axis onto the plane
+/// perpendicular to it (origin at `plane.source`, [`project_along_axis`]; the projected lit arc
+/// is an arc of the true section): the one-plane path's [`robust_circle`] terms, evaluated
+/// about the cylinder's own section (`docs/cylinder.md`, "Data-driven σ of the two-plane
+/// result": the fit already placed that circle with both curves, and a fit of the section
+/// alone would cost as much as the cylinder's rounds to move it by less than its σ). A data
+/// point's noise vector is its stored σ along its direction, projected. With `roundness`, the
+/// section is also judged for non-roundness: screened against the cylinder's section, and
+/// where the screen does not clear it, against its own whole-arc fit, as the one-plane path
+/// judges its section. `None` when the projection or the assessment fails.
+pub(super) fn projected_section(
     curve: &[Vec3],
     sigmas: &[Real],
     plane: &LaserPlane,
-    axis: Vec3,
+    cylinder: &Cylinder,
+    roundness: bool,
     params: &CylinderParams,
     scratch: &mut Scratch<'_>,
-) -> Option<(RobustCircle, Real)> {
+) -> Option<ProjectedSection> {
     let source = plane.source;
-    let projected = project_along_axis(curve, source, axis, scratch.points).ok()?;
+    let projected = project_along_axis(curve, source, cylinder.axis, scratch.points).ok()?;
     let (u, e1, e2, n) = (
         projected.axis,
         projected.e1,
         projected.e2,
         projected.points.len(),
     );
+    let w = cylinder.point - source;
+    let section = circle::Circle {
+        centre: Vec2::new(w.dot(&e1), w.dot(&e2)),
+        radius: cylinder.radius,
+    };
     // Back from the projection to the laser plane: `x = s + q₁e₁ + q₂e₂ + t·u` with
     // `n·(x − s) = 0` (the source lies in the plane).
     let nu = plane.normal.dot(&u);
@@ -197,17 +220,43 @@ pub(super) fn projected_data_sigma(
         let g = field.direction(curve[i]) * sigmas[i];
         Vec2::new(g.dot(&e1), g.dot(&e2))
     };
-    let rc = robust_circle(
-        &scratch.points[..n],
+    let pts = &scratch.points[..n];
+    let rc = robust_circle_from(
+        pts,
+        Start::At(section),
         near_sigma,
         noise_of,
         params,
-        // Only the fit's σ is taken from a projected section.
         circle::Pull::Skip,
         scratch.values,
     )?;
-    let s = rc.data_sigma.hypot(rc.bending);
-    s.is_finite().then_some((rc, s))
+    let sigma = rc.data_sigma.hypot(rc.bending);
+    if !sigma.is_finite() {
+        return None;
+    }
+    let cleared = |c: &circle::Circle, cutoff: Real| {
+        ellipse::ellipse_score_f(pts, c, cutoff)
+            .is_ok_and(|f| f < super::ELLIPTIC_SCREEN * params.elliptic_min_f)
+    };
+    let ellipse = if roundness && !cleared(&section, rc.cutoff) {
+        robust_circle(
+            pts,
+            near_sigma,
+            noise_of,
+            params,
+            circle::Pull::Skip,
+            scratch.values,
+        )
+        .and_then(|own| super::non_round(pts, &own.fit, own.cutoff, params))
+    } else {
+        None
+    };
+    Some(ProjectedSection {
+        sigma,
+        circle: section,
+        arc: arc_angle(pts, section.centre),
+        ellipse,
+    })
 }
 
 /// The whole-arc circle fit with its data-driven σ terms (`docs/error-model.md`, "Data-driven fit
@@ -241,7 +290,31 @@ pub(super) fn robust_circle(
     pull: circle::Pull,
     values: &mut [Real],
 ) -> Option<RobustCircle> {
-    let init = start_circle(pts)?;
+    robust_circle_from(pts, Start::Fit, near_sigma, noise, params, pull, values)
+}
+
+/// Where [`robust_circle_from`] takes its circle.
+pub(super) enum Start {
+    /// The whole-arc fit from [`start_circle`].
+    Fit,
+    /// This circle, assessed without a fit of its own ([`circle::weighted_at`]).
+    At(circle::Circle),
+}
+
+/// [`robust_circle`], or with [`Start::At`] its terms about a given circle.
+fn robust_circle_from(
+    pts: &[Vec2],
+    start: Start,
+    near_sigma: impl Fn(Vec2) -> Real,
+    noise: impl Fn(usize) -> Vec2,
+    params: &CylinderParams,
+    pull: circle::Pull,
+    values: &mut [Real],
+) -> Option<RobustCircle> {
+    let init = match start {
+        Start::Fit => start_circle(pts)?,
+        Start::At(c) => c,
+    };
     let cn = norm(&init.centre);
     if !(cn > 0.0) {
         return None;
@@ -252,7 +325,11 @@ pub(super) fn robust_circle(
     rp.min_scale = rp.min_scale.max(s_point);
     // Whole-arc fit (docs/cylinder.md, "Whole-arc fit"): every point with its own σ along
     // its noise direction, none trimmed but real outliers.
-    let wf = circle::fit_weighted(pts, &noise, init, &rp, pull, values).ok()?;
+    let wf = match start {
+        Start::Fit => circle::fit_weighted(pts, &noise, init, &rp, pull, values),
+        Start::At(c) => circle::weighted_at(pts, &noise, c, &rp, values),
+    }
+    .ok()?;
     let fit = wf.fit;
     let cutoff = rp.tuning * fit.rms_residual.max(rp.min_scale);
     let bending = bending_sigma(&fit, pts, noise);
