@@ -119,16 +119,15 @@ pub fn fit_cylinder_weighted(
         }
     }
     let (ys, noises) = (&*ys, &*noises);
-    let points = || {
-        ys.chunks_exact(3)
-            .zip(noises.chunks_exact(4))
-            .map(|(y, c)| {
-                (
-                    Vec3::new(y[0], y[1], y[2]),
-                    c[0],
-                    Vec3::new(c[1], c[2], c[3]),
-                )
-            })
+    // Each point's `y`, σ and unit noise direction from the tables (a plain zip: mapped, the
+    // iterator's element was a call per point on the device).
+    let points = || ys.chunks_exact(3).zip(noises.chunks_exact(4));
+    let unpack = |y: &[Real], c: &[Real]| {
+        (
+            Vec3::new(y[0], y[1], y[2]),
+            c[0],
+            Vec3::new(c[1], c[2], c[3]),
+        )
     };
     let mut st = start;
     let mut cutoff = Real::INFINITY;
@@ -137,10 +136,11 @@ pub fn fit_cylinder_weighted(
         // Scale from the previous round's points with weight (all, in the first round); the
         // residuals and their σ at this round's frozen cylinder kept for its weights.
         let (mut sum, mut k_in) = (0.0, 0usize);
-        for (((y, s, g), d_out), sd_out) in points()
+        for (((y, c), d_out), sd_out) in points()
             .zip(weights.iter_mut())
             .zip(residual_sigmas.iter_mut())
         {
+            let (y, s, g) = unpack(y, c);
             let (d, sd) = residual(&st, y, s, g);
             (*d_out, *sd_out) = (d, sd);
             let u = (d / sd).abs();
@@ -190,7 +190,8 @@ pub fn fit_cylinder_weighted(
     // The weights at the result (the last round's cutoff), and the unweighted RMS of the
     // points with weight.
     let mut ss = 0.0;
-    for ((y, s, g), w) in points().zip(weights.iter_mut()) {
+    for ((y, c), w) in points().zip(weights.iter_mut()) {
+        let (y, s, g) = unpack(y, c);
         let (d, sd) = residual(&st, y, s, g);
         *w = if sd.is_finite() {
             tukey(d / (sd * cutoff)) / (sd * sd)
