@@ -14,7 +14,7 @@ use core::marker::PhantomData;
 // (docs/subpixel.md §8); the full-frame chain test (`select`) still exercises it.
 #[cfg(test)]
 pub(crate) mod filter;
-mod lanes;
+pub(crate) mod lanes;
 pub mod segment;
 pub mod select;
 pub mod subtract;

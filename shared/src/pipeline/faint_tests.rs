@@ -215,7 +215,7 @@ fn block_responses_are_the_plain_correlation_at_every_row_and_edge() {
         // block cut by the frame's right edge.
         for rows in [0..3, 3..12, 20..height, 0..height] {
             for x0 in [0usize, 8, 32] {
-                block_responses(&diff, x0, 8, &rows, taps, &mut sums, &mut responses);
+                block_responses(&diff, None, x0, 8, &rows, taps, &mut sums, &mut responses);
                 for v in rows.clone() {
                     assert_eq!(
                         responses[v],

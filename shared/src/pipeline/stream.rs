@@ -30,6 +30,7 @@ use crate::image::{Frame, FrameError, Pixel};
 use crate::real::Real;
 
 use super::faint;
+use super::faint_sums;
 use super::profile::{self, Profile, Stage};
 use super::readout_fits::ReadoutFits;
 use super::workspace::need;
@@ -74,6 +75,9 @@ pub struct ProfileStream {
     overflow: bool,
     /// The curve points located as their rows arrive (`pipeline::readout_fits`).
     readout: ReadoutFits,
+    /// Block width of the faint search's block sums gathered as the rows arrive
+    /// (`pipeline::faint_sums`), 0 when they are not.
+    sums_block: usize,
 }
 
 impl ProfileStream {
@@ -120,6 +124,12 @@ impl ProfileStream {
             config.extract,
             config.floors,
         );
+        let sums_block = faint_sums::table_block(
+            config.faint,
+            (width, height),
+            bit_depth,
+            ws.block_sums.len(),
+        );
         Ok(ProfileStream {
             width,
             height,
@@ -130,6 +140,7 @@ impl ProfileStream {
             candidates: 0,
             overflow: false,
             readout,
+            sums_block,
         })
     }
 
@@ -164,6 +175,9 @@ impl ProfileStream {
                 });
             };
             self.difference.row(on, off_diff, ws.histogram);
+            if self.sums_block != 0 {
+                faint_sums::gather_row(off_diff, self.sums_block, y, self.height, ws.block_sums);
+            }
             if !self.overflow {
                 let first = self.candidates;
                 let found = segment::row_runs(
@@ -245,6 +259,7 @@ impl ProfileStream {
             candidates,
             overflow,
             readout,
+            sums_block,
         } = self;
         let cam = &calibration.camera;
         if (cam.width as usize, cam.height as usize) != (width, height) {
@@ -272,6 +287,7 @@ impl ProfileStream {
             bit_depth,
             stats,
             noise,
+            block_sums: sums_block,
         };
         // The thresholded chain; where it finds no stripe, the faint search may
         // (`faint::or_search`).

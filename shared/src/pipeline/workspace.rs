@@ -44,6 +44,11 @@ pub struct Workspace<'a, P: Pixel> {
     pub scratch_points: &'a mut [Vec2],
     /// Solver scratch: residuals (same length as `curve`).
     pub scratch_values: &'a mut [Real],
+    /// The faint search's column sums of the difference frame, one per block of
+    /// `FaintParams::block_columns` columns and row, block-major (`block × height + row`),
+    /// gathered as the rows arrive (`pipeline::stream`); a table shorter than
+    /// `blocks × height` turns that off (same results, the search then reads the pixels).
+    pub block_sums: &'a mut [u16],
 }
 
 /// Buffer lengths a [`Workspace`] needs.
@@ -65,6 +70,8 @@ pub struct WorkspaceSizes {
     pub readout_fits: usize,
     /// Curve, 3-D point, point-σ and solver-scratch entries.
     pub points: usize,
+    /// Block sums of the faint search (blocks of 8 columns × rows).
+    pub block_sums: usize,
 }
 
 impl WorkspaceSizes {
@@ -92,6 +99,7 @@ impl WorkspaceSizes {
             columns: width,
             readout_fits: MAX_READOUT_FITS,
             points: width * planes * 2,
+            block_sums: width.div_ceil(8) * height,
         }
     }
 }
