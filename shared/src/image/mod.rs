@@ -14,7 +14,7 @@ use core::marker::PhantomData;
 // (docs/subpixel.md §8); the full-frame chain test (`select`) still exercises it.
 #[cfg(test)]
 pub(crate) mod filter;
-pub(crate) mod lanes;
+mod lanes;
 pub mod segment;
 pub mod select;
 pub mod subtract;

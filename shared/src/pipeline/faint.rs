@@ -178,25 +178,12 @@ fn search<P: Pixel>(
     for blk in 0..blocks {
         let rows = band(blk);
         if let Some(t) = table {
-            // In integers, as the responses are: the strongest row by an integer comparison
-            // (the first of equals stays, as in `Seed::offer`), `|r|` in `u32` over chunks of
-            // rows (`faint_sums::ABS_CHUNK`).
-            let (mut best, mut best_row) = (0i32, 0usize);
-            let mut start = rows.start;
-            while start < rows.end {
-                let end = (start + faint_sums::ABS_CHUNK).min(rows.end);
-                let mut chunk = 0u32;
-                faint_sums::column_responses(t.column(blk), start..end, &t.kernel, |v, r| {
-                    chunk += r.unsigned_abs();
-                    if r > best {
-                        (best, best_row) = (r, v);
-                    }
-                });
-                abs_sum += u64::from(chunk);
-                start = end;
-            }
+            // In integers, as the responses are: the strongest by an integer comparison
+            // (the first of equals stays, as in `Seed::offer`).
+            let stats = faint_sums::column_stats(t.column(blk), rows.clone(), &t.kernel);
+            abs_sum += stats.abs_sum;
             count += rows.len() as u64;
-            strongest.offer(best as Real, blk, best_row);
+            strongest.offer(stats.best as Real, blk, stats.best_row);
             continue;
         }
         block_responses(&diff, None, blk * b, b, &rows, taps, sums, responses);

@@ -10,17 +10,14 @@
 
 use core::ops::Range;
 
-use crate::image::{lanes, Pixel};
+use crate::image::Pixel;
 
 use super::faint::RING;
 use super::FaintParams;
 
-/// Largest block sum the table serves: sums below 2¹² keep every response below 2²⁶
-/// (the kernel's absolute taps add up to < 2¹⁴), so `u32` sums of 64 of them cannot wrap.
+/// Largest block sum the table serves: non-negative 16-bit lanes for the dual
+/// multiply–accumulates, and responses far below 2³¹ (at most `Σ|w|·MAX_SUM`).
 const MAX_SUM: u32 = (1 << 12) - 1;
-
-/// Rows whose `|response|` are added in `u32` before going into the `u64` total.
-pub(super) const ABS_CHUNK: usize = 64;
 
 /// The block width of the table the stream gathers for frames of `width × height` pixels of
 /// `bit_depth` bits, or 0 when it gathers none: no faint search configured, the table
@@ -46,10 +43,9 @@ pub(super) fn table_block(
 }
 
 /// Adds row `y` of the difference frame (`row`, `width` pixels) to the table: the sum of
-/// each block of `b` columns at `table[block × height + y]`. 8-bit pixels in blocks of 8
-/// take two word loads and two lane sums (`USADA8` on the device) per block: ≈ 0.5
-/// instructions per pixel during the read-out.
-#[inline]
+/// each block of `b` columns at `table[block × height + y]`. Blocks of 8 are summed in the
+/// subtraction's pass instead (`DifferenceHistogram::row_with_block_sums`, ≈ 0.5
+/// instructions per pixel on the device); this serves the other block widths.
 pub(super) fn gather_row<P: Pixel>(
     row: &[P],
     b: usize,
@@ -57,43 +53,32 @@ pub(super) fn gather_row<P: Pixel>(
     height: usize,
     table: &mut [u16],
 ) {
-    let Some(slots) = table.get_mut(y..) else {
+    if y >= height {
         return;
-    };
-    let slots = slots.iter_mut().step_by(height.max(1));
-    if b == 8 && P::STORAGE_BITS == 8 {
-        let mut blocks = row.chunks_exact(8);
-        for (px, slot) in (&mut blocks).zip(slots) {
-            let (p0, p1) = px.split_at(4);
-            let s = lanes::add_lane_sum(lanes::add_lane_sum(0, lanes::pack4(p0)), lanes::pack4(p1));
-            *slot = s as u16;
-        }
-        let rest = blocks.remainder();
-        if !rest.is_empty() {
-            if let Some(slot) = table.get_mut(row.len() / 8 * height + y) {
-                *slot = rest.iter().map(|&p| Into::<u32>::into(p)).sum::<u32>() as u16;
-            }
-        }
-    } else {
-        for (px, slot) in row.chunks(b.max(1)).zip(slots) {
+    }
+    for (px, col) in row.chunks(b.max(1)).zip(table.chunks_exact_mut(height)) {
+        if let Some(slot) = col.get_mut(y) {
             *slot = px.iter().map(|&p| Into::<u32>::into(p)).sum::<u32>() as u16;
         }
     }
 }
 
-/// The kernel in the form the table's correlation uses: the taps as `i32`, and `2·w₀` for
-/// the rings. `None` unless the kernel has [`RING`]-row rings of one non-positive tap on
-/// both sides (every kernel of `faint::kernel` has) and a length [`column_responses`]
-/// serves.
+/// The kernel in the form the table's correlation uses: the core's taps packed in pairs of
+/// 16-bit lanes (rows `2j + 2`, `2j + 3` of the window; row 2 is the upper ring's, tap 0
+/// here) for dual multiply–accumulates, and `2·w₀` for the rings. `None` unless the kernel
+/// has [`RING`]-row rings of one non-positive tap on both sides (every kernel of
+/// `faint::kernel` has), taps of at most 2¹⁰ and a length [`column_responses`] serves.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct IntKernel {
-    taps: [i32; MAX_LEN],
+    pairs: [u32; MAX_PAIRS],
     len: usize,
     ring2: i32,
+    /// Rows whose `|r|` can be added in `u32` without wrapping (`|r| ≤ Σ|w|·MAX_SUM`).
+    chunk_rows: usize,
 }
 
-/// Longest kernel served (`faint::MAX_KERNEL`).
-const MAX_LEN: usize = 15;
+/// Pairs of core taps of the longest kernel served (15 rows: rows 2–11).
+const MAX_PAIRS: usize = 5;
 
 impl IntKernel {
     /// The integer form of `taps`, when it has one (above).
@@ -103,42 +88,197 @@ impl IntKernel {
             return None;
         }
         let w0 = taps[0];
-        let rings = taps[..RING].iter().chain(&taps[len - RING..]);
-        if w0 > 0 || rings.clone().any(|&w| w != w0) || taps.iter().any(|w| w.abs() > 1 << 10) {
+        let mut rings = taps[..RING].iter().chain(&taps[len - RING..]);
+        if w0 > 0 || rings.any(|&w| w != w0) || taps.iter().any(|w| w.abs() > 1 << 10) {
             return None;
         }
-        let mut out = [0i32; MAX_LEN];
-        for (o, &t) in out.iter_mut().zip(taps) {
-            *o = t as i32;
+        let tap = |i: usize| {
+            if (RING..len - RING).contains(&i) {
+                taps[i]
+            } else {
+                0
+            }
+        };
+        let mut pairs = [0u32; MAX_PAIRS];
+        for (j, p) in pairs.iter_mut().enumerate().take((len - 5) / 2) {
+            let (lo, hi) = (tap(2 * j + 2), tap(2 * j + 3));
+            *p = (lo as i16 as u16 as u32) | (hi as i16 as u16 as u32) << 16;
         }
+        let abs_taps = taps[RING..len - RING]
+            .iter()
+            .map(|w| w.unsigned_abs())
+            .sum::<u64>()
+            + 2 * RING as u64 * w0.unsigned_abs();
+        let bound = (abs_taps * u64::from(MAX_SUM)).max(1);
         Some(IntKernel {
-            taps: out,
+            pairs,
             len,
             ring2: 2 * w0 as i32,
+            chunk_rows: (u64::from(u32::MAX) / bound).max(1) as usize,
         })
     }
+}
+
+/// Rows `i`, `i + 1` of `win` as the low and high 16-bit lanes of a word (one unaligned word
+/// load on the device).
+#[inline(always)]
+fn pair(win: &[u16], i: usize) -> u32 {
+    u32::from(win[i]) | u32::from(win[i + 1]) << 16
+}
+
+/// Both lanes in one.
+const ONES: u32 = 0x0001_0001;
+
+/// `acc + x₀·k₀ + x₁·k₁`, the lanes signed 16-bit: `SMLAD` on the Cortex-M7 (the
+/// `core::arch::arm` intrinsic is not stable Rust, inline assembly is).
+#[cfg(all(feature = "cortex-m7", target_arch = "arm"))]
+#[inline(always)]
+#[allow(unsafe_code)]
+fn dot2(acc: i32, x: u32, k: u32) -> i32 {
+    let r: i32;
+    // SAFETY: SMLAD reads three registers and writes one; it may set the Q flag (never here:
+    // the sums stay far below 2³¹), which nothing reads.
+    unsafe {
+        core::arch::asm!(
+            "smlad {r}, {x}, {k}, {acc}",
+            r = lateout(reg) r,
+            x = in(reg) x,
+            k = in(reg) k,
+            acc = in(reg) acc,
+            options(pure, nomem, nostack),
+        );
+    }
+    r
+}
+
+/// `acc + x₀·k₀ + x₁·k₁`, the lanes signed 16-bit (the device's `SMLAD`, bit for bit).
+#[cfg(not(all(feature = "cortex-m7", target_arch = "arm")))]
+#[inline(always)]
+fn dot2(acc: i32, x: u32, k: u32) -> i32 {
+    let lane = |w: u32, i: u32| (w >> (16 * i)) as u16 as i16 as i32;
+    acc.wrapping_add(lane(x, 0) * lane(k, 0))
+        .wrapping_add(lane(x, 1) * lane(k, 1))
 }
 
 /// The ridge response at the centre of `win` (`LEN` consecutive block sums): the core's
 /// taps times the sums, plus the rings. With the rings' tap `w₀ ≤ 0`, the definition's
 /// `w₀·(upper + lower) − |w₀|·|upper − lower|` is `2·w₀·max(upper, lower)`: the same
-/// integer, with no absolute value.
+/// integer, with no absolute value. Sums below 2¹² are non-negative 16-bit lanes.
 #[inline(always)]
 fn respond<const LEN: usize>(win: &[u16; LEN], k: &IntKernel) -> i32 {
-    let s = |i: usize| win[i] as i32;
-    let upper = s(0) + s(1) + s(2);
-    let lower = s(LEN - 3) + s(LEN - 2) + s(LEN - 1);
-    let mut r = k.ring2 * upper.max(lower);
-    for i in RING..LEN - RING {
-        r += k.taps[i] * s(i);
+    let upper = dot2(i32::from(win[2]), pair(win, 0), ONES);
+    let lower = dot2(i32::from(win[LEN - 1]), pair(win, LEN - 3), ONES);
+    let mut core = 0i32;
+    for j in 0..(LEN - 5) / 2 {
+        core = dot2(core, pair(win, 2 * j + 2), k.pairs[j]);
     }
-    r
+    core + k.ring2 * upper.max(lower)
+}
+
+/// What the noise pass takes from a block's responses: the sum of `|r|` and the strongest
+/// response with its row (the first of equals; `(0, 0)` when none is positive).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(super) struct ColumnStats {
+    /// `Σ |r|` over the rows.
+    pub(super) abs_sum: u64,
+    /// The largest positive response (0 when none is).
+    pub(super) best: i32,
+    /// Its row.
+    pub(super) best_row: usize,
+}
+
+/// [`ColumnStats`] of the responses at `rows` of the block whose sums are `col`.
+pub(super) fn column_stats(col: &[u16], rows: Range<usize>, k: &IntKernel) -> ColumnStats {
+    match k.len {
+        9 => stats::<9>(col, rows, k),
+        11 => stats::<11>(col, rows, k),
+        13 => stats::<13>(col, rows, k),
+        _ => stats::<15>(col, rows, k),
+    }
+}
+
+fn stats<const LEN: usize>(col: &[u16], rows: Range<usize>, k: &IntKernel) -> ColumnStats {
+    let mut out = ColumnStats::default();
+    let take = |v: usize, r: i32, out: &mut ColumnStats| {
+        out.abs_sum += u64::from(r.unsigned_abs());
+        if r > out.best {
+            (out.best, out.best_row) = (r, v);
+        }
+    };
+    let (before, inner, after) = split::<LEN>(col.len(), &rows);
+    for v in before {
+        take(v, edge_response::<LEN>(col, v, k), &mut out);
+    }
+    let half = LEN / 2;
+    let mut start = inner.start;
+    while start < inner.end {
+        let end = (start + k.chunk_rows).min(inner.end);
+        let (abs_sum, best, at) = run::<LEN>(&col[start - half..end + half], *k, out.best);
+        out.abs_sum += u64::from(abs_sum);
+        if best > out.best {
+            (out.best, out.best_row) = (best, start + at);
+        }
+        start = end;
+    }
+    for v in after {
+        take(v, edge_response::<LEN>(col, v, k), &mut out);
+    }
+    out
+}
+
+/// The responses of every window of `span` (at most `chunk_rows`): `Σ|r|` in `u32`, the
+/// strongest above `floor` (the first of equals) and its window's index. Not inlined: the
+/// loop keeps its sums, the kernel and the strongest in registers (the search around it
+/// holds many values; inlined there, they were spilled).
+#[inline(never)]
+fn run<const LEN: usize>(span: &[u16], k: IntKernel, floor: i32) -> (u32, i32, usize) {
+    let (mut abs_sum, mut best, mut at) = (0u32, floor, 0usize);
+    for (i, win) in span.windows(LEN).enumerate() {
+        let Some(win) = win.first_chunk::<LEN>() else {
+            break;
+        };
+        let r = respond(win, &k);
+        abs_sum = abs_sum.wrapping_add(r.unsigned_abs());
+        if r > best {
+            (best, at) = (r, i);
+        }
+    }
+    (abs_sum, best, at)
+}
+
+/// `rows` (cut to the frame) in three: the rows whose window reaches above the frame, those
+/// whose window lies inside it, and those whose window reaches below it.
+fn split<const LEN: usize>(
+    height: usize,
+    rows: &Range<usize>,
+) -> (Range<usize>, Range<usize>, Range<usize>) {
+    let half = LEN / 2;
+    let rows = rows.start..rows.end.min(height);
+    if rows.is_empty() {
+        return (0..0, 0..0, 0..0);
+    }
+    let lo = rows.start.max(half).min(rows.end);
+    let hi = rows.end.min(height.saturating_sub(half)).max(lo);
+    (rows.start..lo, lo..hi, hi..rows.end)
+}
+
+/// The response at row `v` with the rows beyond the frame's edges reading the edge row.
+fn edge_response<const LEN: usize>(col: &[u16], v: usize, k: &IntKernel) -> i32 {
+    let half = LEN / 2;
+    let last = col.len().saturating_sub(1);
+    let mut win = [0u16; LEN];
+    for (i, w) in win.iter_mut().enumerate() {
+        *w = col
+            .get((v + i).saturating_sub(half).min(last))
+            .copied()
+            .unwrap_or(0);
+    }
+    respond(&win, k)
 }
 
 /// Calls `f(row, response)` for each of `rows` (ascending) of the block whose sums are `col`
 /// (one per row of the frame), rows beyond the frame's edges reading the edge row, as the
 /// search's definition has it.
-#[inline]
 pub(super) fn column_responses(
     col: &[u16],
     rows: Range<usize>,
@@ -153,45 +293,26 @@ pub(super) fn column_responses(
     }
 }
 
-#[inline(always)]
 fn responses<const LEN: usize>(
     col: &[u16],
     rows: Range<usize>,
     k: &IntKernel,
     mut f: impl FnMut(usize, i32),
 ) {
-    let height = col.len();
-    let half = LEN / 2;
-    let rows = rows.start..rows.end.min(height);
-    if rows.is_empty() {
-        return;
+    let (before, inner, after) = split::<LEN>(col.len(), &rows);
+    for v in before {
+        f(v, edge_response::<LEN>(col, v, k));
     }
-    // Rows whose window lies inside the frame read the column in place; the others a
-    // window with the edge rows repeated.
-    let inner = rows.start.max(half).min(rows.end)..rows.end.min(height.saturating_sub(half));
-    let edge = |v: usize, f: &mut dyn FnMut(usize, i32)| {
-        let mut win = [0u16; LEN];
-        for (i, w) in win.iter_mut().enumerate() {
-            *w = col[(v + i).saturating_sub(half).min(height - 1)];
-        }
-        f(v, respond(&win, k));
-    };
-    if inner.is_empty() {
-        for v in rows {
-            edge(v, &mut f);
-        }
-        return;
-    }
-    for v in rows.start..inner.start {
-        edge(v, &mut f);
-    }
-    let span = &col[inner.start - half..inner.end + half];
-    for (j, win) in span.windows(LEN).enumerate() {
-        if let Some(win) = win.first_chunk::<LEN>() {
-            f(inner.start + j, respond(win, k));
+    if !inner.is_empty() {
+        let half = LEN / 2;
+        let span = &col[inner.start - half..inner.end + half];
+        for (v, win) in inner.clone().zip(span.windows(LEN)) {
+            if let Some(win) = win.first_chunk::<LEN>() {
+                f(v, respond(win, k));
+            }
         }
     }
-    for v in inner.end..rows.end {
-        edge(v, &mut f);
+    for v in after {
+        f(v, edge_response::<LEN>(col, v, k));
     }
 }

@@ -174,9 +174,20 @@ impl ProfileStream {
                     actual: ws.diff.len(),
                 });
             };
-            self.difference.row(on, off_diff, ws.histogram);
-            if self.sums_block != 0 {
-                faint_sums::gather_row(off_diff, self.sums_block, y, self.height, ws.block_sums);
+            // The faint search's block sums, in the subtraction's pass for blocks of 8.
+            match self.sums_block {
+                0 => self.difference.row(on, off_diff, ws.histogram),
+                8 => self.difference.row_with_block_sums(
+                    on,
+                    off_diff,
+                    ws.histogram,
+                    ws.block_sums,
+                    (y, self.height),
+                ),
+                b => {
+                    self.difference.row(on, off_diff, ws.histogram);
+                    faint_sums::gather_row(off_diff, b, y, self.height, ws.block_sums);
+                }
             }
             if !self.overflow {
                 let first = self.candidates;
