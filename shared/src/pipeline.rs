@@ -58,9 +58,11 @@ pub mod workspace;
 #[cfg(any(test, feature = "alloc"))]
 pub use buffers::OwnedBuffers;
 pub use buffers::{
-    Buffers, FaintBuffers, Objects, RunBuffers, SmallBuffers, BLOCK_SUMS_752, NO_OBJECTS,
+    Buffers, FaintBuffers, Objects, RunBuffers, SmallBuffers, BLOCK_SUMS_752, FAINT_COLUMNS,
+    NO_OBJECTS,
 };
 pub use faint::FaintParams;
+pub use faint_sums::FaintColumn;
 pub use fragments::StackParams;
 pub use grow::GrowParams;
 pub use profile::{point_sigmas, Profile, Stage};

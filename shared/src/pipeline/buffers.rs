@@ -11,6 +11,7 @@ use crate::image::segment::{ObjectFeatures, Run};
 use crate::image::Pixel;
 use crate::real::{Real, Vec2, Vec3};
 
+use super::faint_sums::FaintColumn;
 use super::readout_fits::ReadoutBuffers;
 use super::Workspace;
 
@@ -93,12 +94,17 @@ impl<const POINTS: usize, const BINS: usize> SmallBuffers<POINTS, BINS> {
     }
 }
 
+/// Blocks of the faint search the read-out's responses serve: 752 / 8 = 94, with room.
+pub const FAINT_COLUMNS: usize = 128;
+
 /// The faint search's table of block sums (`SUMS` entries: blocks × rows of the difference
-/// frame, [`Workspace::block_sums`]), filled during the read-out. All-zero and
+/// frame, [`Workspace::block_sums`]) and the noise statistics of each block's responses
+/// ([`Workspace::faint_columns`]), filled during the read-out. All-zero and
 /// const-constructible, so a board can place it in a RAM region of its choice.
 #[derive(Debug)]
 pub struct FaintBuffers<const SUMS: usize = BLOCK_SUMS_752> {
     block_sums: [u16; SUMS],
+    columns: [FaintColumn; FAINT_COLUMNS],
 }
 
 impl<const SUMS: usize> FaintBuffers<SUMS> {
@@ -106,6 +112,7 @@ impl<const SUMS: usize> FaintBuffers<SUMS> {
     pub const fn new() -> Self {
         FaintBuffers {
             block_sums: [0; SUMS],
+            columns: [FaintColumn::ZERO; FAINT_COLUMNS],
         }
     }
 }
@@ -156,6 +163,7 @@ impl<'a, P: Pixel> Workspace<'a, P> {
             scratch_points: &mut small.scratch_points,
             scratch_values: &mut small.scratch_values,
             block_sums: &mut faint.block_sums,
+            faint_columns: &mut faint.columns,
         }
     }
 }
@@ -236,6 +244,7 @@ mod owned {
     use alloc::vec;
     use alloc::vec::Vec;
 
+    use super::super::faint_sums::FaintColumn;
     use super::super::readout_fits::{ColumnTrack, ReadoutFit};
     use super::super::{Workspace, WorkspaceSizes};
     use crate::curve::CurvePoint;
@@ -268,6 +277,7 @@ mod owned {
         scratch_points: Vec<Vec2>,
         scratch_values: Vec<Real>,
         block_sums: Vec<u16>,
+        faint_columns: Vec<FaintColumn>,
     }
 
     impl<P: Pixel> OwnedBuffers<P> {
@@ -288,6 +298,7 @@ mod owned {
                 scratch_points: vec![Vec2::zeros(); sizes.points],
                 scratch_values: vec![0.0; sizes.points],
                 block_sums: vec![0; sizes.block_sums],
+                faint_columns: vec![FaintColumn::ZERO; sizes.faint_columns],
             }
         }
 
@@ -313,6 +324,7 @@ mod owned {
                 scratch_points: &mut self.scratch_points,
                 scratch_values: &mut self.scratch_values,
                 block_sums: &mut self.block_sums,
+                faint_columns: &mut self.faint_columns,
             }
         }
 

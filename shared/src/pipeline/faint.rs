@@ -159,6 +159,8 @@ fn search<P: Pixel>(
         _ => None,
     };
     let table = table.as_ref();
+    // Rows whose responses the read-out already took into each block's statistics.
+    let done = if table.is_some() { pair.faint_rows } else { 0 };
     // Scratch: column sums and responses of one block (height + kernel each).
     let (sums, rest) = ws
         .scratch_values
@@ -176,16 +178,25 @@ fn search<P: Pixel>(
     let (mut abs_sum, mut count) = (0u64, 0u64);
     let mut strongest = Seed::NONE;
     for blk in 0..blocks {
-        let rows = band(blk);
         if let Some(t) = table {
             // In integers, as the responses are: the strongest by an integer comparison
-            // (the first of equals stays, as in `Seed::offer`).
-            let stats = faint_sums::column_stats(t.column(blk), rows.clone(), &t.kernel);
+            // (the first of equals stays, as in `Seed::offer`); the rows the read-out did
+            // not reach here (the band as the stream found it: the same function of the
+            // calibration).
+            let (rows, mut stats) = match ws.faint_columns.get(blk).filter(|_| done > 0) {
+                Some(c) => (c.band(), c.stats()),
+                None => (band(blk), faint_sums::ColumnStats::default()),
+            };
+            let rest = rows.start.max(done)..rows.end;
+            if !rest.is_empty() {
+                stats.merge(faint_sums::column_stats(t.column(blk), rest, &t.kernel));
+            }
             abs_sum += stats.abs_sum;
             count += rows.len() as u64;
             strongest.offer(stats.best as Real, blk, stats.best_row);
             continue;
         }
+        let rows = band(blk);
         block_responses(&diff, None, blk * b, b, &rows, taps, sums, responses);
         for v in rows {
             let r = responses[v];
@@ -595,7 +606,7 @@ fn read_column<P: Pixel>(
 
 /// The rows any plane can light in columns `x0..x1` at the search's depths, widened by the
 /// kernel's reach and the sampling's slack (all rows when the geometry says nothing).
-fn band_rows(
+pub(super) fn band_rows(
     calibration: &Calibration,
     params: &FaintParams,
     x0: usize,
@@ -633,7 +644,7 @@ fn band_rows(
 
 /// The integer cross-profile kernel: `g_k = round(16·exp(−k²/2σ²))` on the core
 /// `|k| ≤ ⌈2σ⌉`, 0 on a ring of [`RING`] rows beyond, made zero-sum (`w = n·g − Σg`).
-fn kernel(sigma_px: Real) -> ([i64; MAX_KERNEL], usize) {
+pub(super) fn kernel(sigma_px: Real) -> ([i64; MAX_KERNEL], usize) {
     let sigma = if sigma_px.is_finite() && sigma_px > 0.25 {
         sigma_px.min(2.0)
     } else {

@@ -316,3 +316,120 @@ fn responses<const LEN: usize>(
         f(v, edge_response::<LEN>(col, v, k));
     }
 }
+
+/// Instructions one response costs the noise pass on the emulated Cortex-M7 (≈ 36 for the
+/// default 11-row kernel, measured: `docs/performance.md`, "Issue 17, session 13").
+pub(super) const RESPONSE_COST: u32 = 40;
+/// Instructions of one block's call in a read-out step (its rows, the merge).
+pub(super) const COLUMN_COST: u32 = 120;
+
+/// One block's faint-search statistics gathered during the read-out (an entry of
+/// `Workspace::faint_columns`): the rows of its band and the [`ColumnStats`] of its
+/// responses at the band's rows done so far.
+#[derive(Debug, Clone, Copy)]
+pub struct FaintColumn {
+    band: (u16, u16),
+    stats: ColumnStats,
+}
+
+impl FaintColumn {
+    /// An empty entry (all zero).
+    pub const ZERO: FaintColumn = FaintColumn {
+        band: (0, 0),
+        stats: ColumnStats {
+            abs_sum: 0,
+            best: 0,
+            best_row: 0,
+        },
+    };
+
+    /// The rows of the block's band.
+    pub(super) fn band(&self) -> Range<usize> {
+        self.band.0 as usize..self.band.1 as usize
+    }
+
+    /// The statistics of the band's rows before `done`.
+    pub(super) fn stats(&self) -> ColumnStats {
+        self.stats
+    }
+}
+
+impl ColumnStats {
+    /// Adds the statistics of the rows after this one's (the first of equal strongest stays).
+    pub(super) fn merge(&mut self, later: ColumnStats) {
+        self.abs_sum += later.abs_sum;
+        if later.best > self.best {
+            (self.best, self.best_row) = (later.best, later.best_row);
+        }
+    }
+}
+
+/// The faint search's noise pass during the read-out: the responses of the rows whose
+/// windows are in, computed in the work each block of rows leaves of the read-out's budget
+/// (`readout_fits::BLOCK_WORK`, after the curve points it locates: those are never
+/// displaced), into each block's [`FaintColumn`]. What the budget did not allow is done
+/// after the frame, only if the search runs; the statistics are the same either way.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct FaintReadout {
+    kernel: IntKernel,
+    blocks: usize,
+    height: usize,
+    /// Rows `..next` of every block's band are in its statistics.
+    next: usize,
+}
+
+impl FaintReadout {
+    /// Starts a frame of `height` rows in `blocks` blocks whose bands are `band(block)`;
+    /// `None` when `columns` is too short or a row does not fit `u16`.
+    pub(super) fn begin(
+        kernel: IntKernel,
+        blocks: usize,
+        height: usize,
+        columns: &mut [FaintColumn],
+        band: impl Fn(usize) -> Range<usize>,
+    ) -> Option<Self> {
+        if height >= u16::MAX as usize {
+            return None;
+        }
+        for (blk, c) in columns.get_mut(..blocks)?.iter_mut().enumerate() {
+            let rows = band(blk);
+            *c = FaintColumn {
+                band: (rows.start as u16, rows.end.min(height) as u16),
+                ..FaintColumn::ZERO
+            };
+        }
+        Some(FaintReadout {
+            kernel,
+            blocks,
+            height,
+            next: 0,
+        })
+    }
+
+    /// Rows `..rows_done()` of every band are in the blocks' statistics.
+    pub(super) fn rows_done(&self) -> usize {
+        self.next
+    }
+
+    /// After row `y` is in (its sums in `table`): the responses of the rows whose windows are
+    /// in, as far as `work` (instructions) allows.
+    pub(super) fn step(&mut self, table: &[u16], columns: &mut [FaintColumn], y: usize, work: u32) {
+        let ready = (y + 1).saturating_sub(self.kernel.len / 2);
+        let per_row = RESPONSE_COST.saturating_mul(self.blocks as u32).max(1);
+        let affordable =
+            work.saturating_sub(COLUMN_COST.saturating_mul(self.blocks as u32)) / per_row;
+        let n = ready.saturating_sub(self.next).min(affordable as usize);
+        if n == 0 {
+            return;
+        }
+        let (from, to) = (self.next, self.next + n);
+        let cols = table.chunks_exact(self.height);
+        for (c, col) in columns.iter_mut().take(self.blocks).zip(cols) {
+            let rows = from.max(c.band.0 as usize)..to.min(c.band.1 as usize);
+            if !rows.is_empty() {
+                c.stats.merge(column_stats(col, rows, &self.kernel));
+            }
+        }
+        self.next = to;
+    }
+}

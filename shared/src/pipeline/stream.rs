@@ -30,7 +30,7 @@ use crate::image::{Frame, FrameError, Pixel};
 use crate::real::Real;
 
 use super::faint;
-use super::faint_sums;
+use super::faint_sums::{self, FaintReadout, IntKernel};
 use super::profile::{self, Profile, Stage};
 use super::readout_fits::ReadoutFits;
 use super::workspace::need;
@@ -78,6 +78,9 @@ pub struct ProfileStream {
     /// Block width of the faint search's block sums gathered as the rows arrive
     /// (`pipeline::faint_sums`), 0 when they are not.
     sums_block: usize,
+    /// The faint search's noise pass during the read-out, when it runs
+    /// (`pipeline::faint_sums`).
+    faint: Option<FaintReadout>,
 }
 
 impl ProfileStream {
@@ -130,6 +133,24 @@ impl ProfileStream {
             bit_depth,
             ws.block_sums.len(),
         );
+        let faint = match config.faint {
+            Some(params) if sums_block != 0 => {
+                let (taps, len) = faint::kernel(params.profile_sigma_px);
+                IntKernel::new(&taps[..len]).and_then(|kernel| {
+                    FaintReadout::begin(
+                        kernel,
+                        width.div_ceil(sums_block),
+                        height,
+                        ws.faint_columns,
+                        |blk| {
+                            let x0 = blk * sums_block;
+                            faint::band_rows(calibration, &params, x0, (x0 + sums_block).min(width))
+                        },
+                    )
+                })
+            }
+            _ => None,
+        };
         Ok(ProfileStream {
             width,
             height,
@@ -141,6 +162,7 @@ impl ProfileStream {
             overflow: false,
             readout,
             sums_block,
+            faint,
         })
     }
 
@@ -216,8 +238,13 @@ impl ProfileStream {
             self.next_row += 1;
             if self.next_row.is_multiple_of(BLOCK_ROWS) && self.next_row < self.height {
                 let diff = self.diff_frame(ws.diff)?;
-                self.readout
+                let left = self
+                    .readout
                     .block_done((ws.column_tracks, ws.readout_fits), &diff, y);
+                // The faint search's noise pass in the work the curve points left.
+                if let Some(faint) = self.faint.as_mut() {
+                    faint.step(ws.block_sums, ws.faint_columns, y, left);
+                }
             }
         }
         Ok(())
@@ -271,6 +298,7 @@ impl ProfileStream {
             overflow,
             readout,
             sums_block,
+            faint: faint_readout,
         } = self;
         let cam = &calibration.camera;
         if (cam.width as usize, cam.height as usize) != (width, height) {
@@ -299,6 +327,7 @@ impl ProfileStream {
             stats,
             noise,
             block_sums: sums_block,
+            faint_rows: faint_readout.map_or(0, |f| f.rows_done()),
         };
         // The thresholded chain; where it finds no stripe, the faint search may
         // (`faint::or_search`).

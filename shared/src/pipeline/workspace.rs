@@ -49,6 +49,10 @@ pub struct Workspace<'a, P: Pixel> {
     /// gathered as the rows arrive (`pipeline::stream`); a table shorter than
     /// `blocks × height` turns that off (same results, the search then reads the pixels).
     pub block_sums: &'a mut [u16],
+    /// Each block's faint-search noise statistics, from the responses computed during the
+    /// read-out where its budget allowed (`pipeline::faint_sums`); shorter than the blocks
+    /// turns that off (same results, the responses are then all computed after the frame).
+    pub faint_columns: &'a mut [super::faint_sums::FaintColumn],
 }
 
 /// Buffer lengths a [`Workspace`] needs.
@@ -72,6 +76,8 @@ pub struct WorkspaceSizes {
     pub points: usize,
     /// Block sums of the faint search (blocks of 8 columns × rows).
     pub block_sums: usize,
+    /// Blocks of the faint search (of 8 columns).
+    pub faint_columns: usize,
 }
 
 impl WorkspaceSizes {
@@ -100,6 +106,7 @@ impl WorkspaceSizes {
             readout_fits: MAX_READOUT_FITS,
             points: width * planes * 2,
             block_sums: width.div_ceil(8) * height,
+            faint_columns: width.div_ceil(8),
         }
     }
 }
