@@ -506,6 +506,51 @@ mod tests {
     }
 
     #[test]
+    fn block_sums_in_the_pass_are_the_sums_of_the_difference() {
+        let mut seed = 7u32;
+        // Whole blocks, a cut last block, a row shorter than a block, 7-bit (per-pixel path),
+        // and a table with fewer columns than the row has blocks.
+        for &(w, h, bits, columns) in &[
+            (752usize, 5usize, 8u8, 94usize),
+            (37, 4, 8, 5),
+            (5, 3, 8, 1),
+            (37, 4, 7, 5),
+            (37, 4, 8, 3),
+        ] {
+            let on = random_frame(&mut seed, w * h, true);
+            let off = random_frame(&mut seed, w * h, false);
+            let max = (1u32 << bits) - 1;
+            let (mut plain, mut summed) = (off.clone(), off.clone());
+            let (mut bins_a, mut bins_b) = (std::vec![0u32; 256], std::vec![0u32; 256]);
+            let mut a = DifferenceHistogram::new::<u8>(max, &mut bins_a).unwrap();
+            let mut b = DifferenceHistogram::new::<u8>(max, &mut bins_b).unwrap();
+            let mut table = std::vec![u16::MAX; columns * h];
+            for y in 0..h {
+                let rows = y * w..(y + 1) * w;
+                a.row(&on[rows.clone()], &mut plain[rows.clone()], &mut bins_a);
+                b.row_with_block_sums(
+                    &on[rows.clone()],
+                    &mut summed[rows],
+                    &mut bins_b,
+                    &mut table,
+                    (y, h),
+                );
+            }
+            assert_eq!(plain, summed, "{w} × {h}");
+            assert_eq!(a.finish(&mut bins_a), b.finish(&mut bins_b));
+            assert_eq!(bins_a, bins_b);
+            for y in 0..h {
+                for k in 0..columns {
+                    let block = &plain[y * w + (8 * k).min(w)..y * w + (8 * k + 8).min(w)];
+                    let sum: u32 = block.iter().map(|&p| p as u32).sum();
+                    let expect = if 8 * k < w { sum as u16 } else { u16::MAX };
+                    assert_eq!(table[k * h + y], expect, "{w} × {h}, row {y}, block {k}");
+                }
+            }
+        }
+    }
+
+    #[test]
     fn rejects_mismatched_sizes() {
         let a = [0u8; 12];
         let b = [0u8; 12];

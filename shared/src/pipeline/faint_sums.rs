@@ -134,7 +134,7 @@ const ONES: u32 = 0x0001_0001;
 #[cfg(all(feature = "cortex-m7", target_arch = "arm"))]
 #[inline(always)]
 #[allow(unsafe_code)]
-fn dot2(acc: i32, x: u32, k: u32) -> i32 {
+pub(super) fn dot2(acc: i32, x: u32, k: u32) -> i32 {
     let r: i32;
     // SAFETY: SMLAD reads three registers and writes one; it may set the Q flag (never here:
     // the sums stay far below 2³¹), which nothing reads.
@@ -154,7 +154,7 @@ fn dot2(acc: i32, x: u32, k: u32) -> i32 {
 /// `acc + x₀·k₀ + x₁·k₁`, the lanes signed 16-bit (the device's `SMLAD`, bit for bit).
 #[cfg(not(all(feature = "cortex-m7", target_arch = "arm")))]
 #[inline(always)]
-fn dot2(acc: i32, x: u32, k: u32) -> i32 {
+pub(super) fn dot2(acc: i32, x: u32, k: u32) -> i32 {
     let lane = |w: u32, i: u32| (w >> (16 * i)) as u16 as i16 as i32;
     acc.wrapping_add(lane(x, 0) * lane(k, 0))
         .wrapping_add(lane(x, 1) * lane(k, 1))

@@ -171,6 +171,13 @@ impl ProfileStream {
         self.next_row
     }
 
+    /// Rows of every block's band whose faint-search responses the read-out has taken so far
+    /// (`pipeline::faint_sums`).
+    #[cfg(test)]
+    pub(super) fn faint_rows_done(&self) -> usize {
+        self.faint.map_or(0, |f| f.rows_done())
+    }
+
     /// The next rows of the laser-on frame (a whole number of rows of `width` pixels): each
     /// is subtracted from the stored laser-off row in place, counted in the histogram, and
     /// its runs above the provisional threshold are noted. Errors: a partial row, or more
