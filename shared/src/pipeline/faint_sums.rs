@@ -4,9 +4,15 @@
 //! search after the frame reads one sum per block and row instead of `B` pixels, and
 //! correlates them in integers (`docs/performance.md`, "Issue 17, session 13").
 //!
+//! The noise pass over the band (each block's `Σ|r|` and strongest response, for the
+//! responses' σ and the first track's seed) runs during the read-out too, in the work each
+//! block of rows leaves of the read-out's budget ([`FaintReadout`]); the search after the
+//! frame does only the rows it did not reach.
+//!
 //! The sums are the very integers the search formed from the pixels, and the responses are
 //! exact integers either way, so the search finds the same responses, σ, seed and tracks
-//! with or without the table (`faint_tests.rs` compares both at every row and edge).
+//! with or without the table or the read-out pass (`faint_tests.rs` compares them at every
+//! row and edge, and end to end).
 
 use core::ops::Range;
 
