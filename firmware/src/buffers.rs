@@ -28,6 +28,7 @@ pub struct FrameBuffer<const N: usize>(pub [u8; N]);
 ///     #[link_section = ".sram123"] small;
 ///     objects;
 ///     #[link_section = ".sram4"] readout;
+///     #[link_section = ".axisram"] faint;
 /// }
 /// ```
 #[cfg_attr(
@@ -45,6 +46,7 @@ macro_rules! board_buffers {
         $(#[$small:meta])* small;
         $(#[$objects:meta])* objects;
         $(#[$readout:meta])* readout;
+        $(#[$faint:meta])* faint;
     ) => {
         /// The board's buffers, once: the application's frames and receive buffer, and the
         /// pipeline's workspace for frames of `pixels` pixels (at most the board's frame).
@@ -59,7 +61,8 @@ macro_rules! board_buffers {
             use tangent_core::protocol::MAX_FRAME_LEN;
             use $crate::buffers::FrameBuffer;
             use tangent_core::pipeline::{
-                Objects, ReadoutBuffers, RunBuffers, SmallBuffers, Workspace, NO_OBJECTS,
+                FaintBuffers, Objects, ReadoutBuffers, RunBuffers, SmallBuffers, Workspace,
+                NO_OBJECTS,
             };
 
             const OFF_BYTES: usize = $off_bytes;
@@ -80,6 +83,8 @@ macro_rules! board_buffers {
             static mut OBJECTS: Objects = NO_OBJECTS;
             $(#[$readout])*
             static mut READOUT: ReadoutBuffers = ReadoutBuffers::new();
+            $(#[$faint])*
+            static mut FAINT: FaintBuffers = FaintBuffers::new();
             static mut RX: [u8; MAX_FRAME_LEN] = [0; MAX_FRAME_LEN];
 
             if TAKEN.swap(true, Ordering::AcqRel) {
@@ -98,6 +103,7 @@ macro_rules! board_buffers {
                 write_bytes(addr_of_mut!(SMALL), 0, 1);
                 write_bytes(addr_of_mut!(OBJECTS), 0, 1);
                 write_bytes(addr_of_mut!(READOUT), 0, 1);
+                write_bytes(addr_of_mut!(FAINT), 0, 1);
                 let buffers = $crate::app::Buffers {
                     off: &mut (*addr_of_mut!(OFF)).0,
                     on: &mut (*addr_of_mut!(ON)).0,
@@ -110,6 +116,7 @@ macro_rules! board_buffers {
                     &mut *addr_of_mut!(RUNS),
                     &mut *addr_of_mut!(SMALL),
                     &mut *addr_of_mut!(READOUT),
+                    &mut *addr_of_mut!(FAINT),
                 );
                 Some((buffers, workspace))
             }
@@ -134,6 +141,7 @@ mod tests {
             small;
             objects;
             readout;
+            faint;
         }
     }
 

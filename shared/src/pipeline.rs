@@ -46,6 +46,7 @@ pub mod buffers;
 mod candidate;
 pub mod crossing;
 pub mod faint;
+mod faint_sums;
 pub mod fragments;
 pub mod grow;
 mod planes;
@@ -56,8 +57,12 @@ pub mod workspace;
 
 #[cfg(any(test, feature = "alloc"))]
 pub use buffers::OwnedBuffers;
-pub use buffers::{Buffers, Objects, RunBuffers, SmallBuffers, NO_OBJECTS};
+pub use buffers::{
+    Buffers, FaintBuffers, Objects, RunBuffers, SmallBuffers, BLOCK_SUMS_752, FAINT_COLUMNS,
+    NO_OBJECTS,
+};
 pub use faint::FaintParams;
+pub use faint_sums::FaintColumn;
 pub use fragments::StackParams;
 pub use grow::GrowParams;
 pub use profile::{point_sigmas, Profile, Stage};

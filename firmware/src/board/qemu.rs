@@ -69,6 +69,7 @@ crate::buffers::board_buffers! {
     small;
     objects;
     readout;
+    faint;
 }
 
 /// Bytes of the block the emulated camera hands over at a time ([`ports::BLOCK_ROWS`] rows

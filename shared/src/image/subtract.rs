@@ -169,6 +169,57 @@ impl DifferenceHistogram {
         self.off_sum += sum;
     }
 
+    /// [`DifferenceHistogram::row`] that also sums the differences of each block of 8
+    /// pixels (pixels `8k .. 8k + 8`, the last block cut by the row's end) into row `y` of
+    /// column `k` of `columns` (columns of `height` entries, one after the other:
+    /// `columns[k × height + y]`; those beyond `columns` are not written). On the 8-bit word
+    /// path the sums are taken from the difference words as they are made (two `USADA8` per
+    /// block on the Cortex-M7); elsewhere from the row afterwards.
+    pub fn row_with_block_sums<P: Pixel>(
+        &mut self,
+        on: &[P],
+        off_diff: &mut [P],
+        bins: &mut [u32],
+        columns: &mut [u16],
+        (y, height): (usize, usize),
+    ) {
+        let n = on.len().min(off_diff.len());
+        let (on, off_diff) = (&on[..n], &mut off_diff[..n]);
+        if y >= height {
+            return self.row(on, off_diff, bins);
+        }
+        if self.words && n <= 1 << 18 {
+            if let Some(bins) = bins.first_chunk_mut::<256>() {
+                self.pixels += n as u64;
+                let quads = &mut self.quads;
+                // < 2^18 pixels: the laser-off sum stays below 2^26 in `u32`.
+                let mut sum = 0u32;
+                // The whole blocks that have a column.
+                let done = 8 * (n / 8).min(columns.len() / height);
+                let a8 = on[..done].chunks_exact(8);
+                let o8 = off_diff[..done].chunks_exact_mut(8);
+                for ((a, o), col) in a8.zip(o8).zip(columns.chunks_exact_mut(height)) {
+                    let (a0, a1) = a.split_at(4);
+                    let (o0, o1) = o.split_at_mut(4);
+                    let d0 = difference_word(a0, o0, &mut sum, quads, bins);
+                    let d1 = difference_word(a1, o1, &mut sum, quads, bins);
+                    if let Some(c) = col.get_mut(y) {
+                        *c = lanes::add_lane_sum(lanes::add_lane_sum(0, d0), d1) as u16;
+                    }
+                }
+                // Blocks beyond the columns, and the row's last pixels.
+                self.off_sum += sum as u64;
+                self.pixels -= (n - done) as u64;
+                let (on, off_diff) = (&on[done..], &mut off_diff[done..]);
+                self.row(on, off_diff, bins);
+                add_block_sums(off_diff, done / 8, columns, (y, height));
+                return;
+            }
+        }
+        self.row(on, off_diff, bins);
+        add_block_sums(off_diff, 0, columns, (y, height));
+    }
+
     /// The 8-bit word path of [`DifferenceHistogram::row`].
     #[inline(always)]
     fn row_words<P: Pixel>(&mut self, on: &[P], off_diff: &mut [P], bins: &mut [u32; 256]) {
@@ -225,10 +276,29 @@ impl DifferenceHistogram {
     }
 }
 
+/// The block sums of [`DifferenceHistogram::row_with_block_sums`] for the row's pixels
+/// `row` from block `first` on: `columns[k × height + y]` = the sum of block `k`'s pixels.
+fn add_block_sums<P: Pixel>(
+    row: &[P],
+    first: usize,
+    columns: &mut [u16],
+    (y, height): (usize, usize),
+) {
+    for (k, block) in row.chunks(8).enumerate() {
+        let Some(c) = (first + k)
+            .checked_mul(height)
+            .and_then(|i| columns.get_mut(i + y))
+        else {
+            return;
+        };
+        *c = block.iter().map(|&p| Into::<u32>::into(p)).sum::<u32>() as u16;
+    }
+}
+
 /// The 8-bit word path of [`DifferenceHistogram::row`] for one word of 4 pixels: replaces the
 /// laser-off word `o` by the difference `a − o`, adds the laser-off lanes to `off_sum` and
 /// counts the differences, in `quads` when all four are below 4 (indexed by their 2-bit
-/// values, pixel 0 in the low bits), else in `bins`.
+/// values, pixel 0 in the low bits), else in `bins`. Returns the difference word.
 #[inline(always)]
 fn difference_word<P: Pixel>(
     a: &[P],
@@ -236,7 +306,7 @@ fn difference_word<P: Pixel>(
     off_sum: &mut u32,
     quads: &mut [u32; 256],
     bins: &mut [u32; 256],
-) {
+) -> u32 {
     let (a, b) = (lanes::pack4(a), lanes::pack4(o));
     let d = lanes::sub_sat(a, b);
     for (i, o) in o.iter_mut().take(4).enumerate() {
@@ -250,6 +320,7 @@ fn difference_word<P: Pixel>(
     } else {
         count_lanes(bins, d);
     }
+    d
 }
 
 /// [`subtract`] and the histogram of the difference
@@ -432,6 +503,51 @@ mod tests {
         assert_eq!(out, [1020, 0, 400, 0]);
         assert_eq!(s.max_difference, 1020);
         assert_eq!((bins[0], bins[400], bins[1020]), (2, 1, 1));
+    }
+
+    #[test]
+    fn block_sums_in_the_pass_are_the_sums_of_the_difference() {
+        let mut seed = 7u32;
+        // Whole blocks, a cut last block, a row shorter than a block, 7-bit (per-pixel path),
+        // and a table with fewer columns than the row has blocks.
+        for &(w, h, bits, columns) in &[
+            (752usize, 5usize, 8u8, 94usize),
+            (37, 4, 8, 5),
+            (5, 3, 8, 1),
+            (37, 4, 7, 5),
+            (37, 4, 8, 3),
+        ] {
+            let on = random_frame(&mut seed, w * h, true);
+            let off = random_frame(&mut seed, w * h, false);
+            let max = (1u32 << bits) - 1;
+            let (mut plain, mut summed) = (off.clone(), off.clone());
+            let (mut bins_a, mut bins_b) = (std::vec![0u32; 256], std::vec![0u32; 256]);
+            let mut a = DifferenceHistogram::new::<u8>(max, &mut bins_a).unwrap();
+            let mut b = DifferenceHistogram::new::<u8>(max, &mut bins_b).unwrap();
+            let mut table = std::vec![u16::MAX; columns * h];
+            for y in 0..h {
+                let rows = y * w..(y + 1) * w;
+                a.row(&on[rows.clone()], &mut plain[rows.clone()], &mut bins_a);
+                b.row_with_block_sums(
+                    &on[rows.clone()],
+                    &mut summed[rows],
+                    &mut bins_b,
+                    &mut table,
+                    (y, h),
+                );
+            }
+            assert_eq!(plain, summed, "{w} × {h}");
+            assert_eq!(a.finish(&mut bins_a), b.finish(&mut bins_b));
+            assert_eq!(bins_a, bins_b);
+            for y in 0..h {
+                for k in 0..columns {
+                    let block = &plain[y * w + (8 * k).min(w)..y * w + (8 * k + 8).min(w)];
+                    let sum: u32 = block.iter().map(|&p| p as u32).sum();
+                    let expect = if 8 * k < w { sum as u16 } else { u16::MAX };
+                    assert_eq!(table[k * h + y], expect, "{w} × {h}, row {y}, block {k}");
+                }
+            }
+        }
     }
 
     #[test]

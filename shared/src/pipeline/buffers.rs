@@ -11,8 +11,14 @@ use crate::image::segment::{ObjectFeatures, Run};
 use crate::image::Pixel;
 use crate::real::{Real, Vec2, Vec3};
 
+use super::faint_sums::FaintColumn;
 use super::readout_fits::ReadoutBuffers;
 use super::Workspace;
+
+/// Block-sum entries for frames of the reference size: 752 / 8 = 94 blocks of 8 columns ×
+/// 480 rows (90,240 bytes), the faint search's column sums gathered during the read-out
+/// ([`FaintBuffers`]).
+pub const BLOCK_SUMS_752: usize = 752usize.div_ceil(8) * 480;
 
 /// Entries of each run table ([`super::WorkspaceSizes::new`]): 64 KB each. A laser image has
 /// a few hundred runs above the threshold (a 1 m stem's 559-column stripe: ≈ 600); the
@@ -88,6 +94,35 @@ impl<const POINTS: usize, const BINS: usize> SmallBuffers<POINTS, BINS> {
     }
 }
 
+/// Blocks of the faint search the read-out's responses serve: 752 / 8 = 94, with room.
+pub const FAINT_COLUMNS: usize = 128;
+
+/// The faint search's table of block sums (`SUMS` entries: blocks × rows of the difference
+/// frame, [`Workspace::block_sums`]) and the noise statistics of each block's responses
+/// ([`Workspace::faint_columns`]), filled during the read-out. All-zero and
+/// const-constructible, so a board can place it in a RAM region of its choice.
+#[derive(Debug)]
+pub struct FaintBuffers<const SUMS: usize = BLOCK_SUMS_752> {
+    block_sums: [u16; SUMS],
+    columns: [FaintColumn; FAINT_COLUMNS],
+}
+
+impl<const SUMS: usize> FaintBuffers<SUMS> {
+    /// Zeroed buffers.
+    pub const fn new() -> Self {
+        FaintBuffers {
+            block_sums: [0; SUMS],
+            columns: [FaintColumn::ZERO; FAINT_COLUMNS],
+        }
+    }
+}
+
+impl<const SUMS: usize> Default for FaintBuffers<SUMS> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 impl<const POINTS: usize, const BINS: usize> Default for SmallBuffers<POINTS, BINS> {
     fn default() -> Self {
         Self::new()
@@ -96,20 +131,22 @@ impl<const POINTS: usize, const BINS: usize> Default for SmallBuffers<POINTS, BI
 
 impl<'a, P: Pixel> Workspace<'a, P> {
     /// A workspace over buffers placed apart: the laser-off / difference frame
-    /// (`width × height`), the object features, the [`RunBuffers`], the [`SmallBuffers`] and
-    /// the [`ReadoutBuffers`].
+    /// (`width × height`), the object features, the [`RunBuffers`], the [`SmallBuffers`],
+    /// the [`ReadoutBuffers`] and the [`FaintBuffers`].
     pub fn from_parts<
         const POINTS: usize,
         const BINS: usize,
         const SEEDS: usize,
         const COLUMNS: usize,
         const FITS: usize,
+        const SUMS: usize,
     >(
         diff: &'a mut [P],
         objects: &'a mut [ObjectFeatures],
         runs: &'a mut RunBuffers<SEEDS>,
         small: &'a mut SmallBuffers<POINTS, BINS>,
         readout: &'a mut ReadoutBuffers<COLUMNS, FITS>,
+        faint: &'a mut FaintBuffers<SUMS>,
     ) -> Self {
         Workspace {
             diff,
@@ -125,6 +162,8 @@ impl<'a, P: Pixel> Workspace<'a, P> {
             sigmas: &mut small.sigmas,
             scratch_points: &mut small.scratch_points,
             scratch_values: &mut small.scratch_values,
+            block_sums: &mut faint.block_sums,
+            faint_columns: &mut faint.columns,
         }
     }
 }
@@ -157,6 +196,7 @@ pub struct Buffers<
     runs: RunBuffers<SEEDS>,
     small: SmallBuffers<POINTS, BINS>,
     readout: ReadoutBuffers,
+    faint: FaintBuffers,
 }
 
 impl<P: Pixel, const PIXELS: usize, const POINTS: usize, const BINS: usize, const SEEDS: usize>
@@ -170,6 +210,7 @@ impl<P: Pixel, const PIXELS: usize, const POINTS: usize, const BINS: usize, cons
             runs: RunBuffers::new(),
             small: SmallBuffers::new(),
             readout: ReadoutBuffers::new(),
+            faint: FaintBuffers::new(),
         }
     }
 
@@ -181,6 +222,7 @@ impl<P: Pixel, const PIXELS: usize, const POINTS: usize, const BINS: usize, cons
             &mut self.runs,
             &mut self.small,
             &mut self.readout,
+            &mut self.faint,
         )
     }
 }
@@ -202,6 +244,7 @@ mod owned {
     use alloc::vec;
     use alloc::vec::Vec;
 
+    use super::super::faint_sums::FaintColumn;
     use super::super::readout_fits::{ColumnTrack, ReadoutFit};
     use super::super::{Workspace, WorkspaceSizes};
     use crate::curve::CurvePoint;
@@ -233,6 +276,8 @@ mod owned {
         sigmas: Vec<Real>,
         scratch_points: Vec<Vec2>,
         scratch_values: Vec<Real>,
+        block_sums: Vec<u16>,
+        faint_columns: Vec<FaintColumn>,
     }
 
     impl<P: Pixel> OwnedBuffers<P> {
@@ -252,6 +297,8 @@ mod owned {
                 sigmas: vec![0.0; sizes.points],
                 scratch_points: vec![Vec2::zeros(); sizes.points],
                 scratch_values: vec![0.0; sizes.points],
+                block_sums: vec![0; sizes.block_sums],
+                faint_columns: vec![FaintColumn::ZERO; sizes.faint_columns],
             }
         }
 
@@ -276,6 +323,8 @@ mod owned {
                 sigmas: &mut self.sigmas,
                 scratch_points: &mut self.scratch_points,
                 scratch_values: &mut self.scratch_values,
+                block_sums: &mut self.block_sums,
+                faint_columns: &mut self.faint_columns,
             }
         }
 

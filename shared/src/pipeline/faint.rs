@@ -34,6 +34,7 @@ use crate::image::{Frame, Pixel};
 use crate::peaks::{self, Estimator};
 use crate::real::{Float, Real, Vec3};
 
+use super::faint_sums::{self, IntKernel};
 use super::planes;
 use super::profile::{self, Profile, Subtracted};
 use super::{PipelineConfig, PipelineError, Workspace};
@@ -100,7 +101,7 @@ pub(super) fn takes_over(e: &PipelineError, config: &PipelineConfig) -> bool {
 /// Most rows of the cross-profile kernel.
 const MAX_KERNEL: usize = 15;
 /// Rows of the zero ring on each side of the kernel's Gaussian core.
-const RING: usize = 3;
+pub(super) const RING: usize = 3;
 /// Rows added on each side of the rows a plane can light within the depth range (the
 /// stripe's half-width at 2σ and the sampling's slack): a stripe from beyond the range stays
 /// outside.
@@ -147,6 +148,19 @@ fn search<P: Pixel>(
         .ok()?;
     let (taps, len) = kernel(params.profile_sigma_px);
     let taps = &taps[..len];
+    // The block sums gathered during the read-out, when the stream gathered them for this
+    // block width (`faint_sums`): the same responses, from one sum per block and row.
+    let table = match (pair.block_sums == b, IntKernel::new(taps)) {
+        (true, Some(kernel)) => ws.block_sums.get(..blocks * height).map(|table| Table {
+            table,
+            height,
+            kernel,
+        }),
+        _ => None,
+    };
+    let table = table.as_ref();
+    // Rows whose responses the read-out already took into each block's statistics.
+    let done = if table.is_some() { pair.faint_rows } else { 0 };
     // Scratch: column sums and responses of one block (height + kernel each).
     let (sums, rest) = ws
         .scratch_values
@@ -164,8 +178,26 @@ fn search<P: Pixel>(
     let (mut abs_sum, mut count) = (0u64, 0u64);
     let mut strongest = Seed::NONE;
     for blk in 0..blocks {
+        if let Some(t) = table {
+            // In integers, as the responses are: the strongest by an integer comparison
+            // (the first of equals stays, as in `Seed::offer`); the rows the read-out did
+            // not reach here (the band as the stream found it: the same function of the
+            // calibration).
+            let (rows, mut stats) = match ws.faint_columns.get(blk).filter(|_| done > 0) {
+                Some(c) => (c.band(), c.stats()),
+                None => (band(blk), faint_sums::ColumnStats::default()),
+            };
+            let rest = rows.start.max(done)..rows.end;
+            if !rest.is_empty() {
+                stats.merge(faint_sums::column_stats(t.column(blk), rest, &t.kernel));
+            }
+            abs_sum += stats.abs_sum;
+            count += rows.len() as u64;
+            strongest.offer(stats.best as Real, blk, stats.best_row);
+            continue;
+        }
         let rows = band(blk);
-        block_responses(&diff, blk * b, b, &rows, taps, sums, responses);
+        block_responses(&diff, None, blk * b, b, &rows, taps, sums, responses);
         for v in rows {
             let r = responses[v];
             // |r| < 2³² for frames up to 16 bits: through `u32`, one conversion instruction
@@ -193,7 +225,8 @@ fn search<P: Pixel>(
         };
         let seed = if k == 0 { Some(strongest) } else { None };
         let Some(t) = find_track(
-            &diff, &params, taps, sigma, blocks, &band, &excluded, seed, sums, responses, track,
+            &diff, table, &params, taps, sigma, blocks, &band, &excluded, seed, sums, responses,
+            track,
         ) else {
             break;
         };
@@ -276,6 +309,7 @@ impl Seed {
 #[allow(clippy::too_many_arguments)]
 fn find_track<P: Pixel>(
     diff: &Frame<P, &[P]>,
+    table: Option<&Table<'_>>,
     params: &FaintParams,
     taps: &[i64],
     sigma: Real,
@@ -293,7 +327,7 @@ fn find_track<P: Pixel>(
         let mut seed = Seed::NONE;
         for blk in 0..blocks {
             let rows = band(blk);
-            block_responses(diff, blk * b, b, &rows, taps, sums, responses);
+            block_responses(diff, table, blk * b, b, &rows, taps, sums, responses);
             for v in rows {
                 if !excluded(blk, v) {
                     seed.offer(responses[v], blk, v);
@@ -321,7 +355,7 @@ fn find_track<P: Pixel>(
             if lo >= hi {
                 break;
             }
-            block_responses(diff, bu * b, b, &(lo..hi), taps, sums, responses);
+            block_responses(diff, table, bu * b, b, &(lo..hi), taps, sums, responses);
             let best = (lo..hi)
                 .filter(|&u| !excluded(bu, u))
                 .max_by(|&a, &c| responses[a].total_cmp(&responses[c]));
@@ -345,7 +379,7 @@ fn find_track<P: Pixel>(
             continue;
         }
         let v = v as usize;
-        block_responses(diff, blk * b, b, &(v..v + 1), taps, sums, responses);
+        block_responses(diff, table, blk * b, b, &(v..v + 1), taps, sums, responses);
         let gain = responses[v] / sigma - params.block_bias;
         if run <= 0.0 {
             (run, run_start) = (gain, blk);
@@ -572,7 +606,7 @@ fn read_column<P: Pixel>(
 
 /// The rows any plane can light in columns `x0..x1` at the search's depths, widened by the
 /// kernel's reach and the sampling's slack (all rows when the geometry says nothing).
-fn band_rows(
+pub(super) fn band_rows(
     calibration: &Calibration,
     params: &FaintParams,
     x0: usize,
@@ -610,7 +644,7 @@ fn band_rows(
 
 /// The integer cross-profile kernel: `g_k = round(16·exp(−k²/2σ²))` on the core
 /// `|k| ≤ ⌈2σ⌉`, 0 on a ring of [`RING`] rows beyond, made zero-sum (`w = n·g − Σg`).
-fn kernel(sigma_px: Real) -> ([i64; MAX_KERNEL], usize) {
+pub(super) fn kernel(sigma_px: Real) -> ([i64; MAX_KERNEL], usize) {
     let sigma = if sigma_px.is_finite() && sigma_px > 0.25 {
         sigma_px.min(2.0)
     } else {
@@ -634,10 +668,30 @@ fn kernel(sigma_px: Real) -> ([i64; MAX_KERNEL], usize) {
     (w, len)
 }
 
+/// The block sums gathered during the read-out (`Workspace::block_sums`, block-major) and
+/// the kernel in integers.
+#[derive(Debug, Clone, Copy)]
+struct Table<'a> {
+    table: &'a [u16],
+    height: usize,
+    kernel: IntKernel,
+}
+
+impl Table<'_> {
+    /// The sums of block `blk`, one per row (empty beyond the table).
+    fn column(&self, blk: usize) -> &[u16] {
+        self.table
+            .get(blk * self.height..(blk + 1) * self.height)
+            .unwrap_or(&[])
+    }
+}
+
 /// The ridge responses of the block of `b` columns from `x0`, at `rows`, into
 /// `responses[rows]`: the column sums correlated with `taps`, minus the imbalance of the two
 /// rings (a stripe is a ridge with both rings near the floor; the edge of something that
-/// moved between the two frames is a step, and gets no credit).
+/// moved between the two frames is a step, and gets no credit). With `table` the sums are
+/// the ones gathered during the read-out and correlated in integers
+/// (`faint_sums::column_responses`): the same values.
 ///
 /// Rows beyond the frame's edges read the edge row. Every value is an integer (the column
 /// sums of integer samples, the integer taps): below 2²⁴ for frames up to 8 bits, so exact in
@@ -646,8 +700,10 @@ fn kernel(sigma_px: Real) -> ([i64; MAX_KERNEL], usize) {
 /// frame), so that each response reads `taps.len()` consecutive sums without index
 /// arithmetic (the search's cost is this loop: `docs/performance.md`, "The faint search's
 /// cost"). `taps` is a kernel of [`kernel`]: symmetric, its outer taps the ring's.
+#[allow(clippy::too_many_arguments)]
 fn block_responses<P: Pixel>(
     diff: &Frame<P, &[P]>,
+    table: Option<&Table<'_>>,
     x0: usize,
     b: usize,
     rows: &Range<usize>,
@@ -655,6 +711,14 @@ fn block_responses<P: Pixel>(
     sums: &mut [Real],
     responses: &mut [Real],
 ) {
+    if let Some(t) = table {
+        faint_sums::column_responses(t.column(x0 / b.max(1)), rows.clone(), &t.kernel, |v, r| {
+            if let Some(out) = responses.get_mut(v) {
+                *out = r as Real;
+            }
+        });
+        return;
+    }
     let (width, height) = (diff.width(), diff.height());
     let len = taps.len();
     let half = len / 2;

@@ -2,9 +2,10 @@
 #![allow(clippy::unnecessary_cast)]
 
 extern crate std;
-use super::super::tests::{buffers, calibration, frames, render};
+use super::super::tests::{buffers, calibration, frames, render, H, W};
 use super::*;
 use crate::pipeline::extract_profile;
+use crate::pipeline::faint_sums;
 use std::vec::Vec;
 
 /// A reproducible Gaussian noise source (xorshift, Box–Muller).
@@ -215,7 +216,7 @@ fn block_responses_are_the_plain_correlation_at_every_row_and_edge() {
         // block cut by the frame's right edge.
         for rows in [0..3, 3..12, 20..height, 0..height] {
             for x0 in [0usize, 8, 32] {
-                block_responses(&diff, x0, 8, &rows, taps, &mut sums, &mut responses);
+                block_responses(&diff, None, x0, 8, &rows, taps, &mut sums, &mut responses);
                 for v in rows.clone() {
                     assert_eq!(
                         responses[v],
@@ -225,5 +226,158 @@ fn block_responses_are_the_plain_correlation_at_every_row_and_edge() {
                 }
             }
         }
+    }
+}
+
+/// A random 8-bit difference frame of `width × height` and its block sums of 8 columns
+/// (block-major), gathered row by row as the stream does.
+fn random_table(width: usize, height: usize, seed: u64) -> (Vec<u8>, Vec<u16>) {
+    let mut pixels = std::vec![0u8; width * height];
+    let mut n = Noise(seed);
+    for p in pixels.iter_mut() {
+        *p = (n.uniform() * 256.0).min(255.0) as u8;
+    }
+    let mut table = std::vec![0u16; width.div_ceil(8) * height];
+    for y in 0..height {
+        faint_sums::gather_row(
+            &pixels[y * width..(y + 1) * width],
+            8,
+            y,
+            height,
+            &mut table,
+        );
+    }
+    (pixels, table)
+}
+
+#[test]
+fn table_responses_are_the_plain_correlation_at_every_row_and_edge() {
+    let (width, height) = (37usize, 29usize);
+    let (pixels, table) = random_table(width, height, 4242);
+    let diff = Frame::new(&pixels[..], width, height, width).unwrap();
+    for sigma in [0.6 as Real, 1.0, 2.0] {
+        let (taps, len) = kernel(sigma);
+        let taps = &taps[..len];
+        let k = IntKernel::new(taps).expect("every kernel has an integer form");
+        for rows in [0..3, 3..12, 20..height, 0..height] {
+            for x0 in [0usize, 8, 32] {
+                let col = &table[x0 / 8 * height..(x0 / 8 + 1) * height];
+                let mut seen = Vec::new();
+                faint_sums::column_responses(col, rows.clone(), &k, |v, r| seen.push((v, r)));
+                let plain: Vec<(usize, i32)> = rows
+                    .clone()
+                    .map(|v| (v, plain_response(&diff, x0, 8, v, taps) as i32))
+                    .collect();
+                assert_eq!(seen, plain, "σ {sigma}, rows {rows:?}, block at {x0}");
+                // The noise pass's statistics: Σ|r| and the first strongest positive one.
+                let mut expect = faint_sums::ColumnStats::default();
+                for &(v, r) in &plain {
+                    expect.abs_sum += r.unsigned_abs() as u64;
+                    if r > expect.best {
+                        (expect.best, expect.best_row) = (r, v);
+                    }
+                }
+                assert_eq!(faint_sums::column_stats(col, rows.clone(), &k), expect);
+                // Taken in two parts and merged, as the read-out and the search do.
+                let mid = (rows.start + rows.end) / 2;
+                let mut parts = faint_sums::column_stats(col, rows.start..mid, &k);
+                parts.merge(faint_sums::column_stats(col, mid..rows.end, &k));
+                assert_eq!(parts, expect, "σ {sigma}, rows {rows:?}, split at {mid}");
+            }
+        }
+    }
+}
+
+#[test]
+fn the_read_out_noise_pass_in_steps_is_the_whole_pass() {
+    let (width, height) = (37usize, 61usize);
+    let blocks = width.div_ceil(8);
+    let (_, table) = random_table(width, height, 99);
+    let (taps, len) = kernel(1.0);
+    let k = IntKernel::new(&taps[..len]).unwrap();
+    let band = |blk: usize| (blk * 3)..(height - blk);
+    let mut columns = std::vec![faint_sums::FaintColumn::ZERO; blocks];
+    let mut pass = faint_sums::FaintReadout::begin(k, blocks, height, &mut columns, band).unwrap();
+    // Budgets of 0–3 rows per step, as the rows arrive.
+    let per_row = faint_sums::RESPONSE_COST * blocks as u32;
+    let overhead = faint_sums::COLUMN_COST * blocks as u32;
+    for y in 0..height - 1 {
+        pass.step(&table, &mut columns, y, overhead + per_row * (y % 4) as u32);
+    }
+    let done = pass.rows_done();
+    assert!(
+        done > 10 && done < height - len / 2,
+        "{done} rows in the read-out"
+    );
+    for (blk, c) in columns.iter().enumerate() {
+        let col = &table[blk * height..(blk + 1) * height];
+        assert_eq!(c.band(), band(blk));
+        let mut stats = c.stats();
+        stats.merge(faint_sums::column_stats(
+            col,
+            done.max(band(blk).start)..band(blk).end,
+            &k,
+        ));
+        assert_eq!(
+            stats,
+            faint_sums::column_stats(col, band(blk), &k),
+            "block {blk}"
+        );
+    }
+}
+
+#[test]
+fn the_block_sums_and_the_read_out_pass_change_nothing() {
+    let cal = calibration(1);
+    let (mut off, mut on) = render(&cal, &[0], 1.8, 250..550, 2.5, 60);
+    add_noise(&mut off, &mut on, 1.0, 11);
+    let (off_f, on_f) = frames(&off, &on);
+    let config = PipelineConfig::default();
+    // Everything; no read-out noise pass (the responses after the frame); no table (the
+    // responses from the pixels).
+    let mut results = Vec::new();
+    for case in 0..3 {
+        let mut b = buffers(1);
+        let mut ws = b.workspace();
+        if case >= 1 {
+            ws.faint_columns = &mut [];
+        }
+        if case == 2 {
+            ws.block_sums = &mut [];
+        }
+        let profile = extract_profile(&off_f, &on_f, &cal, &config, &mut ws).unwrap();
+        assert!(profile.faint);
+        let (s, e) = profile.plane_points[0];
+        results.push((profile, ws.curve[s..e].to_vec(), ws.points[s..e].to_vec()));
+    }
+    assert_eq!(results[0], results[1]);
+    assert_eq!(results[0], results[2]);
+    // The first case did take most rows in the read-out (the stream as the device runs it).
+    let mut b = buffers(1);
+    let mut ws = b.workspace();
+    ws.diff[..W * H].copy_from_slice(&off);
+    let mut stream = crate::pipeline::ProfileStream::begin(&mut ws, &cal, &config, 8).unwrap();
+    for block in on.chunks(crate::pipeline::BLOCK_ROWS * W) {
+        stream.push_rows(&mut ws, block).unwrap();
+    }
+    let done = stream.faint_rows_done();
+    assert!(done > H / 2, "{done} rows during the read-out");
+}
+
+#[test]
+fn dual_multiply_accumulate_is_the_lane_arithmetic() {
+    let mut n = Noise(5);
+    for _ in 0..10_000 {
+        let x = [(n.uniform() * 4096.0) as i32, (n.uniform() * 4096.0) as i32];
+        let k = [
+            (n.uniform() * 2048.0) as i32 - 1024,
+            (n.uniform() * 2048.0) as i32 - 1024,
+        ];
+        let acc = (n.uniform() * 1e6) as i32 - 500_000;
+        let pack = |a: [i32; 2]| (a[0] as i16 as u16 as u32) | (a[1] as i16 as u16 as u32) << 16;
+        assert_eq!(
+            faint_sums::dot2(acc, pack(x), pack(k)),
+            acc + x[0] * k[0] + x[1] * k[1]
+        );
     }
 }

@@ -176,6 +176,12 @@ pub(super) struct Subtracted {
     pub(super) stats: SubtractStats,
     /// Noise σ of the difference image (grey levels).
     pub(super) noise: Real,
+    /// Block width of the faint search's block sums gathered during the read-out
+    /// (`Workspace::block_sums`), 0 when none were.
+    pub(super) block_sums: usize,
+    /// Rows of every block's band whose faint-search responses the read-out took into
+    /// `Workspace::faint_columns` (0: none).
+    pub(super) faint_rows: usize,
 }
 
 /// What the streamed front end hands the rest of the chain ([`after_segmentation`]): the

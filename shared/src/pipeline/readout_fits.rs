@@ -235,15 +235,16 @@ impl ReadoutFits {
 
     /// After row `y`, at the end of a block: locates the segments closed before row `y`
     /// whose rows `± half_window` are in, within the block's budget, and renews the budget
-    /// for the next block.
+    /// for the next block. Returns the work the block left of [`BLOCK_WORK`] (the faint
+    /// search's responses may use it: `pipeline::faint_sums`).
     pub(super) fn block_done<P: Pixel>(
         &mut self,
         tables: (&mut [ColumnTrack], &mut [ReadoutFit]),
         diff: &Frame<P, &[P]>,
         y: usize,
-    ) {
+    ) -> u32 {
         if !self.enabled {
-            return;
+            return BLOCK_WORK;
         }
         let (columns, fits) = tables;
         let hw = self.params.half_window as usize;
@@ -256,7 +257,9 @@ impl ReadoutFits {
                 self.locate(track, fits, diff, x, y);
             }
         }
+        let left = BLOCK_WORK.saturating_sub(self.spent);
         self.spent = 0;
+        left
     }
 
     /// Whether this block's work allows one more point.

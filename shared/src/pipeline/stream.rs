@@ -30,6 +30,7 @@ use crate::image::{Frame, FrameError, Pixel};
 use crate::real::Real;
 
 use super::faint;
+use super::faint_sums::{self, FaintReadout, IntKernel};
 use super::profile::{self, Profile, Stage};
 use super::readout_fits::ReadoutFits;
 use super::workspace::need;
@@ -74,6 +75,12 @@ pub struct ProfileStream {
     overflow: bool,
     /// The curve points located as their rows arrive (`pipeline::readout_fits`).
     readout: ReadoutFits,
+    /// Block width of the faint search's block sums gathered as the rows arrive
+    /// (`pipeline::faint_sums`), 0 when they are not.
+    sums_block: usize,
+    /// The faint search's noise pass during the read-out, when it runs
+    /// (`pipeline::faint_sums`).
+    faint: Option<FaintReadout>,
 }
 
 impl ProfileStream {
@@ -120,6 +127,30 @@ impl ProfileStream {
             config.extract,
             config.floors,
         );
+        let sums_block = faint_sums::table_block(
+            config.faint,
+            (width, height),
+            bit_depth,
+            ws.block_sums.len(),
+        );
+        let faint = match config.faint {
+            Some(params) if sums_block != 0 => {
+                let (taps, len) = faint::kernel(params.profile_sigma_px);
+                IntKernel::new(&taps[..len]).and_then(|kernel| {
+                    FaintReadout::begin(
+                        kernel,
+                        width.div_ceil(sums_block),
+                        height,
+                        ws.faint_columns,
+                        |blk| {
+                            let x0 = blk * sums_block;
+                            faint::band_rows(calibration, &params, x0, (x0 + sums_block).min(width))
+                        },
+                    )
+                })
+            }
+            _ => None,
+        };
         Ok(ProfileStream {
             width,
             height,
@@ -130,12 +161,21 @@ impl ProfileStream {
             candidates: 0,
             overflow: false,
             readout,
+            sums_block,
+            faint,
         })
     }
 
     /// Rows received so far.
     pub fn rows_received(&self) -> usize {
         self.next_row
+    }
+
+    /// Rows of every block's band whose faint-search responses the read-out has taken so far
+    /// (`pipeline::faint_sums`).
+    #[cfg(test)]
+    pub(super) fn faint_rows_done(&self) -> usize {
+        self.faint.map_or(0, |f| f.rows_done())
     }
 
     /// The next rows of the laser-on frame (a whole number of rows of `width` pixels): each
@@ -163,7 +203,21 @@ impl ProfileStream {
                     actual: ws.diff.len(),
                 });
             };
-            self.difference.row(on, off_diff, ws.histogram);
+            // The faint search's block sums, in the subtraction's pass for blocks of 8.
+            match self.sums_block {
+                0 => self.difference.row(on, off_diff, ws.histogram),
+                8 => self.difference.row_with_block_sums(
+                    on,
+                    off_diff,
+                    ws.histogram,
+                    ws.block_sums,
+                    (y, self.height),
+                ),
+                b => {
+                    self.difference.row(on, off_diff, ws.histogram);
+                    faint_sums::gather_row(off_diff, b, y, self.height, ws.block_sums);
+                }
+            }
             if !self.overflow {
                 let first = self.candidates;
                 let found = segment::row_runs(
@@ -191,8 +245,13 @@ impl ProfileStream {
             self.next_row += 1;
             if self.next_row.is_multiple_of(BLOCK_ROWS) && self.next_row < self.height {
                 let diff = self.diff_frame(ws.diff)?;
-                self.readout
+                let left = self
+                    .readout
                     .block_done((ws.column_tracks, ws.readout_fits), &diff, y);
+                // The faint search's noise pass in the work the curve points left.
+                if let Some(faint) = self.faint.as_mut() {
+                    faint.step(ws.block_sums, ws.faint_columns, y, left);
+                }
             }
         }
         Ok(())
@@ -245,6 +304,8 @@ impl ProfileStream {
             candidates,
             overflow,
             readout,
+            sums_block,
+            faint: faint_readout,
         } = self;
         let cam = &calibration.camera;
         if (cam.width as usize, cam.height as usize) != (width, height) {
@@ -272,6 +333,8 @@ impl ProfileStream {
             bit_depth,
             stats,
             noise,
+            block_sums: sums_block,
+            faint_rows: faint_readout.map_or(0, |f| f.rows_done()),
         };
         // The thresholded chain; where it finds no stripe, the faint search may
         // (`faint::or_search`).

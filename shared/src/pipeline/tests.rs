@@ -13,8 +13,8 @@ use std::vec::Vec;
 /// A borrowed 8-bit frame.
 pub(crate) type View<'a> = Frame<u8, &'a [u8]>;
 
-const W: usize = 752;
-const H: usize = 480;
+pub(crate) const W: usize = 752;
+pub(crate) const H: usize = 480;
 
 pub(crate) fn buffers(planes: usize) -> OwnedBuffers<u8> {
     OwnedBuffers::for_frame(W, H, 8, planes)

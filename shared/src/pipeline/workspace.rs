@@ -44,6 +44,15 @@ pub struct Workspace<'a, P: Pixel> {
     pub scratch_points: &'a mut [Vec2],
     /// Solver scratch: residuals (same length as `curve`).
     pub scratch_values: &'a mut [Real],
+    /// The faint search's column sums of the difference frame, one per block of
+    /// `FaintParams::block_columns` columns and row, block-major (`block × height + row`),
+    /// gathered as the rows arrive (`pipeline::stream`); a table shorter than
+    /// `blocks × height` turns that off (same results, the search then reads the pixels).
+    pub block_sums: &'a mut [u16],
+    /// Each block's faint-search noise statistics, from the responses computed during the
+    /// read-out where its budget allowed (`pipeline::faint_sums`); shorter than the blocks
+    /// turns that off (same results, the responses are then all computed after the frame).
+    pub faint_columns: &'a mut [super::faint_sums::FaintColumn],
 }
 
 /// Buffer lengths a [`Workspace`] needs.
@@ -65,6 +74,10 @@ pub struct WorkspaceSizes {
     pub readout_fits: usize,
     /// Curve, 3-D point, point-σ and solver-scratch entries.
     pub points: usize,
+    /// Block sums of the faint search (blocks of 8 columns × rows).
+    pub block_sums: usize,
+    /// Blocks of the faint search (of 8 columns).
+    pub faint_columns: usize,
 }
 
 impl WorkspaceSizes {
@@ -92,6 +105,8 @@ impl WorkspaceSizes {
             columns: width,
             readout_fits: MAX_READOUT_FITS,
             points: width * planes * 2,
+            block_sums: width.div_ceil(8) * height,
+            faint_columns: width.div_ceil(8),
         }
     }
 }

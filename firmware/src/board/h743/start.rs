@@ -55,6 +55,7 @@ crate::buffers::board_buffers! {
     #[link_section = ".sram123"] small;
     objects;
     #[link_section = ".sram4"] readout;
+    #[link_section = ".axisram"] faint;
 }
 
 /// The clock tree: 64 MHz HSI → PLL1 (÷4 × 60 ÷ 2): 480 MHz core at voltage scale 0 (the
