@@ -80,10 +80,33 @@ struct CylState {
     r: Real,
 }
 
+/// A normalised point with its weight, as [`cyl_accumulate`] reads it: a pair, or a row of
+/// the weighted fit's tables read in place (mapping the tables into pairs was a call per point
+/// on the device).
+trait WeightedPoint {
+    /// The point `y` and its weight.
+    fn get(self) -> (Vec3, Real);
+}
+
+impl WeightedPoint for (Vec3, Real) {
+    #[inline(always)]
+    fn get(self) -> (Vec3, Real) {
+        self
+    }
+}
+
+impl WeightedPoint for (&[Real], &Real) {
+    #[inline(always)]
+    fn get(self) -> (Vec3, Real) {
+        let (y, w) = self;
+        (Vec3::new(y[0], y[1], y[2]), *w)
+    }
+}
+
 /// The normal equations `JᵀWJ`, `JᵀWd`, the cost `Σwd²` and the number of points with
 /// weight, over normalised points `y` with their weights `w` (points without weight skipped).
-fn cyl_accumulate(
-    points: impl Iterator<Item = (Vec3, Real)>,
+fn cyl_accumulate<T: WeightedPoint>(
+    points: impl Iterator<Item = T>,
     st: &CylState,
 ) -> (M5, V5, Real, usize) {
     let (e1, e2) = basis(st.u);
@@ -91,7 +114,8 @@ fn cyl_accumulate(
     let mut jtd = V5::zeros();
     let mut cost = 0.0;
     let mut n = 0;
-    for (y, weight) in points {
+    for point in points {
+        let (y, weight) = point.get();
         if !(weight > 0.0) {
             continue;
         }
@@ -146,7 +170,7 @@ struct CylinderProblem<P> {
     settle: Real,
 }
 
-impl<P: Fn() -> I, I: Iterator<Item = (Vec3, Real)>> LeastSquares<5> for CylinderProblem<P> {
+impl<P: Fn() -> I, I: Iterator<Item = T>, T: WeightedPoint> LeastSquares<5> for CylinderProblem<P> {
     type Params = CylState;
     type Extra = ();
 

@@ -164,11 +164,7 @@ pub fn fit_cylinder_weighted(
         }
         let table = &*weights;
         let problem = CylinderProblem {
-            points: || {
-                ys.chunks_exact(3)
-                    .zip(table.iter())
-                    .map(|(y, w)| (Vec3::new(y[0], y[1], y[2]), *w))
-            },
+            points: || ys.chunks_exact(3).zip(table.iter()),
             settle: SETTLED_CHI2,
         };
         let begin = Evaluated::at(&problem, st)?;
@@ -203,12 +199,7 @@ pub fn fit_cylinder_weighted(
         }
     }
     let table = &*weights;
-    let (jtj, _, chi2, used) = cyl_accumulate(
-        ys.chunks_exact(3)
-            .zip(table.iter())
-            .map(|(y, w)| (Vec3::new(y[0], y[1], y[2]), *w)),
-        &st,
-    );
+    let (jtj, _, chi2, used) = cyl_accumulate(ys.chunks_exact(3).zip(table.iter()), &st);
     let r = st.r.abs();
     if !(r > 0.0 && r.is_finite()) || used < 6 {
         return Err(SolveError::Degenerate);
