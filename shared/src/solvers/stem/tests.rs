@@ -274,7 +274,8 @@ fn edge_bias_sigma_measures_the_fade_gap() {
     );
 }
 
-/// [`solve`] on `curves` with scratch for curves of up to 1,600 points.
+/// [`solve`] on `curves` with scratch for curves of up to 1,600 points (on two planes, the
+/// cylinder fit's tables for up to 1,777 points per curve).
 fn read_with(
     curves: &[&[Vec3]],
     sigmas: &[&[Real]],
@@ -282,7 +283,7 @@ fn read_with(
     params: &CylinderParams,
 ) -> CylinderSolution {
     let mut pts = std::vec![Vec2::zeros(); 1600];
-    let mut vals = std::vec![0.0; 6400];
+    let mut vals = std::vec![0.0; 32_000];
     solve(
         &CylinderInput {
             curves,
