@@ -36,7 +36,7 @@ pub use budget::POINT_BUDGET;
 use level::LevelMap;
 use sigma::{
     arc_angle, elliptic_diameter, noise_vector, one_point_sigma, projected_section, robust_circle,
-    three_tangent_variance,
+    three_tangent_variance, Start,
 };
 pub use sigma::{edge_bias_sigma, BENDING_FRACTION};
 
@@ -244,6 +244,7 @@ fn solve_plane(
     let near_sigma = |q: Vec2| norm(&noise_at(q));
     let fit = robust_circle(
         pts,
+        Start::Fit,
         near_sigma,
         noise_of,
         params,

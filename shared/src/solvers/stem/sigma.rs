@@ -221,7 +221,7 @@ pub(super) fn projected_section(
         Vec2::new(g.dot(&e1), g.dot(&e2))
     };
     let pts = &scratch.points[..n];
-    let rc = robust_circle_from(
+    let rc = robust_circle(
         pts,
         Start::At(section),
         near_sigma,
@@ -241,6 +241,7 @@ pub(super) fn projected_section(
     let ellipse = if roundness && !cleared(&section, rc.cutoff) {
         robust_circle(
             pts,
+            Start::Fit,
             near_sigma,
             noise_of,
             params,
@@ -278,22 +279,7 @@ pub(super) struct RobustCircle {
     pub(super) pull: Real,
 }
 
-/// [`RobustCircle`] of `pts`: Hyper start ([`start_circle`]), robust fit with the scale floor `near_sigma` of the
-/// start's point nearest the source (origin), the residual sandwich and the bending term with
-/// the points' noise vectors `noise(i)`; the radius's pull only when `pull` asks for it. `None` when a fit fails or the start circle is
-/// centred on the source.
-pub(super) fn robust_circle(
-    pts: &[Vec2],
-    near_sigma: impl Fn(Vec2) -> Real,
-    noise: impl Fn(usize) -> Vec2,
-    params: &CylinderParams,
-    pull: circle::Pull,
-    values: &mut [Real],
-) -> Option<RobustCircle> {
-    robust_circle_from(pts, Start::Fit, near_sigma, noise, params, pull, values)
-}
-
-/// Where [`robust_circle_from`] takes its circle.
+/// Where [`robust_circle`] takes its circle.
 pub(super) enum Start {
     /// The whole-arc fit from [`start_circle`].
     Fit,
@@ -301,8 +287,13 @@ pub(super) enum Start {
     At(circle::Circle),
 }
 
-/// [`robust_circle`], or with [`Start::At`] its terms about a given circle.
-fn robust_circle_from(
+/// [`RobustCircle`] of `pts`: with [`Start::Fit`] the robust whole-arc fit from the Hyper start
+/// ([`start_circle`]), with [`Start::At`] its terms about a given circle without a fit; the
+/// scale floor `near_sigma` of the start's point nearest the source (origin), the residual
+/// sandwich and the bending term with the points' noise vectors `noise(i)`; the radius's pull
+/// only when `pull` asks for it (and a fit ran). `None` when a fit fails or the start circle is
+/// centred on the source.
+pub(super) fn robust_circle(
     pts: &[Vec2],
     start: Start,
     near_sigma: impl Fn(Vec2) -> Real,
