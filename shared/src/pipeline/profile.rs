@@ -116,19 +116,23 @@ pub fn point_sigmas(
     curve: &[CurvePoint],
     sigmas: &mut [Real],
 ) -> Result<(), PipelineError> {
+    // Per point only what depends on the point (the same operations as
+    // `stripe_centre_px` and `displacement_sigma`).
+    let centre = noise.stripe_centre(profile.noise);
     for (plane, &(s, e)) in profile.plane_points.iter().enumerate().take(profile.planes) {
         need("sigmas", e, sigmas.len())?;
         let model = planes.get(plane).ok_or(PipelineError::Calibration)?;
+        let per_pixel = noise::PerPixel::of(model, focal_px);
         let points = profile.points(points, plane);
         let curve = curve.get(s..e).unwrap_or(&[]);
         let Some(sigmas) = sigmas.get_mut(s..e) else {
             continue;
         };
         for (i, (sigma, x)) in sigmas.iter_mut().zip(points).enumerate() {
-            let sigma_px = curve.get(i).map_or(noise.image_px(), |c| {
-                noise.stripe_centre_px(c.amplitude, c.width, profile.noise)
-            });
-            *sigma = noise::displacement_sigma(model, focal_px, *x, sigma_px).unwrap_or(0.0);
+            let sigma_px = curve
+                .get(i)
+                .map_or(centre.image_px(), |c| centre.px(c.amplitude, c.width));
+            *sigma = per_pixel.sigma(*x, sigma_px).unwrap_or(0.0);
         }
     }
     Ok(())
