@@ -484,7 +484,10 @@ pub fn smooth(points: &mut [CurvePoint], params: &SmoothParams) -> Result<(), Cu
                 next = next_of(points, c, j);
             }
             // Only curve c's points between s and end: the run is a plain slice.
-            match points.get_mut(s..s + count).filter(|_| end + 1 == s + count) {
+            match points
+                .get_mut(s..s + count)
+                .filter(|_| end + 1 == s + count)
+            {
                 Some(run) => smooth_contiguous(run, h),
                 None => smooth_run(points, c, s, count, h),
             }

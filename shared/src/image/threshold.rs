@@ -163,9 +163,7 @@ pub fn otsu_threshold(hist: &[u32]) -> Result<u32, ThresholdError> {
     // device) they are exact in `i64` and convert exactly with `exact_f64`, the same `f64`s
     // as the `i128` path's library conversions, which cost ~170 instructions a level on
     // the device (`docs/performance.md`, issue 17).
-    let small = n_total
-        .checked_mul(s_total)
-        .is_some_and(|p| p < EXACT_F64);
+    let small = n_total.checked_mul(s_total).is_some_and(|p| p < EXACT_F64);
     let mut n0: u64 = 0;
     let mut s0: u64 = 0;
     let mut best: Option<(f64, usize)> = None;
@@ -181,13 +179,13 @@ pub fn otsu_threshold(hist: &[u32]) -> Result<u32, ThresholdError> {
         }
         let (num, n0f, n1f) = if small {
             let num = n_total as i64 * s0 as i64 - s_total as i64 * n0 as i64;
-            (
-                exact_f64(num),
-                exact_f64(n0 as i64),
-                exact_f64(n1 as i64),
-            )
+            (exact_f64(num), exact_f64(n0 as i64), exact_f64(n1 as i64))
         } else {
-            ((n * s0 as i128 - s * n0 as i128) as f64, n0 as f64, n1 as f64)
+            (
+                (n * s0 as i128 - s * n0 as i128) as f64,
+                n0 as f64,
+                n1 as f64,
+            )
         };
         let crit = num * num / (n0f * n1f);
         if best.is_none_or(|(b, _)| crit > b) {
@@ -448,7 +446,18 @@ mod tests {
     #[test]
     fn exact_f64_is_the_conversion() {
         let big = (EXACT_F64 - 1) as i64;
-        for v in [0i64, 1, -1, 12345, -98765, 1 << 32, -(1 << 32), (1 << 40) + 3, big, -big] {
+        for v in [
+            0i64,
+            1,
+            -1,
+            12345,
+            -98765,
+            1 << 32,
+            -(1 << 32),
+            (1 << 40) + 3,
+            big,
+            -big,
+        ] {
             assert_eq!(exact_f64(v).to_bits(), (v as f64).to_bits(), "{v}");
         }
     }

@@ -105,9 +105,10 @@ pub(super) fn grow_curves<P: Pixel>(
 
 /// Moves the `g` points grown at `curve[n..n + g]` (outward order: reversed first when
 /// `reverse`) to `curve[at..]`, shifting `curve[at..n]` up by `g`. Through the free tail
-/// beyond them where it has room: one block move of the points after `at`, where rotating
-/// them into place swapped them element by element (27,000 instructions for the tilted stem's
-/// four ends on the device, `docs/performance.md`, issue 17); else the rotation.
+/// beyond them where it has room: the grown points parked there and the points after `at`
+/// moved once, where rotating them into place swapped them element by element (27,000
+/// instructions for the tilted stem's four ends on the device, `docs/performance.md`,
+/// issue 17); else the rotation.
 fn insert_grown(curve: &mut [CurvePoint], at: usize, n: usize, g: usize, reverse: bool) {
     if n + 2 * g <= curve.len() {
         let (body, spare) = curve.split_at_mut(n + g);
