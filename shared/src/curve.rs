@@ -470,13 +470,24 @@ pub fn smooth(points: &mut [CurvePoint], params: &SmoothParams) -> Result<(), Cu
         let mut start = points.iter().position(|p| p.curve == c);
         while let Some(s) = start {
             // The run: s, then successors while the columns are contiguous and rows close.
-            let mut end = s;
-            let mut count = 1usize;
-            let mut next = next_of(points, c, s);
+            let joined = |a: &CurvePoint, b: &CurvePoint| {
+                b.column as u32 == a.column as u32 + 1
+                    && (b.row - a.row).abs() <= params.max_row_jump
+            };
+            // First the successors that are the next points (one curve per plane: all of
+            // them), pairwise without the search for the next point.
+            let consecutive = points
+                .get(s..)
+                .unwrap_or(&[])
+                .windows(2)
+                .take_while(|w| w[1].curve == c && joined(&w[0], &w[1]))
+                .count();
+            let mut end = s + consecutive;
+            let mut count = 1 + consecutive;
+            let mut next = next_of(points, c, end);
             while let (Some(j), Some(a)) = (next, points.get(end)) {
                 let Some(b) = points.get(j) else { break };
-                let contiguous = b.column as u32 == a.column as u32 + 1;
-                if !contiguous || !((b.row - a.row).abs() <= params.max_row_jump) {
+                if !joined(a, b) {
                     break;
                 }
                 end = j;
