@@ -71,6 +71,7 @@ pub struct Distortion {
 
 impl Distortion {
     /// True when every coefficient is zero (pure pinhole camera).
+    #[inline]
     pub fn is_zero(&self) -> bool {
         self.k1 == 0.0 && self.k2 == 0.0 && self.k3 == 0.0 && self.p1 == 0.0 && self.p2 == 0.0
     }
@@ -317,14 +318,24 @@ impl Camera {
     /// is tried. The result is accepted only if its reprojection residual is below
     /// [`Camera::undistort_tolerance_px`] and it lies inside the validity region
     /// ([`Distortion::radially_monotone_up_to`]). `docs/camera-model.md`, "Inverse".
+    ///
+    /// Inlined up to the iteration, so that a camera without distortion costs a triangulated
+    /// point only the two checks (`docs/performance.md`, issue 17).
+    #[inline]
     pub fn undistort(&self, distorted: Vec2) -> Result<Vec2, CameraError> {
         if !(distorted.x.is_finite() && distorted.y.is_finite()) {
             return Err(CameraError::NonFinite);
         }
-        let dist = &self.distortion;
-        if dist.is_zero() {
+        if self.distortion.is_zero() {
             return Ok(distorted);
         }
+        self.undistort_iterative(distorted)
+    }
+
+    /// [`Camera::undistort`] of a finite point with a distortion: the iteration and its
+    /// acceptance.
+    fn undistort_iterative(&self, distorted: Vec2) -> Result<Vec2, CameraError> {
+        let dist = &self.distortion;
         let tol_px = self.undistort_tolerance_px(distorted);
         let residual_px = |p: Vec2| {
             let r = dist.apply(p) - distorted;

@@ -470,20 +470,38 @@ pub fn smooth(points: &mut [CurvePoint], params: &SmoothParams) -> Result<(), Cu
         let mut start = points.iter().position(|p| p.curve == c);
         while let Some(s) = start {
             // The run: s, then successors while the columns are contiguous and rows close.
-            let mut end = s;
-            let mut count = 1usize;
-            let mut next = next_of(points, c, s);
+            let joined = |a: &CurvePoint, b: &CurvePoint| {
+                b.column as u32 == a.column as u32 + 1
+                    && (b.row - a.row).abs() <= params.max_row_jump
+            };
+            // First the successors that are the next points (one curve per plane: all of
+            // them), pairwise without the search for the next point.
+            let consecutive = points
+                .get(s..)
+                .unwrap_or(&[])
+                .windows(2)
+                .take_while(|w| w[1].curve == c && joined(&w[0], &w[1]))
+                .count();
+            let mut end = s + consecutive;
+            let mut count = 1 + consecutive;
+            let mut next = next_of(points, c, end);
             while let (Some(j), Some(a)) = (next, points.get(end)) {
                 let Some(b) = points.get(j) else { break };
-                let contiguous = b.column as u32 == a.column as u32 + 1;
-                if !contiguous || !((b.row - a.row).abs() <= params.max_row_jump) {
+                if !joined(a, b) {
                     break;
                 }
                 end = j;
                 count += 1;
                 next = next_of(points, c, j);
             }
-            smooth_run(points, c, s, count, h);
+            // Only curve c's points between s and end: the run is a plain slice.
+            match points
+                .get_mut(s..s + count)
+                .filter(|_| end + 1 == s + count)
+            {
+                Some(run) => smooth_contiguous(run, h),
+                None => smooth_run(points, c, s, count, h),
+            }
             start = next;
         }
     }
@@ -542,6 +560,77 @@ fn smooth_run(points: &mut [CurvePoint], c: u8, start: usize, n: usize, h: usize
             n => taps(&coefficients, &val, first, n),
         };
         if let Some(p) = points.get_mut(idx[k & MASK]) {
+            p.row = acc;
+        }
+    }
+}
+
+/// [`smooth_run`] of a run whose points are consecutive (`run`, the common case: one curve
+/// per plane): no index ring and no search for the next point, and the full windows of the
+/// run's middle in one loop with the window's taps unrolled. Same taps in the same order,
+/// so the same rows (this was most of the smoothing's cost on the device,
+/// `docs/performance.md`, issue 17).
+fn smooth_contiguous(run: &mut [CurvePoint], h: usize) {
+    let n = run.len();
+    // Ring of the run's original rows: row k lives at slot k & MASK (see `smooth_run`).
+    let mut val = [0.0 as Real; RING];
+    let mut coefficients = [0.0 as Real; RING];
+    let mut coefficients_half = 0usize;
+    let mut loaded = 0usize;
+    let mut k = 0usize;
+    while k < n {
+        let half = h.min(k).min(n - 1 - k);
+        while loaded <= k + half {
+            val[loaded & MASK] = run.get(loaded).map_or(0.0, |p| p.row);
+            loaded += 1;
+        }
+        if half < 2 {
+            k += 1;
+            continue;
+        }
+        if half != coefficients_half {
+            for (j, w) in (-(half as isize)..=half as isize).zip(coefficients.iter_mut()) {
+                *w = savitzky_golay(half, j);
+            }
+            coefficients_half = half;
+        }
+        if half == h {
+            // The full windows: k ..= n − 1 − h, each loading row k + h.
+            let middle = k..n - h;
+            k = middle.end;
+            match 2 * h + 1 {
+                5 => full_windows(run, &mut val, &coefficients, middle, h, 5),
+                7 => full_windows(run, &mut val, &coefficients, middle, h, 7),
+                9 => full_windows(run, &mut val, &coefficients, middle, h, 9),
+                taps => full_windows(run, &mut val, &coefficients, middle, h, taps),
+            }
+            loaded = k + h;
+            continue;
+        }
+        let acc = taps(&coefficients, &val, k - half, 2 * half + 1);
+        if let Some(p) = run.get_mut(k) {
+            p.row = acc;
+        }
+        k += 1;
+    }
+}
+
+/// The full windows `ks` of [`smooth_contiguous`], each loading its last row `k + h` (still
+/// the original: only rows before `k` are written). Inlined, so that a literal `n` unrolls
+/// the taps.
+#[inline(always)]
+fn full_windows(
+    run: &mut [CurvePoint],
+    val: &mut [Real; RING],
+    c: &[Real; RING],
+    ks: core::ops::Range<usize>,
+    h: usize,
+    n: usize,
+) {
+    for k in ks {
+        val[(k + h) & MASK] = run.get(k + h).map_or(0.0, |p| p.row);
+        let acc = taps(c, val, k - h, n);
+        if let Some(p) = run.get_mut(k) {
             p.row = acc;
         }
     }

@@ -416,7 +416,7 @@ impl std::error::Error for TriangulationError {}
 
 /// Triangulates one (distorted) pixel of the laser curve: undistort → ray → intersection
 /// with the laser plane. Returns the 3-D point in the camera frame (metres).
-#[inline]
+#[inline(always)]
 pub fn triangulate(
     camera: &Camera,
     plane: &LaserPlane,

@@ -117,13 +117,21 @@ impl NoiseModel {
     /// amplitude is unknown or not positive, or `width_px` is not positive, the model's
     /// [`NoiseModel::image_px`] stands.
     pub fn stripe_centre_px(&self, amplitude: Real, width_px: Real, noise_dn: Real) -> Real {
-        if !(amplitude > 0.0 && width_px > 0.0 && noise_dn >= 0.0 && amplitude.is_finite()) {
-            return self.image_px();
-        }
-        let noise = sqrt(noise_dn * noise_dn + 1.0 / 12.0);
-        let estimator = noise / amplitude * sqrt(2.0 * width_px / sqrt(PI));
+        self.stripe_centre(noise_dn).px(amplitude, width_px)
+    }
+
+    /// [`NoiseModel::stripe_centre_px`] under noise `noise_dn` for many points: what does not
+    /// depend on the point computed once (the pipeline's per-point cost on the device,
+    /// `docs/performance.md`, issue 17).
+    pub fn stripe_centre(&self, noise_dn: Real) -> StripeCentreSigma {
         let speckle = self.speckle_px();
-        sqrt(estimator * estimator + speckle * speckle)
+        StripeCentreSigma {
+            fallback: self.image_px(),
+            noise_known: noise_dn >= 0.0,
+            noise: sqrt(noise_dn * noise_dn + 1.0 / 12.0),
+            speckle_squared: speckle * speckle,
+            sqrt_pi: sqrt(PI),
+        }
     }
 
     /// σ of one grazing-ray angle (radians): `edge_px / f` (a column is `1/f` rad near the
@@ -134,6 +142,40 @@ impl NoiseModel {
         } else {
             Real::INFINITY
         }
+    }
+}
+
+/// [`NoiseModel::stripe_centre_px`] with the model and the image noise fixed
+/// ([`NoiseModel::stripe_centre`]): the same σ, the same operations.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StripeCentreSigma {
+    /// [`NoiseModel::image_px`], where the point's amplitude or width says nothing.
+    fallback: Real,
+    /// The image noise is not negative (nor NaN).
+    noise_known: bool,
+    /// `√(σ_n² + 1/12)`.
+    noise: Real,
+    /// [`NoiseModel::speckle_px`]².
+    speckle_squared: Real,
+    /// `√π`.
+    sqrt_pi: Real,
+}
+
+impl StripeCentreSigma {
+    /// σ (pixels) of the stripe centre of peak `amplitude` and σ `width_px`
+    /// ([`NoiseModel::stripe_centre_px`]).
+    #[inline]
+    pub fn px(&self, amplitude: Real, width_px: Real) -> Real {
+        if !(amplitude > 0.0 && width_px > 0.0 && self.noise_known && amplitude.is_finite()) {
+            return self.fallback;
+        }
+        let estimator = self.noise / amplitude * sqrt(2.0 * width_px / self.sqrt_pi);
+        sqrt(estimator * estimator + self.speckle_squared)
+    }
+
+    /// [`NoiseModel::image_px`].
+    pub fn image_px(&self) -> Real {
+        self.fallback
     }
 }
 
@@ -151,14 +193,53 @@ pub fn displacement_per_pixel(
     focal_px: Real,
     x: Vec3,
 ) -> Result<Vec3, NoiseError> {
-    if !(x.z > 0.0 && x.z.is_finite() && focal_px > 0.0 && plane.offset > 0.0) {
-        return Err(NoiseError::InvalidGeometry);
+    PerPixel::of(plane, focal_px).at(x)
+}
+
+/// [`displacement_per_pixel`] over one plane and focal length: the stripe's axis and
+/// `∂r/∂v` found once, the same operations per point (the pipeline's per-point cost on the
+/// device, `docs/performance.md`, issue 17).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PerPixel {
+    /// `∂r/∂v` (or `∂r/∂u` for a row-wise plane).
+    dr: Vec3,
+    /// The normal's component along the stripe's axis.
+    normal_a: Real,
+    /// The plane's offset `d`.
+    offset: Real,
+    /// Focal length (pixels).
+    focal_px: Real,
+}
+
+impl PerPixel {
+    /// The derivative's constants for `plane` at focal length `focal_px` (pixels).
+    #[inline]
+    pub fn of(plane: &LaserPlane, focal_px: Real) -> Self {
+        // A row-wise plane's stripe moves along the rows (∂/∂u, `n_x`): the same formula
+        // with x and y swapped (`pipeline::crossing`).
+        let (axis, normal_a) = stripe_axis(plane);
+        PerPixel {
+            dr: axis / focal_px,
+            normal_a,
+            offset: plane.offset,
+            focal_px,
+        }
     }
-    // A row-wise plane's stripe moves along the rows (∂/∂u, `n_x`): the same formula with
-    // x and y swapped (`pipeline::crossing`).
-    let (axis, n_a) = stripe_axis(plane);
-    let dr = axis / focal_px;
-    Ok(dr * x.z - x * (x.z / plane.offset * n_a / focal_px))
+
+    /// [`displacement_per_pixel`] at the point `x` (camera frame).
+    #[inline]
+    pub fn at(&self, x: Vec3) -> Result<Vec3, NoiseError> {
+        if !(x.z > 0.0 && x.z.is_finite() && self.focal_px > 0.0 && self.offset > 0.0) {
+            return Err(NoiseError::InvalidGeometry);
+        }
+        Ok(self.dr * x.z - x * (x.z / self.offset * self.normal_a / self.focal_px))
+    }
+
+    /// [`displacement_sigma`] at the point `x` for `sigma_px` pixels of stripe-centre noise.
+    #[inline]
+    pub fn sigma(&self, x: Vec3, sigma_px: Real) -> Result<Real, NoiseError> {
+        Ok(norm(&self.at(x)?) * sigma_px)
+    }
 }
 
 /// The image axis along which depth moves `plane`'s stripe, as a camera-frame unit vector,
@@ -181,7 +262,7 @@ pub fn displacement_sigma(
     x: Vec3,
     sigma_px: Real,
 ) -> Result<Real, NoiseError> {
-    Ok(norm(&displacement_per_pixel(plane, focal_px, x)?) * sigma_px)
+    PerPixel::of(plane, focal_px).sigma(x, sigma_px)
 }
 
 /// The direction of [`displacement_per_pixel`] over one laser plane. Every image column's

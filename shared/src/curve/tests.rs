@@ -4,6 +4,7 @@
 #![allow(clippy::unnecessary_cast, clippy::type_complexity)]
 
 use super::*;
+extern crate std;
 
 const W: usize = 40;
 const H: usize = 48;
@@ -228,6 +229,39 @@ fn pt(column: u16, row: Real, curve: u8) -> CurvePoint {
         curve,
         saturated: false,
         width: 1.0,
+    }
+}
+
+/// A curve's run smoothed alone (consecutive points: `smooth_contiguous`) and interleaved with
+/// another curve (the index ring of `smooth_run`) gets the same rows, bit for bit, for every
+/// half window and run length, the short runs whose windows are never full included.
+#[test]
+fn consecutive_and_interleaved_runs_are_smoothed_alike() {
+    let row = |x: u16| 10.0 + 0.3 * x as Real + 0.37 * libm::sin(x as f64 * 1.7) as Real;
+    for half_window in 2..=MAX_SMOOTH_HALF_WINDOW {
+        for len in [1u16, 3, 5, 6, 9, 17, 40] {
+            let params = SmoothParams {
+                half_window,
+                max_row_jump: 2.0,
+            };
+            let mut alone: std::vec::Vec<CurvePoint> = (0..len).map(|x| pt(x, row(x), 0)).collect();
+            let mut mixed: std::vec::Vec<CurvePoint> = (0..len)
+                .flat_map(|x| [pt(x, row(x), 0), pt(x, 30.0, 1)])
+                .collect();
+            smooth(&mut alone, &params).unwrap();
+            smooth(&mut mixed, &params).unwrap();
+            let rows = |v: &[CurvePoint]| -> std::vec::Vec<u64> {
+                v.iter()
+                    .filter(|p| p.curve == 0)
+                    .map(|p| p.row.to_bits() as u64)
+                    .collect()
+            };
+            assert_eq!(
+                rows(&alone),
+                rows(&mixed),
+                "half window {half_window}, {len} points"
+            );
+        }
     }
 }
 

@@ -90,12 +90,8 @@ pub(super) fn grow_curves<P: Pixel>(
                 continue;
             }
             // The grown points sit at `n..n + g`, outward from the end; move them into place.
-            if leftward {
-                curve[n..n + g].reverse();
-                curve[s..n + g].rotate_right(g);
-            } else {
-                curve[e..n + g].rotate_right(g);
-            }
+            let at = if leftward { s } else { e };
+            insert_grown(curve, at, n, g, leftward);
             plane_points[plane].1 += g;
             for later in plane_points.iter_mut().take(n_planes).skip(plane + 1) {
                 later.0 += g;
@@ -105,6 +101,34 @@ pub(super) fn grow_curves<P: Pixel>(
         }
     }
     n
+}
+
+/// Moves the `g` points grown at `curve[n..n + g]` (outward order: reversed first when
+/// `reverse`) to `curve[at..]`, shifting `curve[at..n]` up by `g`. Through the free tail
+/// beyond them where it has room: the grown points parked there and the points after `at`
+/// moved once, where rotating them into place swapped them element by element (27,000
+/// instructions for the tilted stem's four ends on the device, `docs/performance.md`,
+/// issue 17); else the rotation.
+fn insert_grown(curve: &mut [CurvePoint], at: usize, n: usize, g: usize, reverse: bool) {
+    if n + 2 * g <= curve.len() {
+        let (body, spare) = curve.split_at_mut(n + g);
+        let parked = &mut spare[..g];
+        parked.copy_from_slice(&body[n..]);
+        if reverse {
+            parked.reverse();
+        }
+        // Point by point from the top (the ranges overlap): a point's four words per step,
+        // where the library's `memmove` took about twice as many instructions.
+        for i in (at..n).rev() {
+            body[i + g] = body[i];
+        }
+        body[at..at + g].copy_from_slice(parked);
+    } else {
+        if reverse {
+            curve[n..n + g].reverse();
+        }
+        curve[at..n + g].rotate_right(g);
+    }
 }
 
 /// Grows one end of the plane's curve `curve[s..e]` into `curve[n..]`; returns the number of

@@ -168,3 +168,29 @@ fn grown_points_from_the_readout_are_those_located_after_the_frame() {
     assert_eq!(early, late);
     assert_eq!(early_curve, ws.curve[s..e].to_vec());
 }
+
+/// Moving the grown points through the free tail gives the rotation's order, at either end
+/// (reversed or not) and whether or not the tail has room.
+#[test]
+fn grown_points_go_where_the_rotation_put_them() {
+    let point = |i: usize| CurvePoint {
+        column: i as u16,
+        row: i as Real,
+        ..CurvePoint::ZERO
+    };
+    let (n, g) = (23, 5);
+    for reverse in [false, true] {
+        for at in [0, 7, n] {
+            for len in [n + g, n + 2 * g, n + 3 * g] {
+                let mut moved: std::vec::Vec<CurvePoint> = (0..len).map(point).collect();
+                let mut rotated = moved.clone();
+                insert_grown(&mut moved, at, n, g, reverse);
+                if reverse {
+                    rotated[n..n + g].reverse();
+                }
+                rotated[at..n + g].rotate_right(g);
+                assert_eq!(moved[..n + g], rotated[..n + g], "at {at}, len {len}");
+            }
+        }
+    }
+}

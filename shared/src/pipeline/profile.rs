@@ -2,7 +2,7 @@
 //! plane's curve and a [`Profile`] summarising the image out.
 
 use crate::calibration::{Calibration, MAX_PLANES};
-use crate::curve::{self, CurvePoint, NO_SEED};
+use crate::curve::{self, CurvePoint, MAX_CURVES, NO_SEED};
 use crate::image::segment::{ObjectFeatures, Run};
 use crate::image::subtract::SubtractStats;
 use crate::image::{Frame, Pixel};
@@ -116,19 +116,23 @@ pub fn point_sigmas(
     curve: &[CurvePoint],
     sigmas: &mut [Real],
 ) -> Result<(), PipelineError> {
+    // Per point only what depends on the point (the same operations as
+    // `stripe_centre_px` and `displacement_sigma`).
+    let centre = noise.stripe_centre(profile.noise);
     for (plane, &(s, e)) in profile.plane_points.iter().enumerate().take(profile.planes) {
         need("sigmas", e, sigmas.len())?;
         let model = planes.get(plane).ok_or(PipelineError::Calibration)?;
+        let per_pixel = noise::PerPixel::of(model, focal_px);
         let points = profile.points(points, plane);
         let curve = curve.get(s..e).unwrap_or(&[]);
         let Some(sigmas) = sigmas.get_mut(s..e) else {
             continue;
         };
         for (i, (sigma, x)) in sigmas.iter_mut().zip(points).enumerate() {
-            let sigma_px = curve.get(i).map_or(noise.image_px(), |c| {
-                noise.stripe_centre_px(c.amplitude, c.width, profile.noise)
-            });
-            *sigma = noise::displacement_sigma(model, focal_px, *x, sigma_px).unwrap_or(0.0);
+            let sigma_px = curve
+                .get(i)
+                .map_or(centre.image_px(), |c| centre.px(c.amplitude, c.width));
+            *sigma = per_pixel.sigma(*x, sigma_px).unwrap_or(0.0);
         }
     }
     Ok(())
@@ -394,21 +398,31 @@ fn group_by_plane(
     let mut plane_points = [(0usize, 0usize); MAX_PLANES];
     let mut start = 0;
     for (plane, range) in plane_points.iter_mut().enumerate().take(n_planes) {
+        // The plane's curves as a bit mask (`used.plane(c) == Some(plane)`): the test of
+        // every point is a shift, not a bounds-checked table lookup (issue 17).
+        let mine = (0..MAX_CURVES as u8)
+            .filter(|&c| used.plane(c) == Some(plane))
+            .fold(0u32, |m, c| m | 1 << c);
+        let is_mine = |p: &CurvePoint| mine.checked_shr(p.curve as u32).unwrap_or(0) & 1 != 0;
         let rest = points.get_mut(start..).unwrap_or(&mut []);
-        let others = rest
-            .iter()
-            .filter(|p| used.plane(p.curve) != Some(plane))
-            .count();
-        let mut end = 0;
-        if others == 0 {
+        // The plane's leading points stay where they are; with room in the tail for all the
+        // points after them, the others need not be counted first.
+        let lead = rest.iter().position(|p| !is_mine(p)).unwrap_or(rest.len());
+        let room = spare.len() >= rest.len() - lead;
+        let others = if room {
+            rest.len() - lead
+        } else {
+            rest[lead..].iter().filter(|p| !is_mine(p)).count()
+        };
+        let mut end = lead;
+        if lead == rest.len() {
             // One plane, or the last: nothing to move.
-            end = rest.len();
         } else if let Some(parking) = spare.get_mut(..others) {
             // Each slot written (`end ≤ i`) has already been read.
             let mut parked = 0;
-            for i in 0..rest.len() {
+            for i in lead..rest.len() {
                 let p = rest[i];
-                if used.plane(p.curve) == Some(plane) {
+                if is_mine(&p) {
                     rest[end] = p;
                     end += 1;
                 } else {
@@ -420,8 +434,8 @@ fn group_by_plane(
                 *slot = *p;
             }
         } else {
-            for i in 0..rest.len() {
-                if used.plane(rest[i].curve) == Some(plane) {
+            for i in lead..rest.len() {
+                if is_mine(&rest[i]) {
                     // Rotate the point to `end`, keeping the order of the others.
                     rest[end..=i].rotate_right(1);
                     end += 1;
@@ -485,7 +499,6 @@ pub(super) fn smooth_and_triangulate(
 mod tests {
     extern crate std;
     use super::*;
-    use crate::curve::MAX_CURVES;
 
     /// Three curves on two planes, interleaved column by column, and an unassigned one.
     fn interleaved(n: usize) -> (std::vec::Vec<CurvePoint>, UsedCurves) {
@@ -516,11 +529,17 @@ mod tests {
         let (points, used) = interleaved(n);
         let mut roomy = points.clone();
         roomy.resize(2 * n, points[0]);
+        // Room for plane 0's other points only: they are counted first.
+        let mut snug = points.clone();
+        snug.resize(n + 152, points[0]);
         let mut tight = points.clone();
         let ranges_roomy = group_by_plane(&mut roomy, n, &used, 2);
+        let ranges_snug = group_by_plane(&mut snug, n, &used, 2);
         let ranges_tight = group_by_plane(&mut tight, n, &used, 2);
         assert_eq!(ranges_roomy, ranges_tight);
+        assert_eq!(ranges_snug, ranges_tight);
         assert_eq!(roomy[..n], tight[..n]);
+        assert_eq!(snug[..n], tight[..n]);
         let expected: std::vec::Vec<CurvePoint> = [Some(0), Some(1), None]
             .iter()
             .flat_map(|&plane| {

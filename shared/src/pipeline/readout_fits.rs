@@ -308,6 +308,7 @@ impl ReadoutFits {
     /// that holds at `saturation` and was located with `params`' estimator and window:
     /// `Some(None)` when the estimator failed there. For
     /// [`crate::curve::extract_seeded_with`] and the growth (`super::grow`).
+    #[inline]
     pub(super) fn lookup(
         &self,
         tables: (&[ColumnTrack], &[ReadoutFit]),
