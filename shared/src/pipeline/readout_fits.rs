@@ -68,7 +68,17 @@ pub struct ColumnTrack {
     best_value: u16,
     /// First point of the column in the fit table, or `NO_FIT`.
     first_fit: u16,
+    /// Row of the brightest pixel of a closed segment waiting to be located (a new segment
+    /// in the column closed it while the block had no budget left, or before its window was
+    /// in; `NO_ROW`: none). One is enough for two planes' stripes; a third segment in the
+    /// column before it is located is left to the extraction after the frame.
+    pending_row: u16,
+    /// Its difference value.
+    pending_value: u16,
 }
+
+/// No pending segment ([`ColumnTrack::pending_row`]).
+const NO_ROW: u16 = u16::MAX;
 
 impl ColumnTrack {
     /// No segment and no point (usable in `const`/`static`).
@@ -77,6 +87,8 @@ impl ColumnTrack {
         best_row: 0,
         best_value: 0,
         first_fit: NO_FIT,
+        pending_row: NO_ROW,
+        pending_value: 0,
     };
 }
 
@@ -223,8 +235,9 @@ impl ReadoutFits {
                     continue;
                 }
                 if track.end != 0 {
-                    // A new segment in this column: the previous one now, or never.
-                    self.locate(track, fits, diff, x, y);
+                    // A new segment in this column: the previous one now, or when a later
+                    // block has its window and the budget for it.
+                    self.locate_or_defer(track, fits, diff, x, y);
                 }
                 track.end = y16 + 1;
                 track.best_row = y16;
@@ -252,6 +265,15 @@ impl ReadoutFits {
             if !self.affordable() {
                 break;
             }
+            if track.pending_row != NO_ROW && track.pending_row as usize + hw <= y {
+                let pending = (track.pending_row, track.pending_value);
+                if self.locate_at(track, fits, diff, (x, y), pending) {
+                    track.pending_row = NO_ROW;
+                }
+            }
+            if !self.affordable() {
+                break;
+            }
             let end = track.end as usize;
             if end != 0 && end <= y && track.best_row as usize + hw <= y {
                 self.locate(track, fits, diff, x, y);
@@ -267,9 +289,10 @@ impl ReadoutFits {
         self.spent.saturating_add(FIT_COST) <= BLOCK_WORK
     }
 
-    /// Locates `track`'s segment in column `x` if rows `..=y` hold its window, it can still
-    /// be in an object and the budget and table allow; closes the segment either way.
-    fn locate<P: Pixel>(
+    /// Closes `track`'s segment in column `x` (a new one opens at row `y`): locates it now
+    /// if it can be ([`Self::locate`]), else keeps it as the column's pending segment for a
+    /// later block when the column has none yet and it can still be in an object.
+    fn locate_or_defer<P: Pixel>(
         &mut self,
         track: &mut ColumnTrack,
         fits: &mut [ReadoutFit],
@@ -277,31 +300,69 @@ impl ReadoutFits {
         x: usize,
         y: usize,
     ) {
-        let seed = track.best_row as usize;
+        let (row, value) = (track.best_row, track.best_value);
+        if !self.locate(track, fits, diff, x, y)
+            && track.pending_row == NO_ROW
+            && value as u32 > self.floor()
+        {
+            track.pending_row = row;
+            track.pending_value = value;
+        }
+    }
+
+    /// Locates `track`'s segment in column `x` if rows `..=y` hold its window, it can still
+    /// be in an object and the budget and table allow; closes the segment either way.
+    /// Returns whether the segment was dealt with: located, or not worth locating.
+    fn locate<P: Pixel>(
+        &mut self,
+        track: &mut ColumnTrack,
+        fits: &mut [ReadoutFit],
+        diff: &Frame<P, &[P]>,
+        x: usize,
+        y: usize,
+    ) -> bool {
+        track.end = 0;
+        self.locate_at(track, fits, diff, (x, y), (track.best_row, track.best_value))
+    }
+
+    /// Locates the segment of column `x` whose brightest pixel is `(row, value)` into the
+    /// column's fit list if rows `..=y` hold its window, it can still be in an object and the
+    /// budget and table allow. Returns whether it was dealt with: located, or not worth
+    /// locating (it cannot be in an object).
+    fn locate_at<P: Pixel>(
+        &mut self,
+        track: &mut ColumnTrack,
+        fits: &mut [ReadoutFit],
+        diff: &Frame<P, &[P]>,
+        (x, y): (usize, usize),
+        (row, value): (u16, u16),
+    ) -> bool {
+        let seed = row as usize;
         let last_row = diff.height().saturating_sub(1);
         let complete = (seed + self.params.half_window as usize).min(last_row) <= y;
-        let worth = track.best_value as u32 > self.floor();
-        track.end = 0;
-        if !complete || !worth || !self.affordable() || self.used >= fits.len().min(NO_FIT as usize)
-        {
-            return;
+        if value as u32 <= self.floor() {
+            return true;
+        }
+        if !complete || !self.affordable() || self.used >= fits.len().min(NO_FIT as usize) {
+            return false;
         }
         self.spent += FIT_COST;
         let (point, brightest) = curve::locate_seeded(diff, x, seed, &self.params, Real::INFINITY);
         let Some(slot) = fits.get_mut(self.used) else {
-            return;
+            return false;
         };
         *slot = ReadoutFit {
             row: point.map_or(0.0, |p| p.row),
             amplitude: point.map_or(0.0, |p| p.amplitude),
             width: point.map_or(0.0, |p| p.width),
-            seed_row: track.best_row,
+            seed_row: row,
             brightest: brightest.min(u16::MAX as u32) as u16,
             next: track.first_fit,
             found: point.is_some(),
         };
         track.first_fit = self.used as u16;
         self.used += 1;
+        true
     }
 
     /// The point located during the read-out at column `x` from seed `row`, if there is one
