@@ -527,4 +527,54 @@ mod tests {
         assert!(affordable > 0 && affordable < W);
         assert_eq!(early.used, affordable.min(fits.len()));
     }
+
+    /// A column's segment that a second one closes while the block has no budget left (two
+    /// planes' stripes in the same columns) waits for a later block and is located there; a
+    /// segment closed while another of its column is still waiting is left to the extraction
+    /// after the frame.
+    #[test]
+    fn a_segment_closed_without_budget_is_located_by_a_later_block() {
+        const COLS: usize = 8;
+        let mut image = std::vec![0u8; COLS * 480];
+        // Stripes (3 rows, peak 120) at rows 20 and 40, and at row 60 in column 0 only.
+        for x in 0..COLS {
+            for (row, v) in [(19, 60), (20, 120), (21, 60), (39, 60), (40, 120), (41, 60)] {
+                image[row * COLS + x] = v;
+            }
+        }
+        for (row, v) in [(59, 60), (60, 120), (61, 60)] {
+            image[row * COLS] = v;
+        }
+        let frame = Frame::new(&image[..], COLS, 480, COLS).unwrap();
+        let mut columns = [ColumnTrack::EMPTY; COLS];
+        let mut fits = [ReadoutFit::ZERO; 64];
+        let params = ExtractParams::default();
+        let mut early =
+            ReadoutFits::begin(&mut columns, &fits, (COLS, 480), params, Floors::default());
+        for y in 0..96 {
+            if y == 39 || y == 59 {
+                // The blocks the second and third stripes open in have spent their budget.
+                early.spent = BLOCK_WORK;
+            }
+            let row = &image[y * COLS..(y + 1) * COLS];
+            let lit = row.iter().filter(|&&v| v > 0).count();
+            // The lit pixels of these rows are the first `lit` columns.
+            early.row((&mut columns, &mut fits), &frame, y, [(0, lit)].into_iter());
+            if y % 16 == 15 {
+                early.block_done((&mut columns, &mut fits), &frame, y);
+            }
+        }
+        let located = |x: usize, row: u16| {
+            early
+                .lookup((&columns, &fits), &params, x, row, Real::INFINITY)
+                .flatten()
+                .map(|p| p.row)
+        };
+        for x in 0..COLS {
+            let first = located(x, 20).expect("the first stripe, located by a later block");
+            assert!((first - 20.0).abs() < 0.05, "column {x}: {first}");
+            assert_eq!(located(x, 40).is_some(), x > 0, "column {x}: the second stripe");
+        }
+        assert!(located(0, 60).is_some(), "column 0's third stripe");
+    }
 }
