@@ -93,6 +93,16 @@ impl<'a> PlanePoints<'a> {
         self.planes
     }
 
+    /// Each plane's curve points beside [`PlanePoints::curves`] (empty slices without
+    /// [`PlanePoints::with_curve`]).
+    pub fn curve_points(&self) -> [&'a [CurvePoint]; MAX_PLANES] {
+        let mut per_plane: [&[CurvePoint]; MAX_PLANES] = [&[]; MAX_PLANES];
+        for (k, c) in per_plane.iter_mut().enumerate().take(self.planes.len()) {
+            *c = self.profile.points(self.curve, k);
+        }
+        per_plane
+    }
+
     /// Writes each point's 1σ into `sigmas` (the workspace's, lent in [`Scratch::sigmas`])
     /// from each point's stripe or the noise model ([`point_sigmas`]) and returns them per plane, in the order of
     /// [`PlanePoints::curves`].

@@ -43,6 +43,25 @@ pub fn sqrt(x: Real) -> Real {
     }
 }
 
+/// The error function (`libm`'s; [`Float`] has none).
+#[inline]
+pub fn erf(x: Real) -> Real {
+    #[cfg(feature = "f32")]
+    {
+        libm::erff(x)
+    }
+    #[cfg(not(feature = "f32"))]
+    {
+        libm::erf(x)
+    }
+}
+
+/// The standard normal distribution function `Φ(z)`.
+#[inline]
+pub fn normal_cdf(z: Real) -> Real {
+    0.5 * (1.0 + erf(z * core::f64::consts::FRAC_1_SQRT_2 as Real))
+}
+
 /// Euclidean norm of a vector through [`sqrt`] (nalgebra's `norm` takes `libm`'s).
 #[inline(always)]
 pub fn norm<const D: usize>(v: &nalgebra::SVector<Real, D>) -> Real {

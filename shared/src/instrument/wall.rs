@@ -147,10 +147,13 @@ pub fn solve_walls(
         curve_sigmas[n] = c.sigmas;
         count += 1;
     }
+    // The crossing line's stripes are its transposed frame's, and no segment is taken on it.
+    let stripes = points.curve_points();
     let input = WallInput {
         curves: &curves[..count],
         sigmas: &curve_sigmas[..count],
         planes: &planes,
+        stripes: &stripes[..n],
     };
     let mut solution = walls::solve(&input, &params.walls)?;
     solution

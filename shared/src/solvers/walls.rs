@@ -12,6 +12,7 @@
 use crate::real::Float;
 use crate::real::{norm, sqrt, Real, Vec3, PI};
 
+use crate::curve::CurvePoint;
 use crate::laser_plane::LaserPlane;
 use crate::noise::{displacement_per_pixel, DisplacementField};
 
@@ -79,6 +80,10 @@ pub struct WallParams {
     /// (`docs/subpixel-study.md`), 0.009 px measured on the frontal wall capture
     /// (`docs/building.md`, "The pitch bias"). 0 leaves it out.
     pub line_bias_px: Real,
+    /// σ of the lens's point spread (pixels; the reference lens: 0.5 px at f/2.4,
+    /// `docs/simulator.md`): it blurs a wall's edge across the end pixel of its stripe, whose
+    /// amplitude places the edge (`docs/building.md`, (B9)).
+    pub psf_sigma_px: Real,
     /// Gravity in the camera frame (pointing down, any length) and its direction's 1σ
     /// (radians), when the instrument knows it: enables [`WallSolution::plumb`].
     pub gravity: Option<(Vec3, Real)>,
@@ -104,6 +109,7 @@ impl Default for WallParams {
             curved_max: 30.0 * PI / 180.0,
             max_rms: 6.0e-3,
             line_bias_px: 0.01,
+            psf_sigma_px: 0.5,
             gravity: None,
         }
     }
@@ -119,6 +125,10 @@ pub struct WallInput<'a> {
     pub sigmas: &'a [&'a [Real]],
     /// The laser planes, in curve order.
     pub planes: &'a [LaserPlane],
+    /// Each point's stripe in the image, same layout as `curves` (a curve's slice empty, or
+    /// shorter than its points, when unknown): a segment's end point's amplitude against its
+    /// neighbours' places the edge within its pixel (`docs/building.md`, "Segment length").
+    pub stripes: &'a [&'a [CurvePoint]],
 }
 
 /// A straight run of one curve: points `start..end` of curve `curve`.

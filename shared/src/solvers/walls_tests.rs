@@ -96,6 +96,7 @@ impl Curves {
                 curves: &curves,
                 sigmas: &sigmas,
                 planes: &self.planes,
+                stripes: &[],
             },
             params,
         )
@@ -327,6 +328,7 @@ fn a_crossing_line_beside_a_corner_edge_does_not_bend_the_corner() {
                 curves: &curves,
                 sigmas: &sigmas,
                 planes: &planes,
+                stripes: &[],
             },
             &WallParams::default(),
         )

@@ -4,10 +4,11 @@
 
 #[allow(unused_imports)]
 use crate::real::Float;
-use crate::real::{norm, sqrt, Real, Vec3, PI};
+use crate::real::{norm, normal_cdf, sqrt, Real, Vec3, PI};
 
 use super::super::plane_pca::{normal_angle, parallel_distance, plane_intersection, Estimate};
 use super::{column, Corner, EndKind, Run, Segment, Wall, WallInput, WallParams};
+use crate::curve::CurvePoint;
 
 /// The corner between the two largest walls more than 30° apart.
 pub(super) fn corner(walls: &[Wall]) -> Option<Corner> {
@@ -43,6 +44,103 @@ pub(super) fn parallel(walls: &[Wall], params: &WallParams) -> Option<Estimate> 
         }
     }
     None
+}
+
+/// Points inward from a segment's end whose stripe amplitudes are the reference for the
+/// end pixel's lit part ([`lit_fraction`]).
+const EDGE_REFERENCE: usize = 9;
+
+/// Least σ of an edge located from the lit part of its pixel (pixels): the amplitude's
+/// proportionality to the lit part holds for a sharp image of a uniform sheet; a blurred
+/// edge or a sheet varying over a pixel departs from it by a fraction of the pixel.
+const EDGE_SIGMA_FLOOR_PX: Real = 0.1;
+
+/// The part `f` of the end point `inner`'s pixel lit by the wall, from its stripe amplitude
+/// against the median of the `inward` points' (the wall's own brightness there), and its
+/// σ from their scatter (`docs/building.md`, (B9)): `None` when the stripes are unknown,
+/// fewer than 5 references, or one is saturated (its amplitude is clipped).
+fn lit_fraction(
+    stripe: &[CurvePoint],
+    inner: usize,
+    inward: impl Iterator<Item = usize>,
+) -> Option<(Real, Real)> {
+    let end = stripe.get(inner).filter(|p| !p.saturated)?;
+    let mut reference = [0.0 as Real; EDGE_REFERENCE];
+    let mut n = 0;
+    for i in inward {
+        let p = stripe.get(i).filter(|p| !p.saturated)?;
+        if let Some(slot) = reference.get_mut(n) {
+            *slot = p.amplitude;
+            n += 1;
+        }
+    }
+    if n < 5 {
+        return None;
+    }
+    let reference = &mut reference[..n];
+    reference.sort_unstable_by(|a, b| a.total_cmp(b));
+    let median = reference[n / 2];
+    if !(median > 0.0) {
+        return None;
+    }
+    // Scatter of one amplitude about the median (1.4826·MAD), relative.
+    let mut deviations = [0.0 as Real; EDGE_REFERENCE];
+    for (d, a) in deviations.iter_mut().zip(reference.iter()) {
+        *d = (a - median).abs();
+    }
+    let deviations = &mut deviations[..n];
+    deviations.sort_unstable_by(|a, b| a.total_cmp(b));
+    let relative = 1.4826 * deviations[n / 2] / median;
+    let f = (end.amplitude / median).clamp(0.0, 1.0);
+    // f = a/A: the end's own scatter and the median's (≈ 1.25/√n of one).
+    let sigma_f = f * relative * sqrt(1.0 + 1.57 / n as Real);
+    Some((f, sigma_f))
+}
+
+/// The part of a pixel centred `δ` pixels inside a wall's edge that the wall's blurred
+/// image lights: the step blurred by the lens's PSF (`σ` px) integrated over the pixel,
+/// `σ·[ψ((δ+½)/σ) − ψ((δ−½)/σ)]`, `ψ(z) = zΦ(z) + φ(z)` (`docs/building.md`, (B9)); and
+/// its derivative in `δ`, `Φ((δ+½)/σ) − Φ((δ−½)/σ)`.
+fn blurred_coverage(delta: Real, sigma: Real) -> (Real, Real) {
+    let psi = |z: Real| {
+        let density = (-0.5 * z * z).exp() / sqrt(2.0 * PI);
+        z * normal_cdf(z) + density
+    };
+    let (hi, lo) = ((delta + 0.5) / sigma, (delta - 0.5) / sigma);
+    (
+        sigma * (psi(hi) - psi(lo)),
+        normal_cdf(hi) - normal_cdf(lo),
+    )
+}
+
+/// Where the edge is past the end pixel's centre (pixels, outwards) for a lit part `f` of
+/// its 1σ `sigma_f` ([`lit_fraction`]), with its σ: the `δ` whose [`blurred_coverage`] is
+/// `f`, by bisection (it rises monotonically), within the end pixel (`|δ| ≤ ½`) and with at
+/// most the σ of an edge anywhere in it, `1/√12`. An end pixel as bright as an edge at its
+/// outer side gives makes it the outer side with that σ, as without the stripes: the edge is
+/// there or beyond (the next column's stripe lost at the kink), and near `δ = ½` the blurred
+/// coverage hardly changes with `δ`. `None` for a PSF σ that is not positive.
+fn edge_offset(f: Real, sigma_f: Real, params: &WallParams) -> Option<(Real, Real)> {
+    let sigma = params.psf_sigma_px;
+    if !(sigma > 0.0) {
+        return None;
+    }
+    let uniform = 1.0 / sqrt(12.0);
+    if f >= blurred_coverage(0.5, sigma).0 {
+        return Some((0.5, uniform));
+    }
+    let (mut lo, mut hi) = (-0.5 as Real, 0.5 as Real);
+    for _ in 0..40 {
+        let mid = 0.5 * (lo + hi);
+        if blurred_coverage(mid, sigma).0 < f {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let delta = 0.5 * (lo + hi);
+    let slope = blurred_coverage(delta, sigma).1.max(1e-3);
+    Some((delta, (sigma_f / slope).clamp(EDGE_SIGMA_FLOOR_PX, uniform)))
 }
 
 /// The aimed wall's segment along the lowest curve across the image that lights it: its
@@ -115,9 +213,10 @@ pub(super) fn segment(
             continue;
         }
         // The plane's stripe is seen up to its last column and not in the next: the edge is
-        // within that column's outer half-pixel whatever follows (a deeper surface, a gap of
-        // unlit columns), uniform: σ = 1/√12 px (docs/building.md, "Segment length"; the
-        // pixel's centre instead read every segment 1 px short on the tuning rooms).
+        // within that column, where the part of the pixel the wall fills ends. Its stripe's
+        // amplitude against its neighbours' is that part, `f` (docs/building.md, "Segment
+        // length", (B9)); without the stripes, the outer half-pixel, uniform: σ = 1/√12 px
+        // (the pixel's centre instead read every segment 1 px short on the tuning rooms).
         let at_side = if side == 0 {
             u_in < params.edge_margin_px
         } else {
@@ -127,7 +226,17 @@ pub(super) fn segment(
             kinds[side] = EndKind::FrameSide;
         }
         let sign = if side == 0 { -1.0 } else { 1.0 };
-        let (u_edge, sigma_u) = (u_in + 0.5 * sign, 1.0 / sqrt(12.0));
+        let stripe = input.stripes.get(curve).copied().unwrap_or(&[]);
+        let lit = if side == 0 {
+            lit_fraction(stripe, inner, (inner + 1..first.end as usize).take(EDGE_REFERENCE))
+        } else {
+            let inward = (last.start as usize..inner).rev().take(EDGE_REFERENCE);
+            lit_fraction(stripe, inner, inward)
+        };
+        let (u_edge, sigma_u) = match lit.and_then(|(f, s)| edge_offset(f, s, params)) {
+            Some((offset, sigma)) => (u_in + sign * offset, sigma),
+            None => (u_in + 0.5 * sign, 1.0 / sqrt(12.0)),
+        };
         let at = |u: Real| -> Option<Real> {
             let a = u - params.principal_u;
             let den = params.focal_px * dir.x - a * dir.z;
