@@ -112,6 +112,7 @@ fn end_name(k: EndKind) -> &'static str {
         EndKind::Corner => "corner",
         EndKind::Edge => "edge",
         EndKind::FrameSide => "frame_side",
+        EndKind::Occluded => "occluded",
     }
 }
 

@@ -80,6 +80,9 @@ pub struct WallParams {
     /// (`docs/subpixel-study.md`), 0.009 px measured on the frontal wall capture
     /// (`docs/building.md`, "The pitch bias"). 0 leaves it out.
     pub line_bias_px: Real,
+    /// Widest object in front of a wall (columns) that a segment is followed across, to the
+    /// wall seen again beyond it: a cable or a pipe; wider clutter hides the segment's end.
+    pub max_occluder_px: Real,
     /// σ of the lens's point spread (pixels; the reference lens: 0.5 px at f/2.4,
     /// `docs/simulator.md`): it blurs a wall's edge across the end pixel of its stripe, whose
     /// amplitude places the edge (`docs/building.md`, (B9)).
@@ -109,6 +112,7 @@ impl Default for WallParams {
             curved_max: 30.0 * PI / 180.0,
             max_rms: 6.0e-3,
             line_bias_px: 0.01,
+            max_occluder_px: 120.0,
             psf_sigma_px: 0.5,
             gravity: None,
         }
@@ -180,6 +184,9 @@ pub enum EndKind {
     Edge,
     /// The frame's side: the wall goes on beyond the view, the length is a lower bound.
     FrameSide,
+    /// Hidden by an object in front of the wall (a cable, a pipe) behind which the line is
+    /// not seen on the wall again: the length is a lower bound.
+    Occluded,
 }
 
 /// A segment of a wall along a laser line, between two ends.
@@ -198,7 +205,10 @@ pub struct Segment {
 impl Segment {
     /// Both ends are edges or corners (not the frame's side).
     pub fn bounded(&self) -> bool {
-        !self.kinds.contains(&EndKind::FrameSide)
+        !self
+            .kinds
+            .iter()
+            .any(|k| matches!(k, EndKind::FrameSide | EndKind::Occluded))
     }
 }
 

@@ -6,7 +6,9 @@
 use crate::real::Float;
 use crate::real::{norm, normal_cdf, sqrt, Real, Vec3, PI};
 
-use super::super::plane_pca::{normal_angle, parallel_distance, plane_intersection, Estimate};
+use super::super::plane_pca::{
+    normal_angle, parallel_distance, plane_intersection, Estimate, PlaneFit,
+};
 use super::{column, Corner, EndKind, Run, Segment, Wall, WallInput, WallParams};
 use crate::curve::CurvePoint;
 
@@ -143,6 +145,121 @@ fn edge_offset(f: Real, sigma_f: Real, params: &WallParams) -> Option<(Real, Rea
     Some((delta, (sigma_f / slope).clamp(EDGE_SIGMA_FLOOR_PX, uniform)))
 }
 
+/// The aimed wall's line on one curve, for following it past clutter in front of the wall.
+struct LineOnWall<'a> {
+    input: &'a WallInput<'a>,
+    params: &'a WallParams,
+    runs: &'a [Run],
+    aimed: usize,
+    plane: &'a PlaneFit,
+    curve: usize,
+}
+
+/// Where a segment's end is once followed past clutter ([`LineOnWall::reach`]).
+struct Reach {
+    /// The end point's index on the curve.
+    end: usize,
+    /// The innermost point of the stretch on the wall that ends there (reference points for
+    /// [`lit_fraction`] lie between the two).
+    limit: usize,
+    /// A nearer object hides the end: the line goes on behind it, and is not seen on the wall
+    /// again.
+    occluded: bool,
+}
+
+/// Fewest points of a stretch of the line on the wall past an object in front of it.
+const MIN_STRETCH: usize = 3;
+
+impl LineOnWall<'_> {
+    /// How point `i` lies against the wall: on it (within `split_sigmas`·σ + `split_floor`),
+    /// in front of it (`Some(true)`), or behind it (`Some(false)`); `None` when it is on it.
+    fn off_wall(&self, i: usize) -> Option<bool> {
+        let p = self.input.curves[self.curve][i];
+        let sigma = self.input.sigmas[self.curve].get(i).copied().unwrap_or(0.0);
+        let tolerance = self.params.split_sigmas * sigma + self.params.split_floor;
+        let d = self.plane.signed_distance(p);
+        // The camera (the origin) is in front of the wall.
+        let front = -self.plane.offset;
+        (d.abs() > tolerance).then_some(d * front > 0.0)
+    }
+
+    /// Whether point `i` is in a run of another wall.
+    fn other_wall(&self, i: usize) -> bool {
+        self.runs.iter().any(|r| {
+            r.curve as usize == self.curve
+                && r.wall.is_some_and(|w| w as usize != self.aimed)
+                && (r.start as usize..r.end as usize).contains(&i)
+        })
+    }
+
+    /// Point `i + step` if the curve has it.
+    fn next(&self, i: usize, step: isize) -> Option<usize> {
+        i.checked_add_signed(step)
+            .filter(|&j| j < self.input.curves[self.curve].len())
+    }
+
+    /// Follows the line outwards (`step` −1: left, +1: right) from its end point `end` (the
+    /// stretch on the wall from `limit`): across an object in front of the wall no wider than
+    /// `max_occluder_px` (a cable, a pipe: a jump towards the camera, then the wall again
+    /// for at least [`MIN_STRETCH`] points), as often as there is one. An object in front
+    /// behind which the wall is not seen again, before another wall's run, a surface behind
+    /// the wall or the curve's end, hides the end (`docs/building.md`, "Segment length").
+    fn reach(&self, end: usize, limit: usize, step: isize) -> Reach {
+        let mut reach = Reach {
+            end,
+            limit,
+            occluded: false,
+        };
+        let column_of = |i: usize| column(self.input.curves[self.curve][i], self.params);
+        while let Some(first_out) = self.next(reach.end, step) {
+            if self.off_wall(first_out) != Some(true) || self.other_wall(first_out) {
+                break;
+            }
+            // Across the object in front to the first point on the wall again.
+            let u_end = column_of(reach.end);
+            let mut i = first_out;
+            let resumed = loop {
+                if (column_of(i) - u_end).abs() > self.params.max_occluder_px
+                    || self.other_wall(i)
+                {
+                    break None;
+                }
+                match self.off_wall(i) {
+                    None => break Some(i),
+                    Some(false) => break None,
+                    Some(true) => {}
+                }
+                match self.next(i, step) {
+                    Some(j) => i = j,
+                    None => break None,
+                }
+            };
+            // The stretch on the wall from there.
+            let stretch = resumed.map(|start| {
+                let (mut last, mut count) = (start, 1);
+                while let Some(j) = self.next(last, step) {
+                    if self.off_wall(j).is_some() || self.other_wall(j) {
+                        break;
+                    }
+                    (last, count) = (j, count + 1);
+                }
+                (start, last, count)
+            });
+            match stretch {
+                Some((start, last, count)) if count >= MIN_STRETCH => {
+                    reach.end = last;
+                    reach.limit = start;
+                }
+                _ => {
+                    reach.occluded = true;
+                    break;
+                }
+            }
+        }
+        reach
+    }
+}
+
 /// The aimed wall's segment along the lowest curve across the image that lights it: its
 /// points' first and
 /// last run, each end at the next wall (corner), at the edge where the line leaves the plane,
@@ -172,14 +289,26 @@ pub(super) fn segment(
     let mut ends = [Vec3::zeros(); 2];
     let mut kinds = [EndKind::Edge; 2];
     let mut var = 0.0;
+    let line = LineOnWall {
+        input,
+        params,
+        runs,
+        aimed,
+        plane: &wall.plane,
+        curve,
+    };
     for side in 0..2 {
-        let (inner, outer) = if side == 0 {
-            (first.start as usize, (first.start as usize).checked_sub(1))
+        // Each end past the clutter in front of the wall that the line shows it beyond.
+        let reach = if side == 0 {
+            line.reach(first.start as usize, first.end as usize - 1, -1)
         } else {
-            (
-                last.end as usize - 1,
-                Some(last.end as usize).filter(|&i| i < pts.len()),
-            )
+            line.reach(last.end as usize - 1, last.start as usize, 1)
+        };
+        let inner = reach.end;
+        let outer = if side == 0 {
+            inner.checked_sub(1)
+        } else {
+            Some(inner + 1).filter(|&i| i < pts.len())
         };
         let u_in = column(pts[inner], params);
         // The neighbouring run on the same curve, if it is another wall's and adjoins.
@@ -187,11 +316,10 @@ pub(super) fn segment(
             r.curve as usize == curve
                 && r.wall.is_some_and(|w| w as usize != aimed)
                 && if side == 0 {
-                    r.end as usize + 2 * params.trim_points + 2 >= first.start as usize
-                        && r.end <= first.start
+                    r.end as usize + 2 * params.trim_points + 2 >= inner && r.end as usize <= inner
                 } else {
-                    r.start as usize <= last.end as usize + 2 * params.trim_points + 2
-                        && r.start >= last.end
+                    r.start as usize <= inner + 1 + 2 * params.trim_points + 2
+                        && r.start as usize > inner
                 }
         });
         let corner_end = next.and_then(|r| {
@@ -226,12 +354,14 @@ pub(super) fn segment(
             kinds[side] = EndKind::FrameSide;
         }
         let sign = if side == 0 { -1.0 } else { 1.0 };
+        if reach.occluded {
+            kinds[side] = EndKind::Occluded;
+        }
         let stripe = input.stripes.get(curve).copied().unwrap_or(&[]);
         let lit = if side == 0 {
-            lit_fraction(stripe, inner, (inner + 1..first.end as usize).take(EDGE_REFERENCE))
+            lit_fraction(stripe, inner, (inner + 1..=reach.limit).take(EDGE_REFERENCE))
         } else {
-            let inward = (last.start as usize..inner).rev().take(EDGE_REFERENCE);
-            lit_fraction(stripe, inner, inward)
+            lit_fraction(stripe, inner, (reach.limit..inner).rev().take(EDGE_REFERENCE))
         };
         let (u_edge, sigma_u) = match lit.and_then(|(f, s)| edge_offset(f, s, params)) {
             Some((offset, sigma)) => (u_in + sign * offset, sigma),
