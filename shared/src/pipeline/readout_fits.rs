@@ -322,7 +322,13 @@ impl ReadoutFits {
         y: usize,
     ) -> bool {
         track.end = 0;
-        self.locate_at(track, fits, diff, (x, y), (track.best_row, track.best_value))
+        self.locate_at(
+            track,
+            fits,
+            diff,
+            (x, y),
+            (track.best_row, track.best_value),
+        )
     }
 
     /// Locates the segment of column `x` whose brightest pixel is `(row, value)` into the
@@ -573,7 +579,11 @@ mod tests {
         for x in 0..COLS {
             let first = located(x, 20).expect("the first stripe, located by a later block");
             assert!((first - 20.0).abs() < 0.05, "column {x}: {first}");
-            assert_eq!(located(x, 40).is_some(), x > 0, "column {x}: the second stripe");
+            assert_eq!(
+                located(x, 40).is_some(),
+                x > 0,
+                "column {x}: the second stripe"
+            );
         }
         assert!(located(0, 60).is_some(), "column 0's third stripe");
     }

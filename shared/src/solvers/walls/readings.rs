@@ -109,10 +109,7 @@ fn blurred_coverage(delta: Real, sigma: Real) -> (Real, Real) {
         z * normal_cdf(z) + density
     };
     let (hi, lo) = ((delta + 0.5) / sigma, (delta - 0.5) / sigma);
-    (
-        sigma * (psi(hi) - psi(lo)),
-        normal_cdf(hi) - normal_cdf(lo),
-    )
+    (sigma * (psi(hi) - psi(lo)), normal_cdf(hi) - normal_cdf(lo))
 }
 
 /// Where the edge is past the end pixel's centre (pixels, outwards) for a lit part `f` of
@@ -219,8 +216,7 @@ impl LineOnWall<'_> {
             let u_end = column_of(reach.end);
             let mut i = first_out;
             let resumed = loop {
-                if (column_of(i) - u_end).abs() > self.params.max_occluder_px
-                    || self.other_wall(i)
+                if (column_of(i) - u_end).abs() > self.params.max_occluder_px || self.other_wall(i)
                 {
                     break None;
                 }
@@ -359,9 +355,17 @@ pub(super) fn segment(
         }
         let stripe = input.stripes.get(curve).copied().unwrap_or(&[]);
         let lit = if side == 0 {
-            lit_fraction(stripe, inner, (inner + 1..=reach.limit).take(EDGE_REFERENCE))
+            lit_fraction(
+                stripe,
+                inner,
+                (inner + 1..=reach.limit).take(EDGE_REFERENCE),
+            )
         } else {
-            lit_fraction(stripe, inner, (reach.limit..inner).rev().take(EDGE_REFERENCE))
+            lit_fraction(
+                stripe,
+                inner,
+                (reach.limit..inner).rev().take(EDGE_REFERENCE),
+            )
         };
         let (u_edge, sigma_u) = match lit.and_then(|(f, s)| edge_offset(f, s, params)) {
             Some((offset, sigma)) => (u_in + sign * offset, sigma),
@@ -390,4 +394,63 @@ pub(super) fn segment(
             sigma: sqrt(var),
         },
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn stripe(amplitudes: &[Real]) -> [CurvePoint; 12] {
+        let mut s = [CurvePoint::ZERO; 12];
+        for (p, &a) in s.iter_mut().zip(amplitudes) {
+            p.amplitude = a;
+        }
+        s
+    }
+
+    /// The blurred coverage is the pixel's lit part: ½ with the edge at its centre, the box
+    /// `δ + ½` for a sharp image, the derivative its slope; the edge found from a lit part
+    /// gives that part back.
+    #[test]
+    fn the_blurred_coverage_places_the_edge() {
+        assert!((blurred_coverage(0.0, 0.5).0 - 0.5).abs() < 1e-12);
+        for delta in [-0.4, -0.1, 0.2, 0.45] {
+            let (sharp, slope) = blurred_coverage(delta, 0.01);
+            assert!((sharp - (delta + 0.5)).abs() < 1e-6, "{delta}");
+            assert!((slope - 1.0).abs() < 1e-6, "{delta}");
+            let h = 1e-6;
+            let (blurred, slope) = blurred_coverage(delta, 0.5);
+            let numeric = (blurred_coverage(delta + h, 0.5).0 - blurred_coverage(delta - h, 0.5).0)
+                / (2.0 * h);
+            assert!((slope - numeric).abs() < 1e-6, "{delta}");
+            let params = WallParams::default();
+            let (found, sigma) = edge_offset(blurred, 0.02, &params).unwrap();
+            if blurred < blurred_coverage(0.5, 0.5).0 {
+                assert!((found - delta).abs() < 1e-9, "{delta}: {found}");
+                assert!((sigma - (0.02 / slope).max(EDGE_SIGMA_FLOOR_PX)).abs() < 1e-9);
+            }
+        }
+        // A pixel as bright as its neighbours: the outer side, with the uniform σ.
+        let (found, sigma) = edge_offset(1.0, 0.02, &WallParams::default()).unwrap();
+        assert_eq!(found, 0.5);
+        assert!((sigma - 1.0 / sqrt(12.0)).abs() < 1e-12);
+    }
+
+    /// The end's amplitude against the median of its neighbours', with the σ of their
+    /// scatter; nothing without enough unsaturated neighbours.
+    #[test]
+    fn the_lit_fraction_is_the_end_amplitude_over_its_neighbours() {
+        let s = stripe(&[20.0, 38.0, 42.0, 40.0, 39.0, 41.0, 40.0, 40.0, 44.0, 36.0]);
+        let (f, sigma) = lit_fraction(&s, 0, 1..10).unwrap();
+        assert!((f - 0.5).abs() < 1e-12, "{f}");
+        assert!(sigma > 0.0 && sigma < 0.05, "{sigma}");
+        assert!(lit_fraction(&s, 0, 1..4).is_none(), "3 references");
+        assert!(lit_fraction(&[], 0, 1..10).is_none(), "no stripes");
+        let mut clipped = s;
+        clipped[4].saturated = true;
+        assert!(
+            lit_fraction(&clipped, 0, 1..10).is_none(),
+            "a clipped reference"
+        );
+    }
 }
