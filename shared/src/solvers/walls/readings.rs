@@ -195,12 +195,25 @@ impl LineOnWall<'_> {
             .filter(|&j| j < self.input.curves[self.curve].len())
     }
 
+    /// Whether the step from point `i` to point `j` is a jump, as [`super::split_curve`]
+    /// cuts runs at: farther than `gap_px` pixels' worth of distance and the points' σ.
+    fn jump(&self, i: usize, j: usize) -> bool {
+        let (pts, sig) = (self.input.curves[self.curve], self.input.sigmas[self.curve]);
+        let step = norm(&(pts[j] - pts[i]));
+        let spacing = self.params.gap_px * norm(&pts[j]) / self.params.focal_px;
+        let sigmas = sig.get(i).copied().unwrap_or(0.0) + sig.get(j).copied().unwrap_or(0.0);
+        !(step <= spacing + self.params.split_sigmas * sigmas)
+    }
+
     /// Follows the line outwards (`step` −1: left, +1: right) from its end point `end` (the
     /// stretch on the wall from `limit`): across an object in front of the wall no wider than
-    /// `max_occluder_px` (a cable, a pipe: a jump towards the camera, then the wall again
-    /// for at least [`MIN_STRETCH`] points), as often as there is one. An object in front
+    /// `max_occluder_px` (a cable, a pipe: a jump towards the camera to at least
+    /// [`MIN_STRETCH`] points in front of the wall, in no other wall's run, then the wall
+    /// again for at least [`MIN_STRETCH`] points), as often as there is one. Such an object
     /// behind which the wall is not seen again, before another wall's run, a surface behind
     /// the wall or the curve's end, hides the end (`docs/building.md`, "Segment length").
+    /// Points in front of the wall without a jump (a jamb the line runs onto) or fewer than
+    /// [`MIN_STRETCH`] (the kink's smeared points) are no object: the end stays an edge.
     fn reach(&self, end: usize, limit: usize, step: isize) -> Reach {
         let mut reach = Reach {
             end,
@@ -209,12 +222,15 @@ impl LineOnWall<'_> {
         };
         let column_of = |i: usize| column(self.input.curves[self.curve][i], self.params);
         while let Some(first_out) = self.next(reach.end, step) {
-            if self.off_wall(first_out) != Some(true) || self.other_wall(first_out) {
+            if self.off_wall(first_out) != Some(true)
+                || self.other_wall(first_out)
+                || !self.jump(reach.end, first_out)
+            {
                 break;
             }
             // Across the object in front to the first point on the wall again.
             let u_end = column_of(reach.end);
-            let mut i = first_out;
+            let (mut i, mut in_front) = (first_out, 0);
             let resumed = loop {
                 if (column_of(i) - u_end).abs() > self.params.max_occluder_px || self.other_wall(i)
                 {
@@ -223,13 +239,16 @@ impl LineOnWall<'_> {
                 match self.off_wall(i) {
                     None => break Some(i),
                     Some(false) => break None,
-                    Some(true) => {}
+                    Some(true) => in_front += 1,
                 }
                 match self.next(i, step) {
                     Some(j) => i = j,
                     None => break None,
                 }
             };
+            if in_front < MIN_STRETCH {
+                break;
+            }
             // The stretch on the wall from there.
             let stretch = resumed.map(|start| {
                 let (mut last, mut count) = (start, 1);
