@@ -234,21 +234,29 @@ fn the_door_opening_is_a_bounded_segment() {
     );
 }
 
-#[test]
-fn a_segment_is_followed_across_a_cable_in_front_of_the_wall() {
-    // The door opening of `the_door_opening_is_a_bounded_segment` with a 1 cm cable 0.6 m in
-    // front of the far wall near the opening's right jamb (columns ≈ 656–664: too few points
-    // for a run of its own, so no wall either). The far wall is seen again beyond it for the
-    // 11 columns up to the jamb (too few for a run too), so the segment is followed across
-    // the cable and is still the opening's width.
+/// The door opening of `the_door_opening_is_a_bounded_segment` (the far wall at 1.8 m seen
+/// between jambs at ±0.45 m, 1.5 m away) with a cable 1.2 m away spanning `cable` (camera
+/// x), solved with `params`: the far wall's segment.
+fn door_with_cable(cable: (Real, Real), params: &WallParams) -> Segment {
     let front_l = piece(Vec3::z(), Vec3::new(0.0, 0.0, 1.5), (-100.0, -0.45));
     let front_r = piece(Vec3::z(), Vec3::new(0.0, 0.0, 1.5), (0.45, 100.0));
     let behind = piece(Vec3::z(), Vec3::new(0.0, 0.0, 1.8), ALL);
-    let cable = piece(Vec3::z(), Vec3::new(0.0, 0.0, 1.2), (0.3366, 0.3462));
+    let cable = piece(Vec3::z(), Vec3::new(0.0, 0.0, 1.2), cable);
     let s = Curves::of(&[front_l, front_r, behind, cable], 0.05, 6)
-        .solve(&WallParams::default())
+        .solve(params)
         .unwrap();
-    let seg = s.segment.unwrap();
+    assert!((s.walls[s.aimed].plane.offset - 1.8).abs() < 1e-3);
+    s.segment.unwrap()
+}
+
+#[test]
+fn a_segment_is_followed_across_a_cable_in_front_of_the_wall() {
+    // A 1 cm cable near the opening's right jamb (columns ≈ 656–664: too few points for a
+    // run of its own, so no wall either). The far wall is seen again beyond it for the 11
+    // columns up to the jamb (too few for a run too), so the segment is followed across the
+    // cable and is still the opening's width.
+    let cable = (0.3366, 0.3462);
+    let seg = door_with_cable(cable, &WallParams::default());
     assert_eq!(seg.kinds, [EndKind::Edge; 2]);
     let want = 0.9 * 1.8 / 1.5;
     assert!(
@@ -262,10 +270,7 @@ fn a_segment_is_followed_across_a_cable_in_front_of_the_wall() {
         max_occluder_px: 4.0,
         ..WallParams::default()
     };
-    let s = Curves::of(&[front_l, front_r, behind, cable], 0.05, 6)
-        .solve(&narrow)
-        .unwrap();
-    let seg = s.segment.unwrap();
+    let seg = door_with_cable(cable, &narrow);
     assert_eq!(seg.kinds[1], EndKind::Occluded);
     assert!(!seg.bounded());
 }
@@ -274,16 +279,7 @@ fn a_segment_is_followed_across_a_cable_in_front_of_the_wall() {
 fn a_segment_end_hidden_by_a_cable_is_a_lower_bound() {
     // The cable in front of the opening's right jamb (columns ≈ 665–675; the jamb is at
     // 675.5): the far wall is not seen again before the front wall, so its end is hidden.
-    let front_l = piece(Vec3::z(), Vec3::new(0.0, 0.0, 1.5), (-100.0, -0.45));
-    let front_r = piece(Vec3::z(), Vec3::new(0.0, 0.0, 1.5), (0.45, 100.0));
-    let behind = piece(Vec3::z(), Vec3::new(0.0, 0.0, 1.8), ALL);
-    let cable = piece(Vec3::z(), Vec3::new(0.0, 0.0, 1.2), (0.3474, 0.3606));
-    let s = Curves::of(&[front_l, front_r, behind, cable], 0.05, 6)
-        .solve(&WallParams::default())
-        .unwrap();
-    let aimed = &s.walls[s.aimed].plane;
-    assert!((aimed.offset - 1.8).abs() < 1e-3);
-    let seg = s.segment.unwrap();
+    let seg = door_with_cable((0.3474, 0.3606), &WallParams::default());
     assert_eq!(seg.kinds, [EndKind::Edge, EndKind::Occluded]);
     assert!(!seg.bounded());
     // What is seen: the far wall from the left jamb to the cable's left side.
