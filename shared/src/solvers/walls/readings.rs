@@ -60,7 +60,8 @@ const EDGE_SIGMA_FLOOR_PX: Real = 0.1;
 /// The part `f` of the end point `inner`'s pixel lit by the wall, from its stripe amplitude
 /// against the median of the `inward` points' (the wall's own brightness there), and its
 /// σ from their scatter (`docs/building.md`, (B9)): `None` when the stripes are unknown,
-/// fewer than 5 references, or one is saturated (its amplitude is clipped).
+/// fewer than 5 references, one is saturated (its amplitude is clipped), or an amplitude is
+/// not finite.
 fn lit_fraction(
     stripe: &[CurvePoint],
     inner: usize,
@@ -96,7 +97,8 @@ fn lit_fraction(
     let f = (end.amplitude / median).clamp(0.0, 1.0);
     // f = a/A: the end's own scatter and the median's (≈ 1.25/√n of one).
     let sigma_f = f * relative * sqrt(1.0 + 1.57 / n as Real);
-    Some((f, sigma_f))
+    // A NaN amplitude is no measurement (`clamp` keeps NaN).
+    (f.is_finite() && sigma_f.is_finite()).then_some((f, sigma_f))
 }
 
 /// The part of a pixel centred `δ` pixels inside a wall's edge that the wall's blurred
@@ -471,5 +473,8 @@ mod tests {
             lit_fraction(&clipped, 0, 1..10).is_none(),
             "a clipped reference"
         );
+        let mut broken = s;
+        broken[0].amplitude = Real::NAN;
+        assert!(lit_fraction(&broken, 0, 1..10).is_none(), "a NaN amplitude");
     }
 }
