@@ -255,7 +255,7 @@ fn a_segment_is_followed_across_a_cable_in_front_of_the_wall() {
     // run of its own, so no wall either). The far wall is seen again beyond it for the 11
     // columns up to the jamb (too few for a run too), so the segment is followed across the
     // cable and is still the opening's width.
-    let cable = (0.3366, 0.3462);
+    let cable = (0.3364, 0.3464);
     let seg = door_with_cable(cable, &WallParams::default());
     assert_eq!(seg.kinds, [EndKind::Edge; 2]);
     let want = 0.9 * 1.8 / 1.5;
@@ -277,13 +277,13 @@ fn a_segment_is_followed_across_a_cable_in_front_of_the_wall() {
 
 #[test]
 fn a_segment_end_hidden_by_a_cable_is_a_lower_bound() {
-    // The cable in front of the opening's right jamb (columns ≈ 665–675; the jamb is at
+    // The cable in front of the opening's right jamb (columns ≈ 665–676; the jamb is at
     // 675.5): the far wall is not seen again before the front wall, so its end is hidden.
-    let seg = door_with_cable((0.3474, 0.3606), &WallParams::default());
+    let seg = door_with_cable((0.3472, 0.3610), &WallParams::default());
     assert_eq!(seg.kinds, [EndKind::Edge, EndKind::Occluded]);
     assert!(!seg.bounded());
     // What is seen: the far wall from the left jamb to the cable's left side.
-    let seen = (0.3474 / 1.2 + 0.45 / 1.5) * 1.8;
+    let seen = (0.3472 / 1.2 + 0.45 / 1.5) * 1.8;
     assert!(
         (seg.length.value - seen).abs() < 4e-3,
         "{} vs {seen}",
