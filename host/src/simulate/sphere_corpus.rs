@@ -77,6 +77,41 @@ pub fn floor_under(centre_y: f64, r: f64) -> Object {
     })
 }
 
+/// Height of the instrument above the floor a random ball rests on (metres): a hand held at
+/// 0.7 × the ball's distance from the camera, at most 0.8 m (waist height), and never less
+/// than the ball needs to be seen resting there ([`floor_seen_from`]).
+fn instrument_height(centre: [f64; 3], r: f64) -> f64 {
+    let distance = (centre[0] * centre[0] + centre[1] * centre[1] + centre[2] * centre[2]).sqrt();
+    (0.7 * distance).min(0.8).max(r + 0.2)
+}
+
+/// The floor a ball at `(centre, r)` rests on, seen by an instrument `height` above it and
+/// pitched down as it must be to aim its lines at the ball: the plane tangent to the ball at
+/// its lowest point along the floor's down direction `g = (0, cos θ, sin θ)` (camera frame),
+/// `g·p = height`, θ solving `g·centre + r = height`. A level floor (θ = 0, [`floor_under`])
+/// under a ball the lines cut is above the lower laser's exit beyond ≈ 0.8 m (the planes
+/// rise with distance), so the floor would hide the lines from the ball.
+pub fn floor_seen_from(centre: [f64; 3], r: f64, height: f64) -> Object {
+    // g·c = A cos(θ − φ), A = |(c_y, c_z)|, φ = atan2(c_z, c_y); the smaller pitch that
+    // solves A cos(θ − φ) = height − r.
+    let a = centre[1].hypot(centre[2]);
+    let phi = centre[2].atan2(centre[1]);
+    let theta = phi - ((height - r) / a).clamp(-1.0, 1.0).acos();
+    let g = [0.0, theta.cos(), theta.sin()];
+    Object::Plane(Plane {
+        bounds_m: None,
+        point_m: [
+            centre[0] + g[0] * r,
+            centre[1] + g[1] * r,
+            centre[2] + g[2] * r,
+        ],
+        normal: [-g[0], -g[1], -g[2]],
+        albedo: 0.2,
+        texture: Texture::Stone,
+        texture_contrast: 0.5,
+    })
+}
+
 fn params(seed: u64, finish: Finish) -> SimParams {
     let mut p = SimParams {
         seed,
@@ -374,7 +409,8 @@ impl RandomBall {
         let mut objects = vec![b.clone()];
         if on_floor {
             if let Object::Sphere(s) = &b {
-                objects.push(floor_under(s.centre_m[1], s.radius_m));
+                let height = instrument_height(s.centre_m, s.radius_m);
+                objects.push(floor_seen_from(s.centre_m, s.radius_m, height));
             }
         }
         SimSpec {
