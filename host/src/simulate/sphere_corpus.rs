@@ -431,3 +431,46 @@ impl RandomBall {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The floor a random ball rests on touches the ball, faces the camera, and has the
+    /// camera and both laser exits above it, `height` above for the camera. (A level floor
+    /// under the ball, `floor_under`, fails the exits' check from the first seed on.)
+    #[test]
+    fn the_floor_is_under_the_ball_and_below_the_instrument() {
+        let cal = two_plane_calibration();
+        for seed in 2_000_000..2_000_200 {
+            let ball = RandomBall::draw(seed);
+            let Object::Sphere(s) = super::ball(ball.d_mm, ball.z, ball.x, ball.shift, ball.finish)
+            else {
+                unreachable!("ball() makes a sphere")
+            };
+            let (c, r) = (s.centre_m, s.radius_m);
+            let height = instrument_height(c, r);
+            let Object::Plane(floor) = floor_seen_from(c, r, height) else {
+                unreachable!("a plane")
+            };
+            let n = floor.normal;
+            let above = |p: [f64; 3]| {
+                (0..3)
+                    .map(|i| (p[i] - floor.point_m[i]) * n[i])
+                    .sum::<f64>()
+            };
+            assert!((above(c) - r).abs() < 1e-9, "seed {seed}: tangent");
+            assert!(
+                (above([0.0; 3]) - height).abs() < 1e-9,
+                "seed {seed}: the camera"
+            );
+            for plane in &cal.planes {
+                let exit = plane.source;
+                assert!(
+                    above([exit.x, exit.y, exit.z]) > 0.0,
+                    "seed {seed}: a laser exit below the floor"
+                );
+            }
+        }
+    }
+}
