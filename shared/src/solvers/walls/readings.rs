@@ -278,9 +278,10 @@ impl LineOnWall<'_> {
 }
 
 /// The aimed wall's segment along the lowest curve across the image that lights it: its
-/// points' first and
-/// last run, each end at the next wall (corner), at the edge where the line leaves the plane,
-/// or at the frame's side (`docs/building.md`, "Segment length").
+/// points' first and last run, each followed past clutter in front of the wall
+/// ([`LineOnWall::reach`]), each end at the next wall (corner), at the edge where the line
+/// leaves the plane (placed within its pixel, [`lit_fraction`], [`edge_offset`]), hidden by
+/// the clutter, or at the frame's side (`docs/building.md`, "Segment length").
 pub(super) fn segment(
     input: &WallInput<'_>,
     params: &WallParams,
