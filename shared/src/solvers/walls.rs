@@ -84,7 +84,7 @@ pub struct WallParams {
     /// wall seen again beyond it: a cable or a pipe; wider clutter hides the segment's end.
     pub max_occluder_px: Real,
     /// σ of the lens's point spread (pixels; the reference lens: 0.5 px at f/2.4,
-    /// `docs/simulator.md` §2): it blurs a wall's edge across the end pixel of its stripe, whose
+    /// `docs/simulator.md` §4): it blurs a wall's edge across the end pixel of its stripe, whose
     /// amplitude places the edge (`docs/building.md`, (B9)).
     pub psf_sigma_px: Real,
     /// Gravity in the camera frame (pointing down, any length) and its direction's 1σ
