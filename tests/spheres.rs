@@ -13,12 +13,14 @@ use tangent_corpus::captures as corpus;
 mod read;
 use read::read;
 
-/// Balls both lines cross: matt, off-centre, on a floor, and polished steel (one with the
-/// laser's own glint saturating its stripe, one with a saturated sun glint beside it).
-const BALLS: [&str; 9] = [
+/// Balls both lines cross: matt, off-centre, on a floor (one beside the aim, where the floor's
+/// lines cross the central column), and polished steel (one with the laser's own glint
+/// saturating its stripe, one with a saturated sun glint beside it).
+const BALLS: [&str; 10] = [
     "sphere-d100-z080-matt-2p",
     "sphere-d150-z100-offcentre-2p",
     "sphere-d160-z100-floor-2p",
+    "sphere-d080-z090-floor-offcentre-2p",
     "sphere-d200-z120-matt-2p",
     "sphere-d400-z200-matt-2p",
     "sphere-d120-z100-shiny-2p",

@@ -42,6 +42,7 @@ use crate::real::Real;
 use crate::solvers::road_profile::RoadError;
 use crate::solvers::SolveError;
 
+pub mod arcs;
 pub mod buffers;
 mod candidate;
 pub mod crossing;
@@ -107,6 +108,10 @@ pub struct PipelineConfig {
     /// agree ([`fragments`]: a niche's front wall beside its back wall); `None` leaves them to
     /// the fragment join. The wall instrument turns it on.
     pub stacks: Option<StackParams>,
+    /// Ranking the selected objects that bend like a ball's section before the straight ones
+    /// ([`arcs`]: a ball beside the central column on a floor, whose line would otherwise be
+    /// the aimed object). The sphere instrument turns it on.
+    pub arcs_first: bool,
 }
 
 impl Default for PipelineConfig {
@@ -125,6 +130,7 @@ impl Default for PipelineConfig {
             faint: Some(FaintParams::default()),
             grow: None,
             stacks: None,
+            arcs_first: false,
         }
     }
 }

@@ -304,6 +304,23 @@ pub fn entries() -> Vec<CorpusEntry> {
             ball(120.0, 1.0, 0.1, 0.2, Finish::Matt),
         ],
     );
+    // A ball beside the aim on a floor: the floor's lines cross the central column, the ball
+    // does not (its sections are ranked first for bending, `pipeline::arcs`).
+    let b = ball(80.0, 0.9, 0.09, 0.2, Finish::Matt);
+    let Object::Sphere(s) = &b else {
+        unreachable!("ball() makes a sphere")
+    };
+    let floor = floor_seen_from(
+        s.centre_m,
+        s.radius_m,
+        instrument_height(s.centre_m, s.radius_m),
+    );
+    add(
+        "sphere-d080-z090-floor-offcentre-2p",
+        "matt ball 80 mm resting on a floor beside the aim (centre 0.9 m ahead, 0.09 m across: \
+         the floor's lines cross the central column, the ball does not), two planes",
+        vec![b, floor],
+    );
     out
 }
 

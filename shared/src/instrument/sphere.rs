@@ -30,6 +30,7 @@ impl Instrument for Sphere {
     fn pipeline_config(base: &PipelineConfig) -> PipelineConfig {
         PipelineConfig {
             grow: Some(GrowParams::default()),
+            arcs_first: true,
             ..*base
         }
     }

@@ -106,7 +106,7 @@ pub(super) fn select_and_assign(
 ) -> Result<Candidates, PipelineError> {
     let n_planes = calibration.planes.len();
     let mut params = config.selection;
-    params.max_objects = if config.stacks.is_some() {
+    params.max_objects = if config.stacks.is_some() || config.arcs_first {
         MAX_CANDIDATES
     } else {
         (config.max_fragments * n_planes).clamp(1, MAX_CURVES)
@@ -137,6 +137,9 @@ pub(super) fn select_and_assign(
         }
     }
     let len = candidates.len;
+    if config.arcs_first {
+        super::arcs::arcs_first(&mut candidates.list[..len], runs, calibration);
+    }
     assign_planes(&mut candidates.list[..len], runs, calibration, config);
     if config.stacks.is_some() {
         keep_nearest_curves(&mut candidates.list[..len]);
