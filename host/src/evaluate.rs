@@ -219,7 +219,76 @@ pub fn section(title: &str, samples: &[Sample]) -> String {
         "z",
         |label, b| row(label, &stats(b)),
     );
+    out += &bound_table(samples);
     out + &failures_and_worst(samples, 1)
+}
+
+/// What readings whose errors were normal with a given σ would score: the expected MAE
+/// `√(2/π)·σ` and the chance of |error| ≤ 1 % of `d`, `erf(0.01·d/(√2·σ))`, averaged over
+/// `(d, σ)`.
+fn expected_scores(pairs: &[(f64, f64)]) -> (f64, f64) {
+    let n = pairs.len().max(1) as f64;
+    let mae = pairs.iter().map(|&(_, s)| s * (2.0 / std::f64::consts::PI).sqrt()).sum::<f64>() / n;
+    let within = pairs
+        .iter()
+        .map(|&(d, s)| libm::erf(0.01 * d / (std::f64::consts::SQRT_2 * s)))
+        .sum::<f64>()
+        / n;
+    (mae, within)
+}
+
+/// The bound beside the measured scores, per distance bin (`docs/error-model.md` §6, "The
+/// single-exposure bound"): readings with errors as large as the points' own scatter allows
+/// (`information_uncertainty_m`), and as large as the stated σ.
+fn bound_table(samples: &[Sample]) -> String {
+    let mut out = String::from(
+        "\nThe bound (`docs/error-model.md` §6): the scores of readings whose errors were as large \
+         as the points' own scatter allows (*bound*: `information_uncertainty_m`, the fit's \
+         white-noise σ with the stripe's correlation length) and as large as the stated σ \
+         (*stated σ*: with the coherent bending and the calibration).\n\n\
+         | bin | n read | MAE mm | bound MAE mm | stated-σ MAE mm | within 1 % | bound within 1 % | stated-σ within 1 % |\n\
+         |---|---|---|---|---|---|---|---|\n",
+    );
+    let mut bins = vec![("**all**".to_string(), (0.0, f64::INFINITY))];
+    bins.extend(DISTANCE_BINS_M.iter().map(|&b| (format!("z {}", distance_label(b)), b)));
+    for (label, bin) in bins {
+        let read: Vec<(&Sample, f64, f64, f64)> = samples
+            .iter()
+            .filter(|s| in_distance_bin(s, bin))
+            .filter_map(|s| {
+                let r = &s.reading;
+                Some((s, r.diameter_m?, r.uncertainty_m?, r.information_uncertainty_m?))
+            })
+            .collect();
+        if read.is_empty() {
+            continue;
+        }
+        let n = read.len() as f64;
+        let mae = read.iter().map(|(s, d, _, _)| (d - s.truth_m).abs()).sum::<f64>() / n;
+        let within = read
+            .iter()
+            .filter(|(s, d, _, _)| (d - s.truth_m).abs() <= 0.01 * s.truth_m)
+            .count() as f64
+            / n;
+        let pairs = |k: usize| -> Vec<(f64, f64)> {
+            read.iter()
+                .map(|&(s, _, stated, info)| (s.truth_m, if k == 0 { info } else { stated }))
+                .collect()
+        };
+        let (bound_mae, bound_within) = expected_scores(&pairs(0));
+        let (stated_mae, stated_within) = expected_scores(&pairs(1));
+        out += &format!(
+            "| {label} | {} | {:.2} | {:.2} | {:.2} | {:.0} % | {:.0} % | {:.0} % |\n",
+            read.len(),
+            mae * 1e3,
+            bound_mae * 1e3,
+            stated_mae * 1e3,
+            within * 100.0,
+            bound_within * 100.0,
+            stated_within * 100.0
+        );
+    }
+    out + "\n"
 }
 
 /// The metrics of one pipeline (Tangent or the baseline) over a set of captures.

@@ -112,6 +112,10 @@ pub struct Reading {
     /// Fit diameter (metres), when it succeeded.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fit_diameter_m: Option<f64>,
+    /// 1σ of the fit diameter that the points' own σ and their correlation along the stripe
+    /// allow (metres; stems: the single-exposure information bound, `docs/error-model.md` §6).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub information_uncertainty_m: Option<f64>,
     /// Distance from the laser source to the stem (metres).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub distance_m: Option<f64>,
@@ -185,6 +189,7 @@ impl Reading {
                     axes_m: s.axes,
                     three_tangent_diameter_m: s.three_tangent_diameter,
                     fit_diameter_m: s.fit_diameter,
+                    information_uncertainty_m: s.information_uncertainty,
                     distance_m: Some(s.distance),
                     points: Some(s.n_points),
                     truth_diameter_m: truth,

@@ -174,6 +174,11 @@ pub struct CylinderSolution {
     pub fit_diameter: Option<Real>,
     /// Its 1σ.
     pub fit_uncertainty: Option<Real>,
+    /// 1σ of the fit diameter that the points' own σ and their correlation along the stripe
+    /// allow: the single-exposure information bound (`docs/error-model.md` §6), without the
+    /// residuals' χ², the coherent bending and the calibration of `fit_uncertainty`. The
+    /// evaluation's bound columns come from it.
+    pub information_uncertainty: Option<Real>,
     /// Distance from the source of plane 0 to the stem (nearest point, metres).
     pub distance: Real,
     /// Centre of the section in plane 0 (camera frame, metres).
@@ -186,6 +191,8 @@ pub struct CylinderSolution {
 struct PlaneResult {
     tt: Option<(ThreeTangent, Real)>,
     fit: Option<(circle::CircleFit, Real, Real)>, // fit, σ_r, arc angle
+    /// The whole-arc fit's information radius σ (`sigma::RobustCircle::information`).
+    information: Option<Real>,
     ellipse: Option<EllipseFit>,
     flags: Flags,
     n: usize,
@@ -242,6 +249,7 @@ fn solve_plane(
     let noise_of =
         |i: usize| level.to_level(field.direction_in_plane(level.to_plane(pts[i])) * sigmas[i]);
     let near_sigma = |q: Vec2| norm(&noise_at(q));
+    let mut information = None;
     let fit = robust_circle(
         pts,
         Start::Fit,
@@ -253,6 +261,7 @@ fn solve_plane(
     )
     .map(|rc| {
         let mut f = rc.fit;
+        information = Some(rc.information);
         // The whole-arc fit's σ: the points' own σ, inflated by χ² and the residuals'
         // correlation along the stripe (docs/error-model.md, "Correlation along the stripe").
         let random = rc.data_sigma.hypot(rc.bending);
@@ -291,6 +300,7 @@ fn solve_plane(
     Ok(PlaneResult {
         tt,
         fit,
+        information,
         ellipse,
         flags,
         n,
@@ -523,6 +533,7 @@ fn finish_plane(
             three_tangent_uncertainty: one.tt.map(|(_, s)| 2.0 * s),
             fit_diameter: Some(2.0 * f.circle.radius),
             fit_uncertainty: one.fit.map(|(_, s, _)| 2.0 * s),
+            information_uncertainty: one.information.map(|s| 2.0 * s),
             distance: norm(&c) - f.circle.radius,
             centre: plane.from_plane_coords(level.to_plane(e.centre)),
             axes: Some((2.0 * e.semi_axes.0, 2.0 * e.semi_axes.1)),
@@ -577,6 +588,7 @@ fn finish_plane(
         three_tangent_uncertainty: one.tt.map(|(_, s)| 2.0 * s),
         fit_diameter: one.fit.map(|(f, _, _)| 2.0 * f.circle.radius),
         fit_uncertainty: one.fit.map(|(_, s, _)| 2.0 * s),
+        information_uncertainty: one.information.map(|s| 2.0 * s),
         distance,
         centre: plane.from_plane_coords(level.to_plane(centre)),
         axes: None,
@@ -619,6 +631,8 @@ fn solve_tilted(
     // Σ of the per-curve data-driven radius variances of the projected circle fits.
     let mut fit_s2sum = 0.0;
     let mut kf = 0;
+    // Σ of the per-curve information radius variances (the bound's counterpart of the above).
+    let mut info_s2sum = 0.0;
     // Σ of the per-curve edge-fade bias σ's: a bias, common to the curves, so it is
     // averaged, not reduced as independent noise.
     let mut edge_sum = 0.0;
@@ -642,6 +656,7 @@ fn solve_tilted(
                 arc0 = Some(p.arc);
                 ellipse = p.ellipse;
             }
+            info_s2sum += p.information * p.information;
             (p.circle, p.sigma)
         });
         if let Some((_, sf)) = extra {
@@ -745,6 +760,7 @@ fn solve_tilted(
         three_tangent_uncertainty: tt.map(|(_, s)| 2.0 * s),
         fit_diameter: Some(2.0 * cyl.radius),
         fit_uncertainty: Some(2.0 * fit_sigma),
+        information_uncertainty: (kf > 0).then(|| 2.0 * sqrt(info_s2sum) / kf as Real),
         distance: norm(&c0) - cyl.radius,
         centre,
         axes,

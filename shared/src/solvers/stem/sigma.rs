@@ -159,6 +159,8 @@ pub(super) struct ProjectedSection {
     /// The section's data-driven radius σ: the one-plane terms about the cylinder's section,
     /// `data_sigma` in quadrature with the coherent bending.
     pub(super) sigma: Real,
+    /// The section's information radius σ ([`RobustCircle::information`]).
+    pub(super) information: Real,
     /// The cylinder's section in the projection's frame (origin at the plane's source).
     pub(super) circle: circle::Circle,
     /// The visible arc seen from the axis (radians, [`arc_angle`]).
@@ -254,6 +256,7 @@ pub(super) fn projected_section(
     };
     Some(ProjectedSection {
         sigma,
+        information: rc.information,
         circle: section,
         arc: arc_angle(pts, section.centre),
         ellipse,
@@ -274,6 +277,10 @@ pub(super) struct RobustCircle {
     pub(super) data_sigma: Real,
     /// Radius σ from a coherent bending of the curve ([`bending_sigma`]).
     pub(super) bending: Real,
+    /// Radius σ the points' own scatter and its correlation along the stripe allow
+    /// (`model σ·√(χ²_ν·L)`: `data_sigma` without its floor at the model σ and without the
+    /// bending; `docs/error-model.md` §6, "The single-exposure bound").
+    pub(super) information: Real,
     /// Expected bias of the fit's radius from the noise along the line of sight
     /// ([`circle::WeightedFit::radius_pull`]; 0 with [`circle::Pull::Skip`]).
     pub(super) pull: Real,
@@ -331,6 +338,7 @@ pub(super) fn robust_circle(
         cutoff,
         data_sigma,
         bending,
+        information: wf.model_sigma_radius * sqrt(wf.chi2_dof * wf.correlation_length.max(1.0)),
         pull: wf.radius_pull,
     })
 }
