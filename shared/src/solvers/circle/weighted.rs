@@ -42,6 +42,10 @@ pub struct WeightedFit {
     pub fit: CircleFit,
     /// Radius σ if the points' σ are right and independent: `√[(JᵀWJ)⁻¹]_rr`.
     pub model_sigma_radius: Real,
+    /// Radius σ from the points' own residuals with the fit's weights, the sandwich
+    /// `√[A⁻¹(Σwᵢ²dᵢ²JᵢJᵢᵀ)A⁻¹]_rr` (`A = JᵀWJ`): the fit's spread when the points' errors are
+    /// independent, whether or not their σ model is right (`docs/error-model.md` §6, (E6)).
+    pub sandwich_sigma_radius: Real,
     /// Reduced χ² of the normalised residuals `dᵢ/σᵢ` of the inliers.
     pub chi2_dof: Real,
     /// Correlation length of the normalised residuals along the curve (points):
@@ -250,6 +254,24 @@ fn weighted(
     let chi2_dof = chi2 / dof;
     let inv = jtj.try_inverse().ok_or(SolveError::Degenerate)?;
     let model = sqrt(inv[(2, 2)].max(0.0)) * norm.scale;
+    // The sandwich A⁻¹BA⁻¹, B = Σ wᵢ²dᵢ²JᵢJᵢᵀ: the spread the points' own residuals give
+    // with these weights, whatever their σ model (`docs/error-model.md` §6, (E6)).
+    let mut meat = Mat3::zeros();
+    for (i, p) in points.iter().enumerate() {
+        let w = weights.get(i).copied().unwrap_or(0.0);
+        if !(w > 0.0) {
+            continue;
+        }
+        let q = norm.apply(*p) - centre;
+        let rho = real::norm(&q);
+        if !(rho > 0.0) {
+            continue;
+        }
+        let j = Vec3::new(-q.x / rho, -q.y / rho, -1.0);
+        let wd = w * (rho - r);
+        meat += j * j.transpose() * (wd * wd);
+    }
+    let sandwich = sqrt((inv * meat * inv)[(2, 2)].max(0.0)) * norm.scale;
     fit.covariance = inv * (chi2_dof * norm.scale * norm.scale);
     fit.std_dev = Vec3::new(
         sqrt(fit.covariance[(0, 0)].max(0.0)),
@@ -286,6 +308,7 @@ fn weighted(
     Ok(WeightedFit {
         fit,
         model_sigma_radius: model,
+        sandwich_sigma_radius: sandwich,
         chi2_dof,
         correlation_length: correlation,
         sigma_radius,

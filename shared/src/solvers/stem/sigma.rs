@@ -277,9 +277,9 @@ pub(super) struct RobustCircle {
     pub(super) data_sigma: Real,
     /// Radius σ from a coherent bending of the curve ([`bending_sigma`]).
     pub(super) bending: Real,
-    /// Radius σ the points' own scatter and its correlation along the stripe allow
-    /// (`model σ·√(χ²_ν·L)`: `data_sigma` without its floor at the model σ and without the
-    /// bending; `docs/error-model.md` §6, "The single-exposure bound").
+    /// Radius σ the points' own scatter and its correlation along the stripe allow (the
+    /// sandwich σ × `√L`: no floor at the model σ, no bending; `docs/error-model.md` §6,
+    /// "The single-exposure bound").
     pub(super) information: Real,
     /// Expected bias of the fit's radius from the noise along the line of sight
     /// ([`circle::WeightedFit::radius_pull`]; 0 with [`circle::Pull::Skip`]).
@@ -338,7 +338,7 @@ pub(super) fn robust_circle(
         cutoff,
         data_sigma,
         bending,
-        information: wf.model_sigma_radius * sqrt(wf.chi2_dof * wf.correlation_length.max(1.0)),
+        information: wf.sandwich_sigma_radius * sqrt(wf.correlation_length.max(1.0)),
         pull: wf.radius_pull,
     })
 }
