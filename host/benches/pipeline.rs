@@ -1,12 +1,14 @@
 //! Host benchmarks of the measurement chain on a 752×480 frame pair: the image part alone
 //! (`extract_profile`: subtract, threshold, segment, select, subpixel curve, triangulate) and
 //! the whole stem measurement (`instrument::measure_with::<Stem>`). The frames come from the simulator (rendered
-//! once, outside the timed loop). Results: docs/performance.md.
+//! once, outside the timed loop). And the sphere instrument's image part on the corpus's ball
+//! beside the aim on a floor, with and without its arcs-before-lines ranking
+//! (`pipeline::arcs`). Results: docs/performance.md.
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use std::hint::black_box;
 use tangent_core::image::Frame;
-use tangent_core::instrument::{measure_with, Stem};
+use tangent_core::instrument::{measure_with, Instrument, Sphere, Stem};
 use tangent_core::pipeline::{extract_profile, OwnedBuffers, PipelineConfig};
 use tangent_core::solvers::stem::CylinderParams;
 use tangent_host::pgm::PgmSamples;
@@ -59,11 +61,53 @@ fn bench(c: &mut Criterion) {
     }
 }
 
+fn bench_sphere(c: &mut Criterion) {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../tests/captures/sphere-d080-z090-floor-offcentre-2p");
+    let capture = tangent_host::capture::Capture::read(&dir).expect("corpus capture");
+    let cal = capture.calibration.clone();
+    let (off, on) = (
+        capture.off_frame(),
+        capture.on_frames().next().expect("an on frame").1,
+    );
+    let (PgmSamples::U8(off_px), PgmSamples::U8(on_px)) = (&off.samples, &on.samples) else {
+        panic!("the benchmark expects 8-bit frames");
+    };
+    let (w, h) = (on.width, on.height);
+    let off_f = Frame::new(off_px, w, h, w).expect("frame");
+    let on_f = Frame::new(on_px, w, h, w).expect("frame");
+    let mut hw = OwnedBuffers::<u8>::for_frame(w, h, 8, cal.planes.len());
+    let with_arcs = Sphere::pipeline_config(&PipelineConfig::default());
+    for (name, config) in [
+        ("arcs_first", with_arcs),
+        (
+            "nearest_only",
+            PipelineConfig {
+                arcs_first: false,
+                ..with_arcs
+            },
+        ),
+    ] {
+        c.bench_function(&format!("extract_profile_sphere_floor_{name}"), |b| {
+            b.iter(|| {
+                black_box(extract_profile(
+                    &off_f,
+                    &on_f,
+                    &cal,
+                    &config,
+                    &mut hw.workspace(),
+                ))
+                .is_ok()
+            })
+        });
+    }
+}
+
 criterion_group! {
     name = benches;
     // Criterion's HTML plots need a system font that plotters (built here with the shipped
     // font only) cannot find; the numbers are what we record.
     config = Criterion::default().without_plots();
-    targets = bench
+    targets = bench, bench_sphere
 }
 criterion_main!(benches);
