@@ -14,20 +14,25 @@ use tangent_core::solvers::stem::CylinderParams;
 use tangent_host::pgm::PgmSamples;
 use tangent_host::simulate::{corpus::random_stem, simulate};
 
+/// The capture's laser-off and first laser-on frames (8-bit) and their size.
+fn eight_bit(capture: &tangent_host::capture::Capture) -> (&[u8], &[u8], usize, usize) {
+    let (off, on) = (
+        capture.off_frame(),
+        capture.on_frames().next().expect("an on frame").1,
+    );
+    let (PgmSamples::U8(off_px), PgmSamples::U8(on_px)) = (&off.samples, &on.samples) else {
+        panic!("the benchmark expects 8-bit frames");
+    };
+    (off_px, on_px, on.width, on.height)
+}
+
 fn bench(c: &mut Criterion) {
     // A 30 cm stem at 1.5 m in forest shade, one plane; and a tilted one with two planes.
     for (name, seed, tilt) in [("one_plane", 7u64, 0.0), ("two_planes", 8u64, 20.0)] {
         let spec = random_stem(seed, tilt);
         let (capture, _) = simulate(&spec).expect("simulated capture");
         let cal = capture.calibration.clone();
-        let (off, on) = (
-            capture.off_frame(),
-            capture.on_frames().next().expect("an on frame").1,
-        );
-        let (PgmSamples::U8(off_px), PgmSamples::U8(on_px)) = (&off.samples, &on.samples) else {
-            panic!("the benchmark expects 8-bit frames");
-        };
-        let (w, h) = (on.width, on.height);
+        let (off_px, on_px, w, h) = eight_bit(&capture);
         let off_f = Frame::new(off_px, w, h, w).expect("frame");
         let on_f = Frame::new(on_px, w, h, w).expect("frame");
         let mut hw = OwnedBuffers::<u8>::for_frame(w, h, 8, cal.planes.len());
@@ -66,14 +71,7 @@ fn bench_sphere(c: &mut Criterion) {
         .join("../tests/captures/sphere-d080-z090-floor-offcentre-2p");
     let capture = tangent_host::capture::Capture::read(&dir).expect("corpus capture");
     let cal = capture.calibration.clone();
-    let (off, on) = (
-        capture.off_frame(),
-        capture.on_frames().next().expect("an on frame").1,
-    );
-    let (PgmSamples::U8(off_px), PgmSamples::U8(on_px)) = (&off.samples, &on.samples) else {
-        panic!("the benchmark expects 8-bit frames");
-    };
-    let (w, h) = (on.width, on.height);
+    let (off_px, on_px, w, h) = eight_bit(&capture);
     let off_f = Frame::new(off_px, w, h, w).expect("frame");
     let on_f = Frame::new(on_px, w, h, w).expect("frame");
     let mut hw = OwnedBuffers::<u8>::for_frame(w, h, 8, cal.planes.len());

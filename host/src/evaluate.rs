@@ -228,7 +228,11 @@ pub fn section(title: &str, samples: &[Sample]) -> String {
 /// `(d, σ)`.
 fn expected_scores(pairs: &[(f64, f64)]) -> (f64, f64) {
     let n = pairs.len().max(1) as f64;
-    let mae = pairs.iter().map(|&(_, s)| s * (2.0 / std::f64::consts::PI).sqrt()).sum::<f64>() / n;
+    let mae = pairs
+        .iter()
+        .map(|&(_, s)| s * (2.0 / std::f64::consts::PI).sqrt())
+        .sum::<f64>()
+        / n;
     let within = pairs
         .iter()
         .map(|&(d, s)| libm::erf(0.01 * d / (std::f64::consts::SQRT_2 * s)))
@@ -250,21 +254,34 @@ fn bound_table(samples: &[Sample]) -> String {
          |---|---|---|---|---|---|---|---|\n",
     );
     let mut bins = vec![("**all**".to_string(), (0.0, f64::INFINITY))];
-    bins.extend(DISTANCE_BINS_M.iter().map(|&b| (format!("z {}", distance_label(b)), b)));
+    bins.extend(
+        DISTANCE_BINS_M
+            .iter()
+            .map(|&b| (format!("z {}", distance_label(b)), b)),
+    );
     for (label, bin) in bins {
         let read: Vec<(&Sample, f64, f64, f64)> = samples
             .iter()
             .filter(|s| in_distance_bin(s, bin))
             .filter_map(|s| {
                 let r = &s.reading;
-                Some((s, r.diameter_m?, r.uncertainty_m?, r.information_uncertainty_m?))
+                Some((
+                    s,
+                    r.diameter_m?,
+                    r.uncertainty_m?,
+                    r.information_uncertainty_m?,
+                ))
             })
             .collect();
         if read.is_empty() {
             continue;
         }
         let n = read.len() as f64;
-        let mae = read.iter().map(|(s, d, _, _)| (d - s.truth_m).abs()).sum::<f64>() / n;
+        let mae = read
+            .iter()
+            .map(|(s, d, _, _)| (d - s.truth_m).abs())
+            .sum::<f64>()
+            / n;
         let within = read
             .iter()
             .filter(|(s, d, _, _)| (d - s.truth_m).abs() <= 0.01 * s.truth_m)
