@@ -210,14 +210,16 @@ fn the_road_instrument_alone_takes_its_curve_unsmoothed_and_in_fragments() {
         },
         base
     );
-    // The stem and the sphere grow their curves along the stripe (`pipeline::grow`) and
-    // change nothing else.
+    // The stem and the sphere grow their curves along the stripe (`pipeline::grow`); the
+    // sphere also ranks arcs before lines (`pipeline::arcs`); nothing else changes.
     for mode in [Mode::Cylinder, Mode::Sphere] {
         let grown = pipeline_config(mode, &base);
         assert!(grown.grow.is_some());
+        assert_eq!(grown.arcs_first, mode == Mode::Sphere);
         assert_eq!(
             PipelineConfig {
                 grow: base.grow,
+                arcs_first: base.arcs_first,
                 ..grown
             },
             base
