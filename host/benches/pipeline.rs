@@ -11,6 +11,7 @@ use tangent_core::image::Frame;
 use tangent_core::instrument::{measure_with, Instrument, Sphere, Stem};
 use tangent_core::pipeline::{extract_profile, OwnedBuffers, PipelineConfig};
 use tangent_core::solvers::stem::CylinderParams;
+use tangent_core::Calibration;
 use tangent_host::pgm::PgmSamples;
 use tangent_host::simulate::{corpus::random_stem, simulate};
 
@@ -26,6 +27,20 @@ fn eight_bit(capture: &tangent_host::capture::Capture) -> (&[u8], &[u8], usize, 
     (off_px, on_px, on.width, on.height)
 }
 
+/// Times `extract_profile` on one frame pair.
+fn bench_extract(
+    c: &mut Criterion,
+    id: &str,
+    (off, on): (&Frame<u8, &[u8]>, &Frame<u8, &[u8]>),
+    cal: &Calibration,
+    config: &PipelineConfig,
+    hw: &mut OwnedBuffers<u8>,
+) {
+    c.bench_function(id, |b| {
+        b.iter(|| black_box(extract_profile(off, on, cal, config, &mut hw.workspace())).is_ok())
+    });
+}
+
 fn bench(c: &mut Criterion) {
     // A 30 cm stem at 1.5 m in forest shade, one plane; and a tilted one with two planes.
     for (name, seed, tilt) in [("one_plane", 7u64, 0.0), ("two_planes", 8u64, 20.0)] {
@@ -38,18 +53,8 @@ fn bench(c: &mut Criterion) {
         let mut hw = OwnedBuffers::<u8>::for_frame(w, h, 8, cal.planes.len());
         let config = PipelineConfig::default();
         let params = CylinderParams::default();
-        c.bench_function(&format!("extract_profile_752x480_{name}"), |b| {
-            b.iter(|| {
-                black_box(extract_profile(
-                    &off_f,
-                    &on_f,
-                    &cal,
-                    &config,
-                    &mut hw.workspace(),
-                ))
-                .is_ok()
-            })
-        });
+        let id = format!("extract_profile_752x480_{name}");
+        bench_extract(c, &id, (&off_f, &on_f), &cal, &config, &mut hw);
         c.bench_function(&format!("measure_stem_752x480_{name}"), |b| {
             b.iter(|| {
                 black_box(measure_with::<Stem, u8>(
@@ -86,18 +91,8 @@ fn bench_sphere(c: &mut Criterion) {
             },
         ),
     ] {
-        c.bench_function(&format!("extract_profile_sphere_floor_{name}"), |b| {
-            b.iter(|| {
-                black_box(extract_profile(
-                    &off_f,
-                    &on_f,
-                    &cal,
-                    &config,
-                    &mut hw.workspace(),
-                ))
-                .is_ok()
-            })
-        });
+        let id = format!("extract_profile_sphere_floor_{name}");
+        bench_extract(c, &id, (&off_f, &on_f), &cal, &config, &mut hw);
     }
 }
 
