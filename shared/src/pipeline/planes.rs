@@ -11,7 +11,8 @@ use super::candidate::{Candidate, MAX_CANDIDATES};
 use super::fragments;
 use super::{PipelineConfig, PipelineError};
 
-/// The selected objects, nearest to the central column first, each with its plane.
+/// The selected objects, nearest to the central column first (in sphere mode the arcs before
+/// the lines, [`super::arcs`]), each with its plane.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Candidates {
     list: [Candidate; MAX_CANDIDATES],
@@ -186,7 +187,8 @@ fn keep_nearest_curves(cands: &mut [Candidate]) {
     }
 }
 
-/// Assigns candidates (sorted nearest to the central column first) to laser planes.
+/// Assigns candidates (sorted nearest to the central column first; in sphere mode the arcs
+/// before the lines) to laser planes.
 ///
 /// The first candidate is the aimed object's curve in some plane. With one plane it is that
 /// plane's. With several planes, the candidates overlapping it in columns are the other planes'
