@@ -27,11 +27,14 @@ fn eight_bit(capture: &tangent_host::capture::Capture) -> (&[u8], &[u8], usize, 
     (off_px, on_px, on.width, on.height)
 }
 
+/// One 8-bit frame borrowed from a capture.
+type Frame8<'a> = Frame<u8, &'a [u8]>;
+
 /// Times `extract_profile` on one frame pair.
 fn bench_extract(
     c: &mut Criterion,
     id: &str,
-    (off, on): (&Frame<u8, &[u8]>, &Frame<u8, &[u8]>),
+    (off, on): (&Frame8, &Frame8),
     cal: &Calibration,
     config: &PipelineConfig,
     hw: &mut OwnedBuffers<u8>,
