@@ -287,13 +287,10 @@ fn bound_table(samples: &[Sample]) -> String {
             .filter(|(s, d, _, _)| (d - s.truth_m).abs() <= 0.01 * s.truth_m)
             .count() as f64
             / n;
-        let pairs = |k: usize| -> Vec<(f64, f64)> {
-            read.iter()
-                .map(|&(s, _, stated, info)| (s.truth_m, if k == 0 { info } else { stated }))
-                .collect()
-        };
-        let (bound_mae, bound_within) = expected_scores(&pairs(0));
-        let (stated_mae, stated_within) = expected_scores(&pairs(1));
+        let bound: Vec<(f64, f64)> = read.iter().map(|&(s, _, _, i)| (s.truth_m, i)).collect();
+        let stated: Vec<(f64, f64)> = read.iter().map(|&(s, _, st, _)| (s.truth_m, st)).collect();
+        let (bound_mae, bound_within) = expected_scores(&bound);
+        let (stated_mae, stated_within) = expected_scores(&stated);
         out += &format!(
             "| {label} | {} | {:.2} | {:.2} | {:.2} | {:.0} % | {:.0} % | {:.0} % |\n",
             read.len(),

@@ -236,13 +236,23 @@ fn weighted(
     } else {
         finish(points, &norm, theta, last_it, &weight)?
     };
-    // Unweighted RMS of the inliers (metres), as the unweighted fits report.
+    // One pass over the inliers: their unweighted RMS (metres), as the unweighted fits
+    // report, and the sandwich's B = Σ wᵢ²dᵢ²JᵢJᵢᵀ: the spread the points' own residuals give
+    // with these weights, whatever their σ model (`docs/error-model.md` §6, (E6)).
     let (mut ss, mut count) = (0.0, 0usize);
-    for (p, w) in points.iter().zip(weights) {
-        if *w > 0.0 {
-            let d = real::norm(&(norm.apply(*p) - centre)) - r;
-            ss += d * d;
-            count += 1;
+    let mut meat = Mat3::zeros();
+    for (p, &w) in points.iter().zip(weights) {
+        if !(w > 0.0) {
+            continue;
+        }
+        let q = norm.apply(*p) - centre;
+        let rho = real::norm(&q);
+        let d = rho - r;
+        ss += d * d;
+        count += 1;
+        if rho > 0.0 {
+            let j = Vec3::new(-q.x / rho, -q.y / rho, -1.0);
+            meat += j * j.transpose() * ((w * d) * (w * d));
         }
     }
     fit.rms_residual = if count > 0 {
@@ -254,23 +264,7 @@ fn weighted(
     let chi2_dof = chi2 / dof;
     let inv = jtj.try_inverse().ok_or(SolveError::Degenerate)?;
     let model = sqrt(inv[(2, 2)].max(0.0)) * norm.scale;
-    // The sandwich A⁻¹BA⁻¹, B = Σ wᵢ²dᵢ²JᵢJᵢᵀ: the spread the points' own residuals give
-    // with these weights, whatever their σ model (`docs/error-model.md` §6, (E6)).
-    let mut meat = Mat3::zeros();
-    for (i, p) in points.iter().enumerate() {
-        let w = weights.get(i).copied().unwrap_or(0.0);
-        if !(w > 0.0) {
-            continue;
-        }
-        let q = norm.apply(*p) - centre;
-        let rho = real::norm(&q);
-        if !(rho > 0.0) {
-            continue;
-        }
-        let j = Vec3::new(-q.x / rho, -q.y / rho, -1.0);
-        let wd = w * (rho - r);
-        meat += j * j.transpose() * (wd * wd);
-    }
+    // The sandwich A⁻¹BA⁻¹.
     let sandwich = sqrt((inv * meat * inv)[(2, 2)].max(0.0)) * norm.scale;
     fit.covariance = inv * (chi2_dof * norm.scale * norm.scale);
     fit.std_dev = Vec3::new(
