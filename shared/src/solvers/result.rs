@@ -49,8 +49,11 @@ impl Flags {
     /// Only one plane: the stem is assumed transversal; a sideways lean `φ` inflates the
     /// diameter by `1/cos φ` (`docs/cylinder.md`, "Error when the tilt is ignored").
     pub const TILT_IGNORED: Flags = Flags(1 << 2);
-    /// The three-tangent and fit radii disagree by more than 3σ combined: an edge is
-    /// probably occluded or lost in the dark; the fit was reported.
+    /// The methods disagree. Stem: the three-tangent and fit radii differ by more than 3σ
+    /// combined (an edge is probably occluded or lost in the dark); the fit was reported.
+    /// Sphere: the sections' centres missed the sphere's axis, but one sphere fits every
+    /// line's points within their noise; the joint fit was reported, its σ widened by the
+    /// methods' spread (`docs/sphere.md`, "Sections that miss the axis").
     pub const INCONSISTENT: Flags = Flags(1 << 3);
     /// The three-tangent method failed (edges missing, too few points near the nearest
     /// point).

@@ -11,11 +11,12 @@
 //!   with its own noise (`docs/accuracy.md`, "Spheres").
 //!
 //! Refusals ([`SolveError`]): one section only ([`SolveError::OneSection`]: `R` is not
-//! observable), round sections that do not share a centre ([`SolveError::TwoObjects`]),
+//! observable), round sections that do not share a centre and whose points no one sphere
+//! fits ([`SolveError::TwoObjects`]),
 //! sections that cannot belong to one sphere ([`SolveError::NotSpherical`]: a flat or
 //! elongated object), a radius outside the plausible range. Flags: a short
-//! arc, a section near a pole, a sphere test that fails ([`Flags::NOT_SPHERICAL`]), methods
-//! that disagree, stray points.
+//! arc, a section near a pole, a sphere test that fails ([`Flags::NOT_SPHERICAL`]), sections
+//! off the axis that the joint fit overrules ([`Flags::INCONSISTENT`]), stray points.
 
 // `!(x > 0.0)` is deliberate throughout: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -28,7 +29,7 @@ use super::circle::RobustParams;
 use super::ellipse;
 use super::lm::LmParams;
 use super::result::{Flags, Method};
-use super::sphere_fit::{fit_sphere, SphereFitParams};
+use super::sphere_fit::{fit_sphere, SphereFit, SphereFitParams};
 use super::sphere_sections::{
     circle_section, initial_sphere, sphere_from_sections, Section, Sphere, SphereEstimate,
 };
@@ -63,8 +64,8 @@ pub struct SphereParams {
     /// the relative axis difference above which the section is not round.
     pub not_round: (Real, Real),
     /// Refusal: the sections' centres miss the sphere's axis by more than this fraction of
-    /// `R` ([`SolveError::TwoObjects`] when every section is a round arc, else
-    /// [`SolveError::NotSpherical`]).
+    /// `R` and no one sphere fits every line's points ([`SolveError::TwoObjects`] when every
+    /// section is a round arc, else [`SolveError::NotSpherical`]).
     pub max_misalignment: Real,
     /// Fraction of rejected points above which [`Flags::SEVERAL_OBJECTS`] is set.
     pub max_outlier_fraction: Real,
@@ -276,18 +277,37 @@ pub fn solve(
         }
     }
     // The geometric refusal: the sections' centres must lie on one axis (checked at the
-    // fitted sphere, or at the starting one when the fit found none).
+    // fitted sphere, or at the starting one when the fit found none). A short section near a
+    // pole can miss the axis through its circle's bias alone while its points lie on the
+    // ball: one sphere fitted to every point then keeps each curve's points within their
+    // noise, and decides (`docs/sphere.md`, "Sections that miss the axis").
+    let mut rescued = None;
     if count >= 2 {
         let sphere = match &sections_fit {
             Some(e) => e.sphere,
             None => initial_sphere(&list[..count])?,
         };
         if misalignment(&list[..count], &sphere) > params.max_misalignment {
-            return Err(if round_arcs || disjoint(&list[..count]) {
-                SolveError::TwoObjects
-            } else {
-                SolveError::NotSpherical
-            });
+            let fit = fit_sphere(
+                &input.curves[..n],
+                &input.sigmas[..n],
+                &input.planes[..n],
+                sphere,
+                &params.fit,
+                values_all,
+            )
+            .ok()
+            .filter(|j| one_sphere_explains(j, &list[..count], params));
+            match fit {
+                Some(j) => {
+                    flags.insert(Flags::INCONSISTENT);
+                    rescued = Some(j);
+                }
+                None if round_arcs || disjoint(&list[..count]) => {
+                    return Err(SolveError::TwoObjects)
+                }
+                None => return Err(SolveError::NotSpherical),
+            }
         }
     }
 
@@ -322,22 +342,28 @@ pub fn solve(
         flags.insert(Flags::THREE_TANGENT_FAILED);
     }
 
-    // Joint fit from the best start available.
-    let start = sections_fit
-        .as_ref()
-        .or(tt_fit.as_ref())
-        .map(|e| e.sphere)
-        // Neither circles nor tangents fit the sections: straight or shapeless curves.
-        .ok_or(SolveError::NotSpherical)?;
-    let joint = fit_sphere(
-        &input.curves[..n],
-        &input.sigmas[..n],
-        &input.planes[..n],
-        start,
-        &params.fit,
-        values_all,
-    )
-    .ok();
+    // Joint fit from the best start available (already made when it decided the sections'
+    // misalignment).
+    let joint = match rescued {
+        Some(j) => Some(j),
+        None => {
+            let start = sections_fit
+                .as_ref()
+                .or(tt_fit.as_ref())
+                .map(|e| e.sphere)
+                // Neither circles nor tangents fit the sections: straight or shapeless curves.
+                .ok_or(SolveError::NotSpherical)?;
+            fit_sphere(
+                &input.curves[..n],
+                &input.sigmas[..n],
+                &input.planes[..n],
+                start,
+                &params.fit,
+                values_all,
+            )
+            .ok()
+        }
+    };
     if joint.is_none() {
         flags.insert(Flags::FIT_FAILED);
     }
@@ -349,12 +375,23 @@ pub fn solve(
     let sections = sections_fit.as_ref().map(estimate_of);
     let three_tangent = tt_fit.as_ref().map(estimate_of);
 
-    let (chosen, method) = match (joint_estimate, sections, three_tangent) {
+    let (mut chosen, method) = match (joint_estimate, sections, three_tangent) {
         (Some(j), _, _) => (j, Method::JointFit),
         (None, Some(s), _) => (s, Method::SphereSections),
         (None, None, Some(t)) => (t, Method::SphereThreeTangent),
         (None, None, None) => return Err(SolveError::NotConverged),
     };
+    if rescued.is_some() {
+        // The sections missed the axis: some method carries an error its σ does not model.
+        // The spread of the methods is the evidence of its size (`docs/sphere.md`, "Sections
+        // that miss the axis").
+        let spread = [sections, three_tangent]
+            .iter()
+            .flatten()
+            .map(|e| (e.diameter - chosen.diameter).abs())
+            .fold(0.0, Real::max);
+        chosen.sigma = sqrt(chosen.sigma * chosen.sigma + spread * spread);
+    }
     let radius = 0.5 * chosen.diameter;
     if !(radius >= params.min_radius && radius <= params.max_radius) {
         return Err(SolveError::RadiusOutOfRange);
@@ -435,6 +472,24 @@ fn disjoint(sections: &[Section]) -> bool {
         })
     })
 }
+
+/// One sphere explains every curve: the joint fit kept nearly all of each curve's points
+/// (a curve on another object is set aside by its robust weights), each curve's robust
+/// residual scale, squared, is within the sphere test's `χ²` per degree of freedom, and no
+/// section's circle is larger than the sphere (`rᵢ ≤ R`, one-sided at 95 %: `1.645 σ_r`).
+/// Only a section's centre is tested loosely: on a short arc near a pole it is biased
+/// (`docs/sphere.md`, "Sections that miss the axis").
+fn one_sphere_explains(fit: &SphereFit, sections: &[Section], params: &SphereParams) -> bool {
+    let fits_inside = sections.iter().all(|s| {
+        s.radius - fit.sphere.radius <= ONE_SIDED_95 * sqrt(s.covariance[(2, 2)].max(0.0))
+    });
+    fits_inside
+        && fit.least_inlier_share >= 1.0 - params.max_outlier_fraction
+        && fit.worst_curve_scale * fit.worst_curve_scale <= params.not_spherical_chi2
+}
+
+/// The one-sided 95 % point of the normal distribution.
+const ONE_SIDED_95: Real = 1.645;
 
 /// Largest distance, relative to `R`, between a section's centre and the sphere centre's
 /// projection on its plane.

@@ -76,6 +76,12 @@ pub struct SphereFit {
     pub reduced_chi2: Real,
     /// Points with non-zero weight.
     pub inliers: usize,
+    /// The smallest share of one curve's points kept (non-zero weight): low when a curve
+    /// lies on another object, which the robust fit sets aside.
+    pub least_inlier_share: Real,
+    /// The largest, over the curves, of the robust scale `1.4826·median|e/σ_e|` of a curve's
+    /// kept residuals: about 1 when every curve lies on the sphere within its points' noise.
+    pub worst_curve_scale: Real,
     /// Points given.
     pub points: usize,
 }
@@ -286,6 +292,7 @@ pub fn fit_sphere(
     // curve k's n_k points count as n_k/L_k independent ones, and the fit's variance is
     // that of Σ n_k/L_k points (`docs/sphere.md`, "Uncertainty of the joint fit").
     let (mut used, mut independent) = (0.0, 0.0);
+    let (mut least_inlier_share, mut worst_curve_scale): (Real, Real) = (1.0, 0.0);
     for k in 0..curves.len() {
         let one = Joint {
             curves: &curves[k..k + 1],
@@ -305,6 +312,14 @@ pub fn fit_sphere(
         if n > 0 {
             used += n as Real;
             independent += n as Real / correlation_length(&buf[..n]);
+            for v in buf[..n].iter_mut() {
+                *v = v.abs();
+            }
+            let (_, median, _) = buf[..n].select_nth_unstable_by(n / 2, |a, b| a.total_cmp(b));
+            worst_curve_scale = worst_curve_scale.max(1.4826 * *median);
+        }
+        if !curves[k].is_empty() {
+            least_inlier_share = least_inlier_share.min(n as Real / curves[k].len() as Real);
         }
     }
     let inflation = if independent > 0.0 {
@@ -319,6 +334,8 @@ pub fn fit_sphere(
         covariance,
         reduced_chi2,
         inliers,
+        least_inlier_share,
+        worst_curve_scale,
         points: total,
     })
 }
