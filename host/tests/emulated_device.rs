@@ -622,6 +622,7 @@ fn on_device_spheres_equal_the_hosts() {
         "sphere-d250-z150-shiny-offcentre-2p",
         "sphere-d400-z200-matt-2p",
         "sphere-d080-z090-floor-offcentre-2p",
+        "sphere-d055-z120-nearpole-2p",
         "notsphere-wall-z120-2p",
     ];
     let entries = tangent_host::simulate::sphere_corpus::entries();

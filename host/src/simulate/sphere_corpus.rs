@@ -321,6 +321,15 @@ pub fn entries() -> Vec<CorpusEntry> {
          the floor's lines cross the central column, the ball does not), two planes",
         vec![b, floor],
     );
+    // A small ball whose lines both cut it near its poles, in few columns: a short section's
+    // circle misses the sphere's axis while one sphere fits every point (`docs/sphere.md`,
+    // "Sections that miss the axis").
+    add(
+        "sphere-d055-z120-nearpole-2p",
+        "matt ball 55 mm, centre 1.2 m ahead, +0.08 m across, midway between the lasers: each \
+         line cuts it about 10 mm from a pole, in ≈ 20 columns, two planes",
+        vec![ball(55.0, 1.2, 0.08, 0.0, Finish::Matt)],
+    );
     out
 }
 
