@@ -41,14 +41,11 @@ fn ball_points(dir: &Path, config: &PipelineConfig, params: &CylinderParams) -> 
     let Ok(Solved::Sphere(m)) = &out.result else {
         return Vec::new();
     };
-    let truth: Vec<(u16, f64)> = std::fs::read_to_string(dir.join("truth-curve.csv"))
-        .unwrap_or_default()
-        .lines()
-        .skip(1)
-        .filter_map(|l| {
-            let f: Vec<&str> = l.split(',').collect();
-            Some((f.get(1)?.parse().ok()?, f.get(2)?.parse().ok()?))
-        })
+    let truth: Vec<(u16, f64)> = capture
+        .truth_curve
+        .iter()
+        .flatten()
+        .map(|t| (t.column as u16, t.row_px))
         .collect();
     let lit: Vec<_> = out.curve.iter().filter(|c| c.amplitude > 0.0).collect();
     let mut amplitudes: Vec<f64> = lit.iter().map(|c| c.amplitude).collect();

@@ -11,7 +11,8 @@ use std::path::Path;
 
 use tangent_core::pipeline::PipelineConfig;
 use tangent_core::solvers::stem::CylinderParams;
-use tangent_host::measure::measure_capture;
+use tangent_host::capture::Capture;
+use tangent_host::measure::measure_loaded;
 
 /// Distance-from-end bins (columns): 0, 1, … up to `END_BINS - 1` and beyond.
 const END_BINS: usize = 8;
@@ -35,19 +36,6 @@ impl Mean {
     }
 }
 
-/// The truth curve's rows per column (`truth-curve.csv`: plane, column, row_px, …).
-fn truth_rows(dir: &Path) -> Vec<(u16, f64)> {
-    std::fs::read_to_string(dir.join("truth-curve.csv"))
-        .unwrap_or_default()
-        .lines()
-        .skip(1)
-        .filter_map(|l| {
-            let f: Vec<&str> = l.split(',').collect();
-            Some((f.get(1)?.parse().ok()?, f.get(2)?.parse().ok()?))
-        })
-        .collect()
-}
-
 fn main() {
     let mut args: Vec<String> = std::env::args().skip(1).collect();
     let mut config = PipelineConfig::default();
@@ -65,7 +53,20 @@ fn main() {
     let mut diameter_errors = Vec::new();
     for dir in &args {
         let dir = Path::new(dir);
-        let out = match measure_capture(dir, None, &config, &params) {
+        let capture = match Capture::read(dir) {
+            Ok(c) => c,
+            Err(e) => {
+                eprintln!("{}: {e}", dir.display());
+                continue;
+            }
+        };
+        let out = match measure_loaded(
+            &capture,
+            dir.to_str().unwrap_or("?"),
+            None,
+            &config,
+            &params,
+        ) {
             Ok(o) => o,
             Err(e) => {
                 eprintln!("{}: {e}", dir.display());
@@ -75,7 +76,12 @@ fn main() {
         if let (Some(d), Some(t)) = (out.reading.diameter_m, out.reading.truth_diameter_m) {
             diameter_errors.push((d - t) * 1e3);
         }
-        let truth = truth_rows(dir);
+        let truth: Vec<(u16, f64)> = capture
+            .truth_curve
+            .iter()
+            .flatten()
+            .map(|t| (t.column as u16, t.row_px))
+            .collect();
         // Each curve's points with their truth, in column order.
         for curve in 0..=out.curve.iter().map(|c| c.curve).max().unwrap_or(0) {
             let mut points: Vec<(u16, f64, f64)> = out
