@@ -276,6 +276,18 @@ pub fn solve(
             flags.insert(Flags::NOT_SPHERICAL);
         }
     }
+    // The joint fit (§10.5) from a starting sphere; the residuals' scratch is `values_all`.
+    let mut joint_fit_from = |start: Sphere| {
+        fit_sphere(
+            &input.curves[..n],
+            &input.sigmas[..n],
+            &input.planes[..n],
+            start,
+            &params.fit,
+            &mut *values_all,
+        )
+        .ok()
+    };
     // The geometric refusal: the sections' centres must lie on one axis (checked at the
     // fitted sphere, or at the starting one when the fit found none). A short section near a
     // pole can miss the axis through its circle's bias alone while its points lie on the
@@ -288,16 +300,8 @@ pub fn solve(
             None => initial_sphere(&list[..count])?,
         };
         if misalignment(&list[..count], &sphere) > params.max_misalignment {
-            let fit = fit_sphere(
-                &input.curves[..n],
-                &input.sigmas[..n],
-                &input.planes[..n],
-                sphere,
-                &params.fit,
-                values_all,
-            )
-            .ok()
-            .filter(|j| one_sphere_explains(j, &list[..count], params));
+            let fit = joint_fit_from(sphere)
+                .filter(|j| one_sphere_explains(j, &list[..count], params));
             match fit {
                 Some(j) => {
                     flags.insert(Flags::INCONSISTENT);
@@ -353,15 +357,7 @@ pub fn solve(
                 .map(|e| e.sphere)
                 // Neither circles nor tangents fit the sections: straight or shapeless curves.
                 .ok_or(SolveError::NotSpherical)?;
-            fit_sphere(
-                &input.curves[..n],
-                &input.sigmas[..n],
-                &input.planes[..n],
-                start,
-                &params.fit,
-                values_all,
-            )
-            .ok()
+            joint_fit_from(start)
         }
     };
     if joint.is_none() {
