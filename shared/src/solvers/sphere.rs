@@ -300,8 +300,8 @@ pub fn solve(
             None => initial_sphere(&list[..count])?,
         };
         if misalignment(&list[..count], &sphere) > params.max_misalignment {
-            let fit = joint_fit_from(sphere)
-                .filter(|j| one_sphere_explains(j, &list[..count], params));
+            let fit =
+                joint_fit_from(sphere).filter(|j| one_sphere_explains(j, &list[..count], params));
             match fit {
                 Some(j) => {
                     flags.insert(Flags::INCONSISTENT);
