@@ -51,9 +51,10 @@ impl Flags {
     pub const TILT_IGNORED: Flags = Flags(1 << 2);
     /// The methods disagree. Stem: the three-tangent and fit radii differ by more than 3σ
     /// combined (an edge is probably occluded or lost in the dark); the fit was reported.
-    /// Sphere: the sections' centres missed the sphere's axis, but one sphere fits every
-    /// line's points within their noise; the joint fit was reported, its σ widened by the
-    /// methods' spread (`docs/sphere.md`, "Sections that miss the axis").
+    /// Sphere: the joint fit and the sections' sphere differ by more than 3σ combined (the
+    /// reading's σ already carries any excess beyond 1σ, `docs/sphere.md`, "Methods that
+    /// disagree"), or the sections' centres missed the sphere's axis and one sphere fitted
+    /// to every line's points overruled them ("Sections that miss the axis").
     pub const INCONSISTENT: Flags = Flags(1 << 3);
     /// The three-tangent method failed (edges missing, too few points near the nearest
     /// point).

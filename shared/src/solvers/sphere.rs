@@ -377,16 +377,16 @@ pub fn solve(
         (None, None, Some(t)) => (t, Method::SphereThreeTangent),
         (None, None, None) => return Err(SolveError::NotConverged),
     };
-    if rescued.is_some() {
-        // The sections missed the axis: some method carries an error its σ does not model.
-        // The spread of the methods is the evidence of its size (`docs/sphere.md`, "Sections
-        // that miss the axis").
-        let spread = [sections, three_tangent]
-            .iter()
-            .flatten()
-            .map(|e| (e.diameter - chosen.diameter).abs())
-            .fold(0.0, Real::max);
-        chosen.sigma = sqrt(chosen.sigma * chosen.sigma + spread * spread);
+    // The joint fit and the sections' sphere estimate one diameter from the same points: a
+    // disagreement beyond both their σ is an error neither σ models (a speckled steel
+    // section, a short section off the axis), and its excess variance is added; beyond 3σ
+    // combined it is flagged, as for stems (`docs/sphere.md`, "Methods that disagree").
+    if let (Method::JointFit, Some(s)) = (method, sections) {
+        let (sigma, disagree) = widened_by_disagreement(&chosen, &s);
+        chosen.sigma = sigma;
+        if disagree {
+            flags.insert(Flags::INCONSISTENT);
+        }
     }
     let radius = 0.5 * chosen.diameter;
     if !(radius >= params.min_radius && radius <= params.max_radius) {
@@ -483,6 +483,25 @@ fn one_sphere_explains(fit: &SphereFit, sections: &[Section], params: &SpherePar
         && fit.least_inlier_share >= 1.0 - params.max_outlier_fraction
         && fit.worst_curve_scale * fit.worst_curve_scale <= params.not_spherical_chi2
 }
+
+/// The reported estimate's σ widened by its disagreement with another estimate of the same
+/// diameter from the same points: the excess of the squared difference over both variances
+/// (an error neither σ models) is added; and whether they differ by more than
+/// [`DISAGREEMENT_SIGMAS`] combined (`docs/sphere.md`, "Methods that disagree").
+fn widened_by_disagreement(reported: &Estimate, other: &Estimate) -> (Real, bool) {
+    let spread = reported.diameter - other.diameter;
+    let variance = reported.sigma * reported.sigma;
+    let combined = variance + other.sigma * other.sigma;
+    let excess = (spread * spread - combined).max(0.0);
+    (
+        sqrt(variance + excess),
+        spread * spread > DISAGREEMENT_SIGMAS * DISAGREEMENT_SIGMAS * combined,
+    )
+}
+
+/// Disagreement of the joint fit and the sections' sphere, in σ combined, beyond which
+/// [`Flags::INCONSISTENT`] is set (the stems' rule, [`super::stem`]).
+const DISAGREEMENT_SIGMAS: Real = 3.0;
 
 /// The one-sided 95 % point of the normal distribution.
 const ONE_SIDED_95: Real = 1.645;

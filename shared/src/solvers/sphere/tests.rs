@@ -251,3 +251,27 @@ fn a_short_bowed_section_near_a_pole_is_read_not_refused_as_two_objects() {
     assert!(err <= 2.0 * s.uncertainty, "{err} vs σ {}", s.uncertainty);
     assert!((s.centre - centre).norm() < 0.25 * radius, "{:?}", s.centre);
 }
+
+#[test]
+fn a_disagreement_beyond_both_sigmas_widens_the_reported_one() {
+    let estimate = |diameter: Real, sigma: Real| Estimate {
+        diameter,
+        sigma,
+        centre: Vec3::zeros(),
+    };
+    let joint = estimate(0.100, 0.0003);
+    // Within both σ: nothing changes.
+    let (sigma, flag) = widened_by_disagreement(&joint, &estimate(0.1004, 0.0004));
+    assert_eq!((sigma, flag), (0.0003, false));
+    // 1.2 mm apart, σ 0.3 and 0.4 mm (0.5 mm combined): the excess 1.44 − 0.25 mm² joins the
+    // reported variance, σ = √(0.09 + 1.19) mm; within 3σ combined (1.5 mm): no flag.
+    let (sigma, flag) = widened_by_disagreement(&joint, &estimate(0.1012, 0.0004));
+    assert!(
+        (sigma / (1.28e-6 as Real).sqrt() - 1.0).abs() < 1e-4,
+        "{sigma}"
+    );
+    assert!(!flag);
+    // 2 mm apart: beyond 3σ combined, flagged.
+    let (_, flag) = widened_by_disagreement(&joint, &estimate(0.098, 0.0004));
+    assert!(flag);
+}
