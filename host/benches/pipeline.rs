@@ -3,13 +3,15 @@
 //! the whole stem measurement (`instrument::measure_with::<Stem>`). The frames come from the simulator (rendered
 //! once, outside the timed loop). And the sphere instrument's image part on the corpus's ball
 //! beside the aim on a floor, with and without its arcs-before-lines ranking
-//! (`pipeline::arcs`). Results: docs/performance.md.
+//! (`pipeline::arcs`), and the whole sphere measurement on two corpus balls. Results:
+//! docs/performance.md.
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use std::hint::black_box;
 use tangent_core::image::Frame;
 use tangent_core::instrument::{measure_with, Instrument, Sphere, Stem};
 use tangent_core::pipeline::{extract_profile, OwnedBuffers, PipelineConfig};
+use tangent_core::solvers::sphere::SphereParams;
 use tangent_core::solvers::stem::CylinderParams;
 use tangent_core::Calibration;
 use tangent_host::pgm::PgmSamples;
@@ -96,6 +98,38 @@ fn bench_sphere(c: &mut Criterion) {
     ] {
         let id = format!("extract_profile_sphere_floor_{name}");
         bench_extract(c, &id, (&off_f, &on_f), &cal, &config, &mut hw);
+    }
+    // The whole sphere measurement: a ball read the usual way, and the small ball whose
+    // sections miss the axis, read by the joint fit that decides it (`docs/sphere.md`,
+    // "Sections that miss the axis": one more joint fit than a refusal cost).
+    for (name, capture_name) in [
+        ("floor_offcentre", "sphere-d080-z090-floor-offcentre-2p"),
+        ("nearpole", "sphere-d055-z120-nearpole-2p"),
+    ] {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../tests/captures")
+            .join(capture_name);
+        let capture = tangent_host::capture::Capture::read(&dir).expect("corpus capture");
+        let cal = capture.calibration.clone();
+        let (off_px, on_px, w, h) = eight_bit(&capture);
+        let off_f = Frame::new(off_px, w, h, w).expect("frame");
+        let on_f = Frame::new(on_px, w, h, w).expect("frame");
+        let mut hw = OwnedBuffers::<u8>::for_frame(w, h, 8, cal.planes.len());
+        let config = PipelineConfig::default();
+        let params = SphereParams::default();
+        c.bench_function(&format!("measure_sphere_{name}"), |b| {
+            b.iter(|| {
+                black_box(measure_with::<Sphere, u8>(
+                    &off_f,
+                    &on_f,
+                    &cal,
+                    &config,
+                    &params,
+                    &mut hw.workspace(),
+                ))
+                .is_ok()
+            })
+        });
     }
 }
 
