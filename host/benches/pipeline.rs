@@ -17,8 +17,11 @@ use tangent_core::Calibration;
 use tangent_host::pgm::PgmSamples;
 use tangent_host::simulate::{corpus::random_stem, simulate};
 
-/// The capture's laser-off and first laser-on frames (8-bit) and their size.
-fn eight_bit(capture: &tangent_host::capture::Capture) -> (&[u8], &[u8], usize, usize) {
+/// One 8-bit frame borrowed from a capture.
+type Frame8<'a> = Frame<u8, &'a [u8]>;
+
+/// The capture's laser-off and first laser-on frames (8-bit).
+fn frames(capture: &tangent_host::capture::Capture) -> (Frame8<'_>, Frame8<'_>) {
     let (off, on) = (
         capture.off_frame(),
         capture.on_frames().next().expect("an on frame").1,
@@ -26,11 +29,25 @@ fn eight_bit(capture: &tangent_host::capture::Capture) -> (&[u8], &[u8], usize, 
     let (PgmSamples::U8(off_px), PgmSamples::U8(on_px)) = (&off.samples, &on.samples) else {
         panic!("the benchmark expects 8-bit frames");
     };
-    (off_px, on_px, on.width, on.height)
+    let (w, h) = (on.width, on.height);
+    (
+        Frame::new(&off_px[..], w, h, w).expect("frame"),
+        Frame::new(&on_px[..], w, h, w).expect("frame"),
+    )
 }
 
-/// One 8-bit frame borrowed from a capture.
-type Frame8<'a> = Frame<u8, &'a [u8]>;
+/// A capture of the corpus (`tests/captures/<name>`).
+fn corpus_capture(name: &str) -> tangent_host::capture::Capture {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../tests/captures")
+        .join(name);
+    tangent_host::capture::Capture::read(&dir).expect("corpus capture")
+}
+
+/// Workspace buffers for a frame pair and its calibration's planes.
+fn buffers(frame: &Frame8, cal: &Calibration) -> OwnedBuffers<u8> {
+    OwnedBuffers::<u8>::for_frame(frame.width(), frame.height(), 8, cal.planes.len())
+}
 
 /// Times `extract_profile` on one frame pair.
 fn bench_extract(
@@ -46,45 +63,65 @@ fn bench_extract(
     });
 }
 
+/// Times the whole measurement of instrument `I` on one frame pair.
+fn bench_measure<I: Instrument>(
+    c: &mut Criterion,
+    id: &str,
+    (off, on): (&Frame8, &Frame8),
+    cal: &Calibration,
+    params: &I::Params,
+    hw: &mut OwnedBuffers<u8>,
+) {
+    let config = PipelineConfig::default();
+    c.bench_function(id, |b| {
+        b.iter(|| {
+            black_box(measure_with::<I, u8>(
+                off,
+                on,
+                cal,
+                &config,
+                params,
+                &mut hw.workspace(),
+            ))
+            .is_ok()
+        })
+    });
+}
+
 fn bench(c: &mut Criterion) {
     // A 30 cm stem at 1.5 m in forest shade, one plane; and a tilted one with two planes.
     for (name, seed, tilt) in [("one_plane", 7u64, 0.0), ("two_planes", 8u64, 20.0)] {
         let spec = random_stem(seed, tilt);
         let (capture, _) = simulate(&spec).expect("simulated capture");
         let cal = capture.calibration.clone();
-        let (off_px, on_px, w, h) = eight_bit(&capture);
-        let off_f = Frame::new(off_px, w, h, w).expect("frame");
-        let on_f = Frame::new(on_px, w, h, w).expect("frame");
-        let mut hw = OwnedBuffers::<u8>::for_frame(w, h, 8, cal.planes.len());
-        let config = PipelineConfig::default();
-        let params = CylinderParams::default();
+        let (off_f, on_f) = frames(&capture);
+        let mut hw = buffers(&on_f, &cal);
         let id = format!("extract_profile_752x480_{name}");
-        bench_extract(c, &id, (&off_f, &on_f), &cal, &config, &mut hw);
-        c.bench_function(&format!("measure_stem_752x480_{name}"), |b| {
-            b.iter(|| {
-                black_box(measure_with::<Stem, u8>(
-                    &off_f,
-                    &on_f,
-                    &cal,
-                    &config,
-                    &params,
-                    &mut hw.workspace(),
-                ))
-                .is_ok()
-            })
-        });
+        bench_extract(
+            c,
+            &id,
+            (&off_f, &on_f),
+            &cal,
+            &PipelineConfig::default(),
+            &mut hw,
+        );
+        let id = format!("measure_stem_752x480_{name}");
+        bench_measure::<Stem>(
+            c,
+            &id,
+            (&off_f, &on_f),
+            &cal,
+            &CylinderParams::default(),
+            &mut hw,
+        );
     }
 }
 
 fn bench_sphere(c: &mut Criterion) {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../tests/captures/sphere-d080-z090-floor-offcentre-2p");
-    let capture = tangent_host::capture::Capture::read(&dir).expect("corpus capture");
+    let capture = corpus_capture("sphere-d080-z090-floor-offcentre-2p");
     let cal = capture.calibration.clone();
-    let (off_px, on_px, w, h) = eight_bit(&capture);
-    let off_f = Frame::new(off_px, w, h, w).expect("frame");
-    let on_f = Frame::new(on_px, w, h, w).expect("frame");
-    let mut hw = OwnedBuffers::<u8>::for_frame(w, h, 8, cal.planes.len());
+    let (off_f, on_f) = frames(&capture);
+    let mut hw = buffers(&on_f, &cal);
     let with_arcs = Sphere::pipeline_config(&PipelineConfig::default());
     for (name, config) in [
         ("arcs_first", with_arcs),
@@ -101,35 +138,24 @@ fn bench_sphere(c: &mut Criterion) {
     }
     // The whole sphere measurement: a ball read the usual way, and the small ball whose
     // sections miss the axis, read by the joint fit that decides it (`docs/sphere.md`,
-    // "Sections that miss the axis": one more joint fit than a refusal cost).
+    // "Sections that miss the axis").
     for (name, capture_name) in [
         ("floor_offcentre", "sphere-d080-z090-floor-offcentre-2p"),
         ("nearpole", "sphere-d055-z120-nearpole-2p"),
     ] {
-        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../tests/captures")
-            .join(capture_name);
-        let capture = tangent_host::capture::Capture::read(&dir).expect("corpus capture");
+        let capture = corpus_capture(capture_name);
         let cal = capture.calibration.clone();
-        let (off_px, on_px, w, h) = eight_bit(&capture);
-        let off_f = Frame::new(off_px, w, h, w).expect("frame");
-        let on_f = Frame::new(on_px, w, h, w).expect("frame");
-        let mut hw = OwnedBuffers::<u8>::for_frame(w, h, 8, cal.planes.len());
-        let config = PipelineConfig::default();
-        let params = SphereParams::default();
-        c.bench_function(&format!("measure_sphere_{name}"), |b| {
-            b.iter(|| {
-                black_box(measure_with::<Sphere, u8>(
-                    &off_f,
-                    &on_f,
-                    &cal,
-                    &config,
-                    &params,
-                    &mut hw.workspace(),
-                ))
-                .is_ok()
-            })
-        });
+        let (off_f, on_f) = frames(&capture);
+        let mut hw = buffers(&on_f, &cal);
+        let id = format!("measure_sphere_{name}");
+        bench_measure::<Sphere>(
+            c,
+            &id,
+            (&off_f, &on_f),
+            &cal,
+            &SphereParams::default(),
+            &mut hw,
+        );
     }
 }
 
