@@ -154,6 +154,12 @@ pub fn solve_walls(
         sigmas: &curve_sigmas[..count],
         planes: &planes,
         stripes: &stripes[..n],
+        // A faint-search profile's curves were not cut by a threshold.
+        threshold: if points.profile.faint {
+            0.0
+        } else {
+            points.profile.threshold as Real
+        },
     };
     let mut solution = walls::solve(&input, &params.walls)?;
     solution

@@ -133,6 +133,11 @@ pub struct WallInput<'a> {
     /// shorter than its points, when unknown): a segment's end point's amplitude against its
     /// neighbours' places the edge within its pixel (`docs/building.md`, "Segment length").
     pub stripes: &'a [&'a [CurvePoint]],
+    /// The segmentation's detection threshold on the difference image, in the stripes'
+    /// amplitude units (0 when unknown): a column whose stripe peaks below it is not seen, so
+    /// past a fully lit end pixel the edge may run into the next column by as much as keeps
+    /// that column's lit part below it (`docs/building.md`, "Segment length", (B9b)).
+    pub threshold: Real,
 }
 
 /// A straight run of one curve: points `start..end` of curve `curve`.

@@ -97,6 +97,7 @@ impl Curves {
                 sigmas: &sigmas,
                 planes: &self.planes,
                 stripes: &[],
+                threshold: 0.0,
             },
             params,
         )
@@ -386,6 +387,7 @@ fn a_crossing_line_beside_a_corner_edge_does_not_bend_the_corner() {
                 sigmas: &sigmas,
                 planes: &planes,
                 stripes: &[],
+                threshold: 0.0,
             },
             &WallParams::default(),
         )

@@ -59,14 +59,14 @@ const EDGE_SIGMA_FLOOR_PX: Real = 0.1;
 
 /// The part `f` of the end point `inner`'s pixel lit by the wall, from its stripe amplitude
 /// against the median of the `inward` points' (the wall's own brightness there), and its
-/// σ from their scatter (`docs/building.md`, (B9)): `None` when the stripes are unknown,
-/// fewer than 5 references, one is saturated (its amplitude is clipped), or an amplitude is
-/// not finite.
+/// σ from their scatter (`docs/building.md`, (B9)), and that median (the wall's stripe
+/// amplitude): `None` when the stripes are unknown, fewer than 5 references, one is
+/// saturated (its amplitude is clipped), or an amplitude is not finite.
 fn lit_fraction(
     stripe: &[CurvePoint],
     inner: usize,
     inward: impl Iterator<Item = usize>,
-) -> Option<(Real, Real)> {
+) -> Option<(Real, Real, Real)> {
     let end = stripe.get(inner).filter(|p| !p.saturated)?;
     let mut reference = [0.0 as Real; EDGE_REFERENCE];
     let mut n = 0;
@@ -98,7 +98,7 @@ fn lit_fraction(
     // f = a/A: the end's own scatter and the median's (≈ 1.25/√n of one).
     let sigma_f = f * relative * sqrt(1.0 + 1.57 / n as Real);
     // A NaN amplitude is no measurement (`clamp` keeps NaN).
-    (f.is_finite() && sigma_f.is_finite()).then_some((f, sigma_f))
+    (f.is_finite() && sigma_f.is_finite()).then_some((f, sigma_f, median))
 }
 
 /// The part of a pixel centred `δ` pixels inside a wall's edge that the wall's blurred
@@ -117,19 +117,40 @@ fn blurred_coverage(delta: Real, sigma: Real) -> (Real, Real) {
 /// Where the edge is past the end pixel's centre (pixels, outwards) for a lit part `f` of
 /// its 1σ `sigma_f` ([`lit_fraction`]), with its σ: the `δ` whose [`blurred_coverage`] is
 /// `f`, by bisection (it rises monotonically), within the end pixel (`|δ| ≤ ½`) and with at
-/// most the σ of an edge anywhere in it, `1/√12`. An end pixel as bright as an edge at its
-/// outer side gives makes it the outer side with that σ, as without the stripes: the edge is
-/// there or beyond (the next column's stripe lost at the kink), and near `δ = ½` the blurred
-/// coverage hardly changes with `δ`. `None` for a PSF σ that is not positive.
-fn edge_offset(f: Real, sigma_f: Real, params: &WallParams) -> Option<(Real, Real)> {
+/// most the σ of an edge anywhere in it, `1/√12`.
+///
+/// An end pixel as bright as an edge at its outer side gives says only that the edge is
+/// there or beyond: near `δ = ½` the blurred coverage hardly changes with `δ`. How far beyond
+/// is bounded by the next column, which was not seen: its lit part `c(δ − 1)` stayed below
+/// `detect`, the detection threshold over the wall's stripe amplitude, so the edge is
+/// anywhere in `½ ≤ δ < 1 + c⁻¹(detect)` — the middle of that range, with its uniform σ
+/// (`docs/building.md`, (B9b)). With `detect` unknown (0), or not below `c(½)` (a stripe
+/// barely above the threshold says nothing of the next column), the outer side with `1/√12`,
+/// as without the stripes. `None` for a PSF σ that is not positive.
+fn edge_offset(f: Real, sigma_f: Real, detect: Real, params: &WallParams) -> Option<(Real, Real)> {
     let sigma = params.psf_sigma_px;
     if !(sigma > 0.0) {
         return None;
     }
     let uniform = 1.0 / sqrt(12.0);
-    if f >= blurred_coverage(0.5, sigma).0 {
-        return Some((0.5, uniform));
+    let outer = blurred_coverage(0.5, sigma).0;
+    if f >= outer {
+        if !(detect > 0.0 && detect < outer) {
+            return Some((0.5, uniform));
+        }
+        // The next column's centre is `δ − 1` inside the edge: unseen while c(δ − 1) < detect.
+        let beyond = 1.0 + coverage_inverse(detect, sigma);
+        let width = (beyond - 0.5).max(0.0);
+        return Some((0.5 + 0.5 * width, uniform));
     }
+    let delta = coverage_inverse(f, sigma);
+    let slope = blurred_coverage(delta, sigma).1.max(1e-3);
+    Some((delta, (sigma_f / slope).clamp(EDGE_SIGMA_FLOOR_PX, uniform)))
+}
+
+/// The `δ` in `[−½, ½]` whose [`blurred_coverage`] is `f` (clamped to that range), by
+/// bisection: the coverage rises monotonically in `δ`.
+fn coverage_inverse(f: Real, sigma: Real) -> Real {
     let (mut lo, mut hi) = (-0.5 as Real, 0.5 as Real);
     for _ in 0..40 {
         let mid = 0.5 * (lo + hi);
@@ -139,9 +160,7 @@ fn edge_offset(f: Real, sigma_f: Real, params: &WallParams) -> Option<(Real, Rea
             hi = mid;
         }
     }
-    let delta = 0.5 * (lo + hi);
-    let slope = blurred_coverage(delta, sigma).1.max(1e-3);
-    Some((delta, (sigma_f / slope).clamp(EDGE_SIGMA_FLOOR_PX, uniform)))
+    0.5 * (lo + hi)
 }
 
 /// The aimed wall's line on one curve, for following it past clutter in front of the wall.
@@ -389,7 +408,16 @@ pub(super) fn segment(
                 (reach.limit..inner).rev().take(EDGE_REFERENCE),
             )
         };
-        let (u_edge, sigma_u) = match lit.and_then(|(f, s)| edge_offset(f, s, params)) {
+        // Only an edge has an unseen next column: past the frame's side there is none, and
+        // an occluder's column is seen (a lower bound stays at the last lit column's side).
+        let detect = if kinds[side] == EndKind::Edge {
+            input.threshold
+        } else {
+            0.0
+        };
+        let located =
+            lit.and_then(|(f, s, amplitude)| edge_offset(f, s, detect / amplitude, params));
+        let (u_edge, sigma_u) = match located {
             Some((offset, sigma)) => (u_in + sign * offset, sigma),
             None => (u_in + 0.5 * sign, 1.0 / sqrt(12.0)),
         };
@@ -452,7 +480,7 @@ mod tests {
                 / (2.0 * h);
             assert!((slope - numeric).abs() < 10.0 * h * h + tol / h, "{delta}");
             let params = WallParams::default();
-            let (found, sigma) = edge_offset(blurred, 0.02, &params).unwrap();
+            let (found, sigma) = edge_offset(blurred, 0.02, 0.0, &params).unwrap();
             if blurred < blurred_coverage(0.5, 0.5).0 {
                 assert!((found - delta).abs() < 10.0 * tol, "{delta}: {found}");
                 let want = (0.02 / slope).max(EDGE_SIGMA_FLOOR_PX);
@@ -463,9 +491,38 @@ mod tests {
             }
         }
         // A pixel as bright as its neighbours: the outer side, with the uniform σ.
-        let (found, sigma) = edge_offset(1.0, 0.02, &WallParams::default()).unwrap();
+        let (found, sigma) = edge_offset(1.0, 0.02, 0.0, &WallParams::default()).unwrap();
         assert_eq!(found, 0.5);
         assert!((sigma - 1.0 / sqrt(12.0)).abs() < tol);
+    }
+
+    /// A fully lit end pixel: the edge is past its outer side by up to where the unseen next
+    /// column's lit part reaches the detection threshold — the middle of that range. A
+    /// threshold at half the wall's amplitude allows the whole next half pixel (`c(0)` = ½):
+    /// ¾ px past the end pixel's centre; unknown or no lower than `c(½)`, the outer side.
+    #[test]
+    fn past_a_fully_lit_end_pixel_the_edge_is_where_the_next_column_stays_unseen() {
+        let params = WallParams::default();
+        let uniform = 1.0 / sqrt(12.0);
+        let tol = (1e-6 as Real).max(300.0 * Real::EPSILON);
+        let (at, sigma) = edge_offset(1.0, 0.02, 0.5, &params).unwrap();
+        assert!((at - 0.75).abs() < tol, "{at}");
+        assert!((sigma - uniform).abs() < tol);
+        // A lower threshold leaves less of the next column unseen.
+        let (low, _) = edge_offset(0.95, 0.02, 0.2, &params).unwrap();
+        let c = blurred_coverage(2.0 * low - 0.5 - 1.0, params.psf_sigma_px).0;
+        assert!(low > 0.5 && low < 0.75, "{low}");
+        assert!(
+            (c - 0.2).abs() < 1e-4,
+            "the range ends where the next column reaches it: {c}"
+        );
+        for detect in [0.0, 0.85, 1.5] {
+            let (at, _) = edge_offset(1.0, 0.02, detect, &params).unwrap();
+            assert_eq!(at, 0.5, "{detect}");
+        }
+        // A partly lit end pixel is placed by its own lit part, whatever the threshold.
+        let (partial, _) = edge_offset(0.5, 0.02, 0.3, &params).unwrap();
+        assert!(partial.abs() < tol, "{partial}");
     }
 
     /// The end's amplitude against the median of its neighbours', with the σ of their
@@ -473,7 +530,7 @@ mod tests {
     #[test]
     fn the_lit_fraction_is_the_end_amplitude_over_its_neighbours() {
         let s = stripe(&[20.0, 38.0, 42.0, 40.0, 39.0, 41.0, 40.0, 40.0, 44.0, 36.0]);
-        let (f, sigma) = lit_fraction(&s, 0, 1..10).unwrap();
+        let (f, sigma, _) = lit_fraction(&s, 0, 1..10).unwrap();
         assert!((f - 0.5).abs() < 1e-12, "{f}");
         assert!(sigma > 0.0 && sigma < 0.05, "{sigma}");
         assert!(lit_fraction(&s, 0, 1..4).is_none(), "3 references");
