@@ -15,11 +15,12 @@ use tangent_core::solvers::circle::fit_kasa;
 use tangent_core::solvers::sphere_sections::{initial_sphere, Section};
 
 use crate::baseline::stripe_points;
+use crate::calibration_draw;
 use crate::capture::Capture;
 use crate::evaluate::table::{
     binned_rows, error_stats, failures_and_worst, ErrorStats, Evaluated, MethodDiameter,
 };
-use crate::measure::{measure_loaded, Reading};
+use crate::measure::{measure_loaded, sphere_params, Reading};
 use crate::simulate::simulate;
 use crate::simulate::sphere_corpus::{Finish, RandomBall};
 use crate::truth::Object;
@@ -77,8 +78,17 @@ pub fn kasa_baseline(capture: &Capture) -> Result<f64, String> {
 
 /// Simulates and measures `count` random balls from `first_seed`, in parallel. With `cache`,
 /// each ball's capture is read from `cache/<seed>` when there and written there otherwise
-/// (re-measuring a set after a solver change without simulating it again).
-pub fn run(first_seed: u64, count: u64, cache: Option<&Path>) -> anyhow::Result<Vec<SphereSample>> {
+/// (re-measuring a set after a solver change without simulating it again). With
+/// `calibration_errors` each ball is measured with its calibration off by a draw from the
+/// calibration σ the sphere solver states ([`crate::calibration_draw`]), so that *within
+/// 2σ* checks the whole stated σ; else with the exact calibration the capture was rendered
+/// with.
+pub fn run(
+    first_seed: u64,
+    count: u64,
+    cache: Option<&Path>,
+    calibration_errors: bool,
+) -> anyhow::Result<Vec<SphereSample>> {
     let config = PipelineConfig::default();
     let params = CylinderParams::default();
     (first_seed..first_seed + count)
@@ -96,6 +106,17 @@ pub fn run(first_seed: u64, count: u64, cache: Option<&Path>) -> anyhow::Result<
                     }
                     capture
                 }
+            };
+            let capture = if calibration_errors {
+                let noise = sphere_params(&params).noise;
+                let calibration = calibration_draw::drawn(&capture.calibration, &noise, seed)
+                    .map_err(|e| anyhow::anyhow!("seed {seed}: {e}"))?;
+                Capture {
+                    calibration,
+                    ..capture
+                }
+            } else {
+                capture
             };
             let outcome =
                 measure_loaded(&capture, &format!("seed {seed}"), None, &config, &params)?;

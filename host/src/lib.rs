@@ -10,6 +10,7 @@ pub mod baseline;
 pub mod bridge;
 pub mod calibrate;
 pub mod calibration_bounds;
+pub mod calibration_draw;
 pub mod calibration_file;
 pub mod capture;
 pub mod emulator;

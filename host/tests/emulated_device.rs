@@ -646,6 +646,21 @@ fn on_device_spheres_equal_the_hosts() {
             h.diameter
         );
         assert_eq!(d.flags, h.flags, "{name}: flags");
+        // The stated σ too: its covariance inverts a normal matrix whose determinant can be
+        // beyond f32's range (`solvers::lm::spd_inverse`: a closed-form inverse gave a zero
+        // covariance in f32 for the core's near-pole unit test ball).
+        let rel_sigma = (d.uncertainty - h.uncertainty).abs() / h.uncertainty;
+        eprintln!(
+            "{name}: σ host {:.4} mm, device {:.4} mm",
+            h.uncertainty * 1e3,
+            d.uncertainty * 1e3
+        );
+        assert!(
+            d.uncertainty > 0.0 && rel_sigma <= 1e-2,
+            "{name}: σ device {} m vs host {} m",
+            d.uncertainty,
+            h.uncertainty
+        );
     };
     let Some(compared) = device_equals_host(entries, &wanted, Mode::Sphere, SetMode::Yes, same)
     else {

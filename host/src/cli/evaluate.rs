@@ -59,6 +59,12 @@ pub struct Args {
     /// next run: re-measuring a set after a solver change without simulating it again.
     #[arg(long)]
     sphere_cache: Option<PathBuf>,
+    /// Measure each ball with its calibration off by a draw from the calibration σ the
+    /// solver states (`host/src/calibration_draw.rs`), so that *within 2σ* checks the whole
+    /// stated σ, calibration term included (default: the exact calibration, which exercises
+    /// only the random part).
+    #[arg(long)]
+    calibration_errors: bool,
     /// Evaluate the road instrument instead (`docs/road.md`): MPD per surface type, furrow
     /// depths, piezo height-scale calibration, vertical resolution, captif-slp cross-check,
     /// bad input; `--count` fresh seeds per surface.
@@ -199,8 +205,12 @@ fn sphere_section(args: &Args) -> anyhow::Result<String> {
     let first = args
         .sphere_seed
         .unwrap_or_else(|| args.set.first_sphere_seed());
-    let samples =
-        tangent_host::evaluate_sphere::run(first, args.spheres, args.sphere_cache.as_deref())?;
+    let samples = tangent_host::evaluate_sphere::run(
+        first,
+        args.spheres,
+        args.sphere_cache.as_deref(),
+        args.calibration_errors,
+    )?;
     if let Some(path) = &args.sphere_csv {
         std::fs::write(path, tangent_host::evaluate_sphere::csv(&samples))
             .with_context(|| format!("writing {}", path.display()))?;

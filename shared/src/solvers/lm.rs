@@ -71,7 +71,7 @@
 use nalgebra::{SMatrix, SVector};
 
 use super::SolveError;
-use crate::real::{norm, Real};
+use crate::real::{norm, sqrt, Real};
 
 /// Settings of the Levenberg–Marquardt iteration (every fit: circle, ellipse, cylinder).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -267,5 +267,50 @@ fn levenberg_step<const N: usize>(
                 Ok(None)
             }
         }
+    }
+}
+
+/// Inverse of a symmetric positive-definite matrix (a normal matrix `JᵀWJ`), scaled to unit
+/// diagonal first: `A⁻¹ = D (D A D)⁻¹ D`, `D = diag(1/√Aᵢᵢ)`, the scaled one by Cholesky.
+/// Why not `try_inverse`: nalgebra's closed-form inverse of a 4 × 4 divides by the
+/// determinant, and a normal matrix weighted by `1/σ²` of sub-millimetre σ has entries of
+/// 10¹⁰ and a determinant beyond `f32`'s range — in `f32` the inverse came out as zeros
+/// (the sphere's joint fit of a small near-pole ball: a zero covariance, σ 0). `None` when a diagonal entry is not positive or the matrix is not positive definite.
+pub fn spd_inverse<const N: usize>(a: &SMatrix<Real, N, N>) -> Option<SMatrix<Real, N, N>> {
+    let mut d = SVector::<Real, N>::zeros();
+    for k in 0..N {
+        let v = a[(k, k)];
+        if !(v > 0.0 && v.is_finite()) {
+            return None;
+        }
+        d[k] = 1.0 / sqrt(v);
+    }
+    let scaled = SMatrix::<Real, N, N>::from_fn(|i, j| a[(i, j)] * d[i] * d[j]);
+    let inverse = scaled.cholesky()?.inverse();
+    let out = SMatrix::<Real, N, N>::from_fn(|i, j| inverse[(i, j)] * d[i] * d[j]);
+    out.iter().all(|v| v.is_finite()).then_some(out)
+}
+
+#[cfg(test)]
+mod spd_tests {
+    use super::*;
+
+    /// A normal matrix weighted by `1/σ²` of 10 µm: entries of 10¹⁰, a determinant beyond
+    /// `f32`'s range; the scaled Cholesky inverse is still the inverse.
+    #[test]
+    fn a_normal_matrix_of_small_sigmas_is_inverted_in_either_precision() {
+        let base = SMatrix::<Real, 4, 4>::new(
+            4.0, 1.0, 0.5, 0.2, 1.0, 3.0, 0.4, 0.1, 0.5, 0.4, 2.0, 0.3, 0.2, 0.1, 0.3, 1.0,
+        );
+        let a = base * 1e10;
+        let inverse = spd_inverse(&a).expect("positive definite");
+        let identity = a * inverse;
+        for i in 0..4 {
+            for j in 0..4 {
+                let want = if i == j { 1.0 } else { 0.0 };
+                assert!((identity[(i, j)] - want).abs() < 1e-4, "{identity}");
+            }
+        }
+        assert!(spd_inverse(&(-a)).is_none());
     }
 }

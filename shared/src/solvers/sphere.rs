@@ -29,7 +29,7 @@ use super::circle::RobustParams;
 use super::ellipse;
 use super::lm::LmParams;
 use super::result::{Flags, Method};
-use super::sphere_fit::{fit_sphere, SphereFit, SphereFitParams};
+use super::sphere_fit::{calibration_sigma_radius, fit_sphere, SphereFit, SphereFitParams};
 use super::sphere_sections::{
     circle_section, initial_sphere, sphere_from_sections, Section, Sphere, SphereEstimate,
 };
@@ -402,20 +402,38 @@ pub fn solve(
     if !(distance >= params.range.0 && distance <= params.range.1) {
         flags.insert(Flags::RANGE_LIMIT);
     }
-    // Calibration: the relative scale error of the plane around the first section's centre,
-    // fully correlated between the sections (`docs/error-model.md`, "Sphere").
-    let calibration = (0..n)
-        .find(|&k| circles[k].is_some())
-        .and_then(|k| circles[k].map(|s| (k, s)))
-        .map_or(0.0, |(k, s)| {
-            noise::calibration_relative_sigma(
-                &input.planes[k],
-                s.centre_3d(),
+    // Calibration: the joint fit's response to each calibration error, the planes' errors
+    // independent (`docs/sphere.md`, "Calibration errors", (S-cal)); without a joint fit, the
+    // relative scale error of the plane around the first section's centre, common to the
+    // sections (which misses the planes' differential error: such readings are the fallbacks).
+    let common_scale = || {
+        (0..n)
+            .find(|&k| circles[k].is_some())
+            .and_then(|k| circles[k].map(|s| (k, s)))
+            .map_or(0.0, |(k, s)| {
+                noise::calibration_relative_sigma(
+                    &input.planes[k],
+                    s.centre_3d(),
+                    &params.noise,
+                    params.focal_px,
+                )
+            })
+            * chosen.diameter
+    };
+    let calibration = match &joint {
+        Some(j) => {
+            2.0 * calibration_sigma_radius(
+                j,
+                &input.curves[..n],
+                &input.sigmas[..n],
+                &input.planes[..n],
+                &params.fit,
                 &params.noise,
                 params.focal_px,
-            )
-        })
-        * chosen.diameter;
+            )?
+        }
+        None => common_scale(),
+    };
     let uncertainty = sqrt(chosen.sigma * chosen.sigma + calibration * calibration);
     if !(chosen.diameter.is_finite() && uncertainty.is_finite()) {
         return Err(SolveError::NonFinite);

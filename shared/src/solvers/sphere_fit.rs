@@ -18,10 +18,12 @@ use nalgebra::{SMatrix, SVector};
 
 use super::circle::tukey;
 use super::correlation::correlation_length;
-use super::lm::{LmParams, NormalEquations};
+use super::lm::{spd_inverse, LmParams, NormalEquations};
 use super::sphere_sections::{minimise_sphere, Sphere, SphereCost};
 use super::SolveError;
+use crate::calibration::MAX_PLANES;
 use crate::laser_plane::LaserPlane;
+use crate::noise::{self, NoiseModel};
 
 /// [`SphereFitParams::direction_free_share`]'s default, from the tuning balls
 /// with grown sections and estimator-only point σ (`docs/sphere.md`, "Joint fit" and
@@ -84,6 +86,9 @@ pub struct SphereFit {
     pub worst_curve_scale: Real,
     /// Points given.
     pub points: usize,
+    /// The last round's Tukey cut (σ units; `None`: no reweighting round), so that
+    /// [`calibration_sigma_radius`] weighs the points as the fit did.
+    pub cut: Option<Real>,
 }
 
 impl SphereFit {
@@ -327,7 +332,7 @@ pub fn fit_sphere(
     } else {
         1.0
     };
-    let bread = normal.jtj.try_inverse().ok_or(SolveError::Degenerate)?;
+    let bread = spd_inverse(&normal.jtj).ok_or(SolveError::Degenerate)?;
     let covariance = bread * meat * bread * (error_scale * inflation);
     Ok(SphereFit {
         sphere,
@@ -337,7 +342,100 @@ pub fn fit_sphere(
         least_inlier_share,
         worst_curve_scale,
         points: total,
+        cut: problem.cut,
     })
+}
+
+/// 1σ of the fitted radius from the calibration's errors (`docs/sphere.md`, "Calibration
+/// errors", (S-cal)): each error moves every point it touches by a known displacement
+/// `δXⱼ` (`noise::calibration_displacements`: the pixel kept, the point re-triangulated),
+/// the residuals by `n̂ⱼ·δXⱼ`, and the fit — linearised at its solution, with its own
+/// weights — by `δθ = A⁻¹ Σ cⱼ (n̂ⱼ, 1)(n̂ⱼ·δXⱼ)`, `A = Σ cⱼ (n̂ⱼ, 1)(n̂ⱼ, 1)ᵀ`,
+/// `cⱼ = wⱼ/σ_wⱼ²`. The focal length is the camera's, one error for every point; each
+/// plane's baseline `e` and tilt `δ` are calibrated from its own board poses, so they are
+/// independent errors, one pair per plane. A difference between the planes' errors shifts
+/// one section against the other along the line of sight, which for the front arcs a camera
+/// sees is nearly a change of radius: that is the term a common scale misses.
+///
+/// `curves`, `sigmas`, `planes` as given to [`fit_sphere`]; `noise` the calibration σ,
+/// `focal_px` the camera's. Errors: a plane or point that cannot be re-triangulated, or a
+/// singular normal matrix ([`SolveError::Degenerate`]).
+pub fn calibration_sigma_radius(
+    fit: &SphereFit,
+    curves: &[&[Vec3]],
+    sigmas: &[&[Real]],
+    planes: &[LaserPlane],
+    params: &SphereFitParams,
+    noise: &NoiseModel,
+    focal_px: Real,
+) -> Result<Real, SolveError> {
+    let n = curves
+        .len()
+        .min(sigmas.len())
+        .min(planes.len())
+        .min(MAX_PLANES);
+    let centre = fit.sphere.centre;
+    let mut a = SMatrix::<Real, 4, 4>::zeros();
+    // Right-hand sides: the focal length's, then each plane's `e` and `δ`.
+    let mut focal = SVector::<Real, 4>::zeros();
+    let mut per_plane = [[SVector::<Real, 4>::zeros(); 2]; MAX_PLANES];
+    let mut failed = false;
+    for k in 0..n {
+        let (by_e, ray_scale, by_tilt) =
+            noise::perturbed(&planes[k], focal_px, noise).map_err(|_| SolveError::Degenerate)?;
+        let one = Joint {
+            curves: &curves[k..k + 1],
+            sigmas: &sigmas[k..k + 1],
+            planes: &planes[k..k + 1],
+            normals_of: fit.sphere,
+            min_share: params.min_normal_share,
+            kappa: params.direction_free_share,
+            cut: fit.cut,
+        };
+        one.each(|t| {
+            let d = t.x - centre;
+            let len = norm(&d);
+            if !(t.w > 0.0 && len > 0.0 && t.weight_sigma > 0.0) {
+                return;
+            }
+            let u = d / len;
+            let j = SVector::<Real, 4>::new(u.x, u.y, u.z, 1.0);
+            let c = t.w / (t.weight_sigma * t.weight_sigma);
+            a += j * j.transpose() * c;
+            let moved = |plane: &LaserPlane, scale: Real| {
+                noise::retriangulate(t.x, plane, scale).map(|y| u.dot(&(y - t.x)))
+            };
+            match (
+                moved(&planes[k], ray_scale),
+                moved(&by_e, 1.0),
+                moved(&by_tilt, 1.0),
+            ) {
+                (Ok(f), Ok(e), Ok(tilt)) => {
+                    focal += j * (c * f);
+                    per_plane[k][0] += j * (c * e);
+                    per_plane[k][1] += j * (c * tilt);
+                }
+                _ => failed = true,
+            }
+        });
+    }
+    if failed {
+        return Err(SolveError::Degenerate);
+    }
+    let inverse = spd_inverse(&a).ok_or(SolveError::Degenerate)?;
+    let radius_of = |b: &SVector<Real, 4>| (inverse * b)[3];
+    let mut variance = radius_of(&focal).powi(2);
+    for pair in per_plane.iter().take(n) {
+        for b in pair {
+            variance += radius_of(b).powi(2);
+        }
+    }
+    let sigma = sqrt(variance);
+    if sigma.is_finite() {
+        Ok(sigma)
+    } else {
+        Err(SolveError::NonFinite)
+    }
 }
 
 #[cfg(test)]
@@ -387,6 +485,60 @@ mod tests {
             radius: truth.radius * 1.02,
         };
         fit_sphere(&refs, &sigs, &cal.planes, start, params, &mut scratch).expect("fits")
+    }
+
+    /// The calibration σ of the radius against re-fits: each calibration error applied to
+    /// the points it moves (re-triangulated, exact), the sphere fitted again, the radius
+    /// changes added in quadrature. A 300 mm ball at 1.5 m, where one plane's tilt error
+    /// shifts its section along the line of sight by millimetres.
+    #[test]
+    fn the_calibration_sigma_is_the_refits_spread() {
+        let (cal, curves, truth) = sections(1.5, 0.15, 0.0);
+        let sig: Vec<Vec<Real>> = curves.iter().map(|c| std::vec![5e-4; c.len()]).collect();
+        let sigs: [&[Real]; 2] = [&sig[0], &sig[1]];
+        let params = SphereFitParams::default();
+        let noise = NoiseModel::reference();
+        let focal = 1000.0;
+        let mut scratch = std::vec![0.0; curves[0].len() + curves[1].len()];
+        let refit = |curves: &[Vec<Vec3>; 2], scratch: &mut [Real]| {
+            let refs: [&[Vec3]; 2] = [&curves[0], &curves[1]];
+            fit_sphere(&refs, &sigs, &cal.planes, truth, &params, scratch).expect("fits")
+        };
+        let base = refit(&curves, &mut scratch);
+        let refs: [&[Vec3]; 2] = [&curves[0], &curves[1]];
+        let stated =
+            calibration_sigma_radius(&base, &refs, &sigs, &cal.planes, &params, &noise, focal)
+                .expect("evaluates");
+        let moved = |k: Option<usize>, which: usize| -> Real {
+            let mut c = curves.clone();
+            for (j, curve) in c.iter_mut().enumerate() {
+                if k.is_some_and(|k| k != j) {
+                    continue;
+                }
+                let (pe, pf, pd) = noise::perturbed(&cal.planes[j], focal, &noise).unwrap();
+                for x in curve.iter_mut() {
+                    *x = match which {
+                        0 => noise::retriangulate(*x, &pe, 1.0),
+                        1 => noise::retriangulate(*x, &cal.planes[j], pf),
+                        _ => noise::retriangulate(*x, &pd, 1.0),
+                    }
+                    .unwrap();
+                }
+            }
+            let mut scratch = std::vec![0.0; c[0].len() + c[1].len()];
+            refit(&c, &mut scratch).sphere.radius - base.sphere.radius
+        };
+        let mut variance = moved(None, 1).powi(2);
+        for k in 0..2 {
+            variance += moved(Some(k), 0).powi(2) + moved(Some(k), 2).powi(2);
+        }
+        let refits = sqrt(variance);
+        // A third of a millimetre on the radius: several times the common scale's share.
+        assert!(refits > 1e-4, "{refits}");
+        assert!(
+            ((stated - refits) / refits).abs() < 0.1,
+            "stated {stated} against re-fits {refits}"
+        );
     }
 
     /// The stated covariance comes from the residuals: the points' σ set only their relative

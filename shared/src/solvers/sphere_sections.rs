@@ -20,7 +20,7 @@ use nalgebra::{SMatrix, SVector};
 
 use super::circle::{fit_hyper, fit_robust, CircleFit, RobustParams};
 use super::correlation::correlation_length;
-use super::lm::{minimise, Evaluated, LeastSquares, LmParams, NormalEquations};
+use super::lm::{minimise, spd_inverse, Evaluated, LeastSquares, LmParams, NormalEquations};
 use super::SolveError;
 use crate::laser_plane::LaserPlane;
 
@@ -365,7 +365,7 @@ pub fn sphere_from_sections(
     }
     let first = initial_sphere(sections)?;
     let (sphere, normal) = minimise_sphere(&FromSections { sections, weights }, first, lm)?;
-    let covariance = normal.jtj.try_inverse().ok_or(SolveError::Degenerate)?;
+    let covariance = spd_inverse(&normal.jtj).ok_or(SolveError::Degenerate)?;
     Ok(SphereEstimate {
         sphere,
         covariance,

@@ -1,0 +1,83 @@
+//! A calibration as a real unit's would be: the exact one of a simulated capture, off by a
+//! draw from the calibration uncertainties the error model states (`NoiseModel`'s `e`, `f`
+//! and `δ` σ; `docs/error-model.md`, "Calibration errors"). An evaluation that measures
+//! with it checks a reading's whole stated σ, calibration term included — with the exact
+//! calibration only the random part is exercised (`docs/accuracy.md`, "Spheres").
+
+use rand::SeedableRng;
+use rand_distr::{Distribution, StandardNormal};
+use rand_pcg::Pcg64;
+use tangent_core::calibration::Calibration;
+use tangent_core::laser_plane::LaserPlane;
+use tangent_core::noise::NoiseModel;
+
+/// `calibration` off by one draw from `noise`'s calibration σ, seeded by `seed` (a stream of
+/// its own: the capture's frames do not depend on it). The focal length is the camera's,
+/// common to every plane (`fx` and `fy` scaled together); each plane's baseline `e` and tilt
+/// `δ` are calibrated from its own board poses, so each draws its own errors. The roll
+/// and everything else stay exact.
+pub fn drawn(
+    calibration: &Calibration,
+    noise: &NoiseModel,
+    seed: u64,
+) -> Result<Calibration, String> {
+    let mut rng = Pcg64::seed_from_u64(seed ^ 0xCA11_B5A7_0000_0000);
+    let mut unit = || -> f64 { StandardNormal.sample(&mut rng) };
+    let mut out = calibration.clone();
+    let scale = 1.0 + noise.focal_px * unit() / calibration.camera.fx;
+    out.camera.fx *= scale;
+    out.camera.fy *= scale;
+    for (k, plane) in out.planes.iter_mut().enumerate() {
+        let (e, delta) = plane.baseline_tilt();
+        let roll = plane.roll();
+        let e = e + noise.baseline * unit();
+        let delta = delta + noise.tilt * unit();
+        *plane = LaserPlane::from_baseline_tilt_roll(e, delta, roll)
+            .map_err(|err| format!("plane {k} off by its calibration σ: {err}"))?;
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// With no calibration σ the drawn calibration is the exact one (the planes rebuilt from
+    /// their `e`, `δ` and roll); with the reference σ the draws scatter by those σ.
+    #[test]
+    fn the_draws_scatter_by_the_stated_calibration_sigma() {
+        let cal = Calibration::reference_design();
+        let exact = NoiseModel {
+            baseline: 0.0,
+            focal_px: 0.0,
+            tilt: 0.0,
+            ..NoiseModel::reference()
+        };
+        let same = drawn(&cal, &exact, 7).unwrap();
+        assert_eq!(same.camera.fx, cal.camera.fx);
+        for (a, b) in same.planes.iter().zip(cal.planes.iter()) {
+            assert!((a.normal - b.normal).norm() < 1e-12, "{a:?} {b:?}");
+            assert!((a.offset - b.offset).abs() < 1e-12);
+        }
+        let noise = NoiseModel::reference();
+        let n = 2000;
+        let (mut fx2, mut e2, mut d2) = (0.0, 0.0, 0.0);
+        for seed in 0..n {
+            let c = drawn(&cal, &noise, seed).unwrap();
+            fx2 += (c.camera.fx - cal.camera.fx).powi(2);
+            let (e, d) = c.planes[1].baseline_tilt();
+            let (e0, d0) = cal.planes[1].baseline_tilt();
+            e2 += (e - e0).powi(2);
+            d2 += (d - d0).powi(2);
+        }
+        let rms = |s: f64| (s / n as f64).sqrt();
+        // 2000 draws: the RMS is within ≈ 5 % of the σ (3.2 standard errors of 1.6 %).
+        assert!(
+            (rms(fx2) / noise.focal_px - 1.0).abs() < 0.05,
+            "{}",
+            rms(fx2)
+        );
+        assert!((rms(e2) / noise.baseline - 1.0).abs() < 0.05, "{}", rms(e2));
+        assert!((rms(d2) / noise.tilt - 1.0).abs() < 0.05, "{}", rms(d2));
+    }
+}
