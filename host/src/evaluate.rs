@@ -87,8 +87,16 @@ pub struct Sample {
 
 /// Simulates and measures `count` random stems from `first_seed` (lean up to `tilt_max_deg`;
 /// a lean > 0 uses the two-plane device), each with the physics model of its seed
-/// ([`model_for_seed`]), by Tangent and by the baseline, in parallel.
-pub fn run(first_seed: u64, count: u64, tilt_max_deg: f64) -> anyhow::Result<Vec<Sample>> {
+/// ([`model_for_seed`]), by Tangent and by the baseline, in parallel. With
+/// `calibration_errors` Tangent measures with the capture's calibration off by a draw from
+/// the calibration σ its solver states ([`crate::calibration_draw`]; the baseline keeps the
+/// exact one).
+pub fn run(
+    first_seed: u64,
+    count: u64,
+    tilt_max_deg: f64,
+    calibration_errors: bool,
+) -> anyhow::Result<Vec<Sample>> {
     let config = PipelineConfig::default();
     let params = CylinderParams::default();
     (first_seed..first_seed + count)
@@ -98,8 +106,18 @@ pub fn run(first_seed: u64, count: u64, tilt_max_deg: f64) -> anyhow::Result<Vec
             let model = model_for_seed(seed);
             physics::apply(model, seed, &mut spec);
             let (capture, _) = simulate(&spec)?;
-            let outcome =
-                measure_loaded(&capture, &format!("seed {seed}"), None, &config, &params)?;
+            let outcome = if calibration_errors {
+                let calibration =
+                    crate::calibration_draw::drawn(&capture.calibration, &params.noise, seed)
+                        .map_err(|e| anyhow::anyhow!("seed {seed}: {e}"))?;
+                let drawn = crate::capture::Capture {
+                    calibration,
+                    ..capture.clone()
+                };
+                measure_loaded(&drawn, &format!("seed {seed}"), None, &config, &params)?
+            } else {
+                measure_loaded(&capture, &format!("seed {seed}"), None, &config, &params)?
+            };
             let baseline = baseline::measure(&capture, None)
                 .map(|b| b.diameter_m)
                 .map_err(|e| e.to_string());

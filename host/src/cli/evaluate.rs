@@ -59,10 +59,10 @@ pub struct Args {
     /// next run: re-measuring a set after a solver change without simulating it again.
     #[arg(long)]
     sphere_cache: Option<PathBuf>,
-    /// Measure each ball with its calibration off by a draw from the calibration σ the
-    /// solver states (`host/src/calibration_draw.rs`), so that *within 2σ* checks the whole
-    /// stated σ, calibration term included (default: the exact calibration, which exercises
-    /// only the random part).
+    /// Measure each stem or ball with its calibration off by a draw from the calibration σ
+    /// the solver states (`host/src/calibration_draw.rs`), so that *within 2σ* checks the
+    /// whole stated σ, calibration term included (default: the exact calibration, which
+    /// exercises only the random part).
     #[arg(long)]
     calibration_errors: bool,
     /// Evaluate the road instrument instead (`docs/road.md`): MPD per surface type, furrow
@@ -129,8 +129,13 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     }
     let start = Instant::now();
     let (t_seed, tilt_seed) = (args.set.first_seed(false), args.set.first_seed(true));
-    let transversal = run_samples(t_seed, args.count, 0.0)?;
-    let tilted = run_samples(tilt_seed, args.tilted_count, args.tilt_max_deg)?;
+    let transversal = run_samples(t_seed, args.count, 0.0, args.calibration_errors)?;
+    let tilted = run_samples(
+        tilt_seed,
+        args.tilted_count,
+        args.tilt_max_deg,
+        args.calibration_errors,
+    )?;
     let elapsed = start.elapsed().as_secs_f64();
     if let Some(path) = &args.samples {
         let lines: Vec<String> = transversal
