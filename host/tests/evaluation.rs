@@ -48,7 +48,8 @@ fn metrics_of_known_errors() {
 #[test]
 fn small_evaluation_per_model_with_the_baseline_column() {
     // Two captures per model: 16 consecutive seeds of the tuning set.
-    let samples: Vec<Sample> = run(SeedSet::Tuning.first_seed(false), 16, 0.0).expect("runs");
+    let samples: Vec<Sample> =
+        run(SeedSet::Tuning.first_seed(false), 16, 0.0, false).expect("runs");
     assert_eq!(samples.len(), 16);
     for model in PhysicsModel::ALL {
         assert_eq!(
