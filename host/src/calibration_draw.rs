@@ -11,6 +11,8 @@ use tangent_core::calibration::Calibration;
 use tangent_core::laser_plane::LaserPlane;
 use tangent_core::noise::NoiseModel;
 
+use crate::capture::Capture;
+
 /// `calibration` off by one draw from `noise`'s calibration σ, seeded by `seed` (a stream of
 /// its own: the capture's frames do not depend on it). The focal length is the camera's,
 /// common to every plane (`fx` and `fy` scaled together); each plane's baseline `e` and tilt
@@ -36,6 +38,17 @@ pub fn drawn(
             .map_err(|err| format!("plane {k} off by its calibration σ: {err}"))?;
     }
     Ok(out)
+}
+
+/// `capture` with its calibration replaced by [`drawn`] (seed `seed`): what the evaluations
+/// measure with `--calibration-errors`.
+pub fn with_drawn(capture: Capture, noise: &NoiseModel, seed: u64) -> anyhow::Result<Capture> {
+    let calibration = drawn(&capture.calibration, noise, seed)
+        .map_err(|e| anyhow::anyhow!("seed {seed}: {e}"))?;
+    Ok(Capture {
+        calibration,
+        ..capture
+    })
 }
 
 #[cfg(test)]

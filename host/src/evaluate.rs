@@ -106,18 +106,19 @@ pub fn run(
             let model = model_for_seed(seed);
             physics::apply(model, seed, &mut spec);
             let (capture, _) = simulate(&spec)?;
-            let outcome = if calibration_errors {
-                let calibration =
-                    crate::calibration_draw::drawn(&capture.calibration, &params.noise, seed)
-                        .map_err(|e| anyhow::anyhow!("seed {seed}: {e}"))?;
-                let drawn = crate::capture::Capture {
-                    calibration,
-                    ..capture.clone()
-                };
-                measure_loaded(&drawn, &format!("seed {seed}"), None, &config, &params)?
+            // The baseline below keeps the exact calibration.
+            let drawn = if calibration_errors {
+                Some(crate::calibration_draw::with_drawn(
+                    capture.clone(),
+                    &params.noise,
+                    seed,
+                )?)
             } else {
-                measure_loaded(&capture, &format!("seed {seed}"), None, &config, &params)?
+                None
             };
+            let measured = drawn.as_ref().unwrap_or(&capture);
+            let outcome =
+                measure_loaded(measured, &format!("seed {seed}"), None, &config, &params)?;
             let baseline = baseline::measure(&capture, None)
                 .map(|b| b.diameter_m)
                 .map_err(|e| e.to_string());

@@ -108,13 +108,7 @@ pub fn run(
                 }
             };
             let capture = if calibration_errors {
-                let noise = sphere_params(&params).noise;
-                let calibration = calibration_draw::drawn(&capture.calibration, &noise, seed)
-                    .map_err(|e| anyhow::anyhow!("seed {seed}: {e}"))?;
-                Capture {
-                    calibration,
-                    ..capture
-                }
+                calibration_draw::with_drawn(capture, &sphere_params(&params).noise, seed)?
             } else {
                 capture
             };
