@@ -13,12 +13,15 @@
 //! 4. [`laser`]: board pose per capture, stripe points back-projected onto the board plane,
 //!    robust plane fit, repeatability (leave-one-pose-out spread of baseline, tilt, roll);
 //! 5. [`report`]: the text report and the PNG figures;
-//! 6. [`sanity`]: what is refused — views that cannot determine the calibration,
+//! 6. [`ball`] (optional, two planes or more): the planes' `e` and `δ` refined against each
+//!    other on captures of a ball, which both sections must fit;
+//! 7. [`sanity`]: what is refused — views that cannot determine the calibration,
 //!    parameters whose σ is beyond a sane bound, loaded values outside physical ranges.
 //!
 //! The camera model is the core's ([`tangent_core::camera::Camera`]): whatever is
 //! calibrated here is exactly what the instrument evaluates.
 
+pub mod ball;
 pub mod corners;
 pub mod laser;
 pub mod refine;

@@ -367,6 +367,29 @@ pub fn cylinder_with_ends(r: f64, len: f64, end: [f64; 3], axis: [f64; 3]) -> Ve
 }
 
 /// A random ball for the accuracy evaluation (not the corpus): diameter log-uniform in
+/// View `i` (0–5) of a calibration session with a reference ball (`docs/calibration.md`,
+/// section 9): a matt 145 mm sphere (the size of a laser scanner's reference sphere) at
+/// 0.6–1.6 m, alternately left and right of the axis and stepped across the free play
+/// between the lines; `session` seeds the rendering's noise.
+pub fn reference_ball_spec(i: u64, session: u64) -> SimSpec {
+    let z = 0.6 + 0.2 * i as f64;
+    let x = if i % 2 == 0 { 0.08 * z } else { -0.06 * z };
+    let shift = 0.1 * (i as f64 - 2.5);
+    SimSpec {
+        mode: Mode::Sphere,
+        description: format!("reference ball 145 mm, view {i} at {z:.1} m"),
+        timestamp: "2025-06-04T12:00:00Z".into(),
+        calibration: two_plane_calibration(),
+        objects: vec![ball(145.0, z, x, shift, Finish::Matt)],
+        params: params(splitmix_session(session, i), Finish::Matt),
+    }
+}
+
+/// A seed per (session, view) for [`reference_ball_spec`]'s noise.
+fn splitmix_session(session: u64, i: u64) -> u64 {
+    super::scene::splitmix(session.wrapping_mul(0x9E37_79B9) ^ (i + 1)) & (u64::MAX >> 1)
+}
+
 /// 20–400 mm, centre 0.3–2 m ahead, across the central half of the view, up to ±0.5 of the
 /// free play off the mid-plane, matt or shiny, on a floor one time in three; the two-plane
 /// reference head.

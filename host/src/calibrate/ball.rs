@@ -1,0 +1,648 @@
+//! The laser planes refined on captures of one ball (`docs/calibration.md`, section 9,
+//! "Refining the planes on a ball").
+//!
+//! The board calibration ([`super::laser`]) fixes each plane's baseline `e` and tilt `δ` to
+//! the σ the error model carries (0.2 mm, 0.2 mrad), each plane from its own stripe points.
+//! One plane's tilt error moves its section along the line of sight by `z²·Δδ/e`; a fit that
+//! combines two sections (a ball, a leaning stem) reads that as size or lean
+//! (`docs/error-model.md`, "Calibration errors across two planes"). A ball, of any size, cut
+//! by two planes is a check of exactly that: both sections must lie on one sphere. Seen at
+//! several distances it determines the planes' *relative* `e` and `δ` (the shift grows as `z`
+//! for `e` and as `z²` for `δ`).
+//!
+//! The refinement: every point of plane `k` was triangulated with the plane `(n, d)`; on the
+//! plane `(n', d')` of the corrected `e`, `δ` the same pixel's ray gives `X' = X·d'/(n'·X)`
+//! (the camera, hence the ray, is unchanged). The corrections `u` (in units of their prior
+//! σ) minimise `|u|² + Σ_views min_(C,R) Σ_points ((|X' − C| − R)/s)²`: the prior keeps what
+//! the ball cannot see (the common scale, with an unknown diameter) at the board's value,
+//! and each view's sphere is re-fitted for every `u` (variable projection). `s` is a view
+//! plane's robust residual scale times the square root of its residuals' correlation length,
+//! so the posterior covariance `(JᵀJ)⁻¹` counts correlated speckle once.
+
+use nalgebra::{DMatrix, SMatrix, SVector};
+use tangent_core::calibration::Calibration;
+use tangent_core::laser_plane::LaserPlane;
+use tangent_core::noise::NoiseModel;
+use tangent_core::real::{Vec2, Vec3};
+use tangent_core::solvers::circle::{fit_hyper, fit_robust, RobustParams};
+use tangent_core::solvers::correlation::correlation_length;
+use tangent_core::solvers::lm::{minimise, Evaluated, LeastSquares, LmParams, NormalEquations};
+use tangent_core::solvers::sphere_sections::Sphere;
+use tangent_core::solvers::SolveError;
+
+use super::CalibrateError;
+use crate::capture::{Capture, Mode};
+use crate::measure::{measure_loaded, Solved};
+use tangent_core::pipeline::PipelineConfig;
+use tangent_core::solvers::stem::CylinderParams;
+
+/// Fewest views: a relative `e` and `δ` per extra plane from shifts that grow as `z` and
+/// `z²` need at least two distances, and a third checks them.
+pub const MIN_BALL_VIEWS: usize = 3;
+
+/// Fewest points a plane's section must keep in a view: a section shorter than this
+/// determines its circle too poorly to check the other (as the sphere solver's own arcs).
+pub const MIN_SECTION_POINTS: usize = 30;
+
+/// Smallest `|cos|` of the angle between a point's displacement direction `L` and its
+/// section's radius for the point to be used (60°; see [`prepare`]).
+pub const MIN_RADIAL_SHARE: f64 = 0.5;
+
+/// Tukey-style hard cut (robust-scale units) that sets a point aside as not on the ball
+/// (a stand, a floor): the biweight's zero-weight point, as in the sphere fits.
+pub const OUTLIER_CUT: f64 = 4.685;
+
+/// Largest posterior σ of the planes' relative tilt the refinement accepts, as a share of
+/// its prior σ (`√2·σ_δ` for two independently calibrated planes): views that shrink it by
+/// less than half (one distance only, tiny sections) did not determine it.
+pub const MAX_RELATIVE_TILT_SHARE: f64 = 0.5;
+
+/// One capture of the ball: each plane's 3-D points as the calibration being refined
+/// triangulated them, and that calibration's sphere as the start.
+#[derive(Debug, Clone)]
+pub struct BallView {
+    /// Where the view came from (capture directory), for messages and the report.
+    pub name: String,
+    /// Plane `k`'s points (camera frame, metres, in image-column order).
+    pub planes: Vec<Vec<Vec3>>,
+    /// The sphere measured with the calibration being refined.
+    pub start: Sphere,
+}
+
+impl BallView {
+    /// The view of `capture` (a sphere-mode capture of the ball) measured with
+    /// `calibration`, the one being refined. Errors name the capture: not a sphere capture,
+    /// frames that do not read, no sphere.
+    pub fn measure(
+        capture: &Capture,
+        calibration: &Calibration,
+        name: &str,
+    ) -> Result<BallView, CalibrateError> {
+        let refuse = |why: String| CalibrateError::Refinement(format!("{name}: {why}"));
+        if capture.meta.mode != Mode::Sphere {
+            return Err(refuse(format!(
+                "mode is `{:?}`; a ball's captures are taken in sphere mode",
+                capture.meta.mode
+            )));
+        }
+        let outcome = measure_loaded(
+            capture,
+            name,
+            Some(calibration),
+            &PipelineConfig::default(),
+            &CylinderParams::default(),
+        )
+        .map_err(|e| refuse(e.to_string()))?;
+        let m = match &outcome.result {
+            Ok(Solved::Sphere(m)) => m,
+            Ok(_) => return Err(refuse("not measured as a sphere".into())),
+            Err(e) => return Err(refuse(format!("no sphere: {e}"))),
+        };
+        let planes = (0..calibration.planes.len())
+            .map(|k| m.profile.points(&outcome.points, k).to_vec())
+            .collect();
+        Ok(BallView {
+            name: name.to_string(),
+            planes,
+            start: Sphere {
+                centre: m.solution.centre,
+                radius: 0.5 * m.solution.diameter,
+            },
+        })
+    }
+}
+
+/// A known ball diameter (a reference sphere's certificate), which makes the common scale
+/// observable as well.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct KnownDiameter {
+    /// The diameter (metres).
+    pub diameter: f64,
+    /// Its 1σ (metres, positive).
+    pub sigma: f64,
+}
+
+/// One plane's correction with its posterior σ.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlaneCorrection {
+    /// Change of the baseline `e` (metres).
+    pub baseline: f64,
+    /// Its 1σ (metres).
+    pub baseline_sigma: f64,
+    /// Change of the tilt `δ` (radians).
+    pub tilt: f64,
+    /// Its 1σ (radians).
+    pub tilt_sigma: f64,
+}
+
+/// How one view fits before and after.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ViewFit {
+    /// The view's name.
+    pub name: String,
+    /// Distance of the ball's centre (metres).
+    pub distance: f64,
+    /// Diameter of the sphere through the kept points, before and after (metres).
+    pub diameter: (f64, f64),
+    /// RMS of the kept points' distance to that sphere, before and after (metres).
+    pub rms: (f64, f64),
+    /// Points kept / given.
+    pub kept: (usize, usize),
+}
+
+/// The result of [`refine_planes`].
+#[derive(Debug, Clone)]
+pub struct BallRefinement {
+    /// The calibration with the refined planes (camera and id unchanged).
+    pub calibration: Calibration,
+    /// Each plane's correction.
+    pub corrections: Vec<PlaneCorrection>,
+    /// Posterior 1σ of plane 1's tilt relative to plane 0's (radians).
+    pub relative_tilt_sigma: f64,
+    /// Posterior 1σ of plane 1's baseline relative to plane 0's (metres).
+    pub relative_baseline_sigma: f64,
+    /// Each view's fit.
+    pub views: Vec<ViewFit>,
+}
+
+/// A point as the inner fit reads it: where it is, the unit direction `L` in which its
+/// stripe's error moves it (its plane's line in the image column's plane through it), and
+/// the 1σ of that move.
+#[derive(Debug, Clone, Copy)]
+struct Observed {
+    x: Vec3,
+    along: Vec3,
+    sigma: f64,
+}
+
+/// The signed distance `t` along `L` from `x` to the sphere (the root of
+/// `|x + tL − C|² = R²` nearest 0), with `∂t/∂(C, R)`; where the line misses the sphere, the
+/// closest approach `t = −L·(x − C)`. This is the stripe's own error, so the residual `t/σ`
+/// is Gaussian where a point's distance to the surface is not: near a section's limb `L`
+/// runs along the surface and a move `t` puts the point `t²/2R` outside it, always outward
+/// (`docs/calibration.md`, section 9).
+fn along_line(p: &Observed, c: &Vec3, radius: f64) -> (f64, SVector<f64, 4>) {
+    let v = p.x - c;
+    let b = p.along.dot(&v);
+    let cc = v.norm_squared() - radius * radius;
+    let disc = b * b - cc;
+    if disc < 0.0 {
+        let j = SVector::<f64, 4>::new(p.along.x, p.along.y, p.along.z, 0.0);
+        return (-b, j);
+    }
+    let q = b + b.signum() * disc.sqrt();
+    let t = if q != 0.0 { -cc / q } else { 0.0 };
+    // |x + tL − C|² = R² differentiated: (P − C)·(L dt − dC) = R dR.
+    let pc = v + p.along * t;
+    let den = pc.dot(&p.along);
+    if den == 0.0 {
+        return (t, SVector::<f64, 4>::zeros());
+    }
+    let j = SVector::<f64, 4>::new(pc.x / den, pc.y / den, pc.z / den, radius / den);
+    (t, j)
+}
+
+/// Sphere through fixed points, each residual its distance along `L` over its σ: the
+/// inner problem.
+struct FixedSphere<'a> {
+    points: &'a [Observed],
+    known: Option<KnownDiameter>,
+}
+
+impl LeastSquares<4> for FixedSphere<'_> {
+    type Params = SVector<f64, 4>;
+    type Extra = ();
+
+    fn evaluate(&self, p: &Self::Params) -> Result<(NormalEquations<4>, ()), SolveError> {
+        let c = Vec3::new(p[0], p[1], p[2]);
+        let mut jtj = SMatrix::<f64, 4, 4>::zeros();
+        let mut jtr = SVector::<f64, 4>::zeros();
+        let mut cost = 0.0;
+        let mut add = |j: SVector<f64, 4>, r: f64| {
+            jtj += j * j.transpose();
+            jtr += j * r;
+            cost += r * r;
+        };
+        for o in self.points {
+            let (t, j) = along_line(o, &c, p[3]);
+            add(j / o.sigma, t / o.sigma);
+        }
+        if let Some(k) = self.known {
+            let r = (p[3] - 0.5 * k.diameter) / (0.5 * k.sigma);
+            add(
+                SVector::<f64, 4>::new(0.0, 0.0, 0.0, 1.0 / (0.5 * k.sigma)),
+                r,
+            );
+        }
+        if !cost.is_finite() || !(p[3] > 0.0) {
+            return Err(SolveError::Degenerate);
+        }
+        Ok((NormalEquations { jtj, jtr, cost }, ()))
+    }
+
+    fn step(&self, p: &Self::Params, delta: &SVector<f64, 4>) -> Self::Params {
+        p + delta
+    }
+
+    fn step_scale(&self, p: &Self::Params) -> f64 {
+        1e-3 + p.norm()
+    }
+}
+
+/// The best sphere through `points` from `start`, and the residuals `t/σ` appended to `out`.
+fn fit_fixed(
+    points: &[Observed],
+    known: Option<KnownDiameter>,
+    start: &Sphere,
+    out: &mut Vec<f64>,
+) -> Result<Sphere, SolveError> {
+    let problem = FixedSphere { points, known };
+    let begin = Evaluated::at(&problem, start.params())?;
+    let lm = LmParams {
+        tolerance: 1e-13,
+        ..LmParams::default()
+    };
+    let (min, _) = minimise(&problem, begin, &lm)?;
+    let sphere = Sphere::of_params(&min.params);
+    out.extend(
+        points
+            .iter()
+            .map(|o| along_line(o, &sphere.centre, sphere.radius).0 / o.sigma),
+    );
+    if let Some(k) = known {
+        out.push((sphere.radius - 0.5 * k.diameter) / (0.5 * k.sigma));
+    }
+    Ok(sphere)
+}
+
+/// Unit direction in which a point `x` of `plane` moves when its stripe's row moves: the
+/// line the plane shares with the image column's plane through `x` (normal `(z, 0, −x)`).
+fn displacement(plane: &LaserPlane, x: &Vec3) -> Vec3 {
+    plane
+        .normal
+        .cross(&Vec3::new(x.z, 0.0, -x.x))
+        .try_normalize(0.0)
+        .unwrap_or_else(Vec3::zeros)
+}
+
+/// The planes of `nominal` with the corrections `u` (prior-σ units: `u[2k]` of `e`,
+/// `u[2k+1]` of `δ`).
+fn corrected_planes(
+    nominal: &[LaserPlane],
+    u: &[f64],
+    prior: &NoiseModel,
+) -> Result<Vec<LaserPlane>, SolveError> {
+    nominal
+        .iter()
+        .enumerate()
+        .map(|(k, p)| {
+            let (e, delta) = p.baseline_tilt();
+            LaserPlane::from_baseline_tilt_roll(
+                e + prior.baseline * u[2 * k],
+                delta + prior.tilt * u[2 * k + 1],
+                p.roll(),
+            )
+            .map_err(|_| SolveError::Degenerate)
+        })
+        .collect()
+}
+
+/// A triangulated point moved along its ray onto the plane `to` (`X' = X·d'/(n'·X)`).
+fn retriangulate(x: &Vec3, to: &LaserPlane) -> Vec3 {
+    x * (to.offset / to.normal.dot(x))
+}
+
+/// One view's kept points and each plane's scale `s` (see the module documentation).
+#[derive(Debug, Clone)]
+struct Prepared {
+    /// Plane of each kept point, and the point (σ: its plane's scale).
+    kept: Vec<(usize, Observed)>,
+    /// The sphere at the current corrections (start of the next fit).
+    sphere: Sphere,
+}
+
+/// The robust scale `1.4826·median|r|`.
+fn robust_scale(r: &[f64]) -> f64 {
+    let mut a: Vec<f64> = r.iter().map(|x| x.abs()).collect();
+    a.sort_by(f64::total_cmp);
+    if a.is_empty() {
+        return 0.0;
+    }
+    1.4826 * a[a.len() / 2]
+}
+
+/// The outer problem: corrections `u` of every plane.
+struct Planes<'a> {
+    nominal: &'a [LaserPlane],
+    prior: &'a NoiseModel,
+    views: &'a [BallView],
+    prepared: &'a [Prepared],
+    known: Option<KnownDiameter>,
+}
+
+impl Planes<'_> {
+    /// The residual vector at `u`: the prior's, then every view's at its re-fitted sphere.
+    fn residuals(&self, u: &[f64]) -> Result<(Vec<f64>, Vec<Sphere>), SolveError> {
+        let planes = corrected_planes(self.nominal, u, self.prior)?;
+        let mut r: Vec<f64> = u.to_vec();
+        let mut spheres = Vec::with_capacity(self.views.len());
+        let mut pts = Vec::new();
+        for prep in self.prepared {
+            pts.clear();
+            pts.extend(prep.kept.iter().map(|(k, o)| Observed {
+                x: retriangulate(&o.x, &planes[*k]),
+                ..*o
+            }));
+            spheres.push(fit_fixed(&pts, self.known, &prep.sphere, &mut r)?);
+        }
+        Ok((r, spheres))
+    }
+}
+
+/// Central-difference step of the corrections (prior-σ units): the points move by
+/// ≈ 10⁻² σ of a tilt (µm at 1 m), far above the inner fit's convergence and far inside the
+/// linear range.
+const JACOBIAN_STEP: f64 = 1e-2;
+
+impl<const N: usize> LeastSquares<N> for Planes<'_> {
+    type Params = SVector<f64, N>;
+    type Extra = ();
+
+    fn evaluate(&self, p: &Self::Params) -> Result<(NormalEquations<N>, ()), SolveError> {
+        let (r0, _) = self.residuals(p.as_slice())?;
+        let mut jac = DMatrix::<f64>::zeros(r0.len(), N);
+        for i in 0..N {
+            let mut plus = *p;
+            let mut minus = *p;
+            plus[i] += JACOBIAN_STEP;
+            minus[i] -= JACOBIAN_STEP;
+            let (rp, _) = self.residuals(plus.as_slice())?;
+            let (rm, _) = self.residuals(minus.as_slice())?;
+            if rp.len() != r0.len() || rm.len() != r0.len() {
+                return Err(SolveError::Degenerate);
+            }
+            for (row, (a, b)) in rp.iter().zip(&rm).enumerate() {
+                jac[(row, i)] = (a - b) / (2.0 * JACOBIAN_STEP);
+            }
+        }
+        let r = nalgebra::DVector::from_vec(r0);
+        let jtj_d = jac.transpose() * &jac;
+        let jtr_d = jac.transpose() * &r;
+        let jtj = SMatrix::<f64, N, N>::from_fn(|i, j| jtj_d[(i, j)]);
+        let jtr = SVector::<f64, N>::from_fn(|i, _| jtr_d[i]);
+        let cost = r.norm_squared();
+        Ok((NormalEquations { jtj, jtr, cost }, ()))
+    }
+
+    fn step(&self, p: &Self::Params, delta: &SVector<f64, N>) -> Self::Params {
+        p + delta
+    }
+
+    fn step_scale(&self, p: &Self::Params) -> f64 {
+        1.0 + p.norm()
+    }
+
+    /// Settled when the cost drops by less than 10⁻⁴: a hundredth of a σ of any correction.
+    fn settled(&self, before: f64, after: f64) -> bool {
+        before - after < 1e-4
+    }
+}
+
+/// Each view's points on the ball with their `L` and σ: every section alone is fitted by a
+/// robust circle in its plane. A calibration error moves and scales a whole section, which
+/// its own circle absorbs, so these residuals are the points' noise alone, whatever the
+/// calibration's error. Each residual is turned into the move along `L` that explains it
+/// (`d/(L·m̂)`, `m̂` the circle's radial direction); points where `L` is more than 60° off
+/// the radial direction (the limbs: a move there hardly leaves the surface, so they carry
+/// little and only second-order information) and points beyond the Tukey cut (a stand, a
+/// floor) are set aside. σ is the robust scale of the moves times the square root of their
+/// correlation length.
+fn prepare(nominal: &[LaserPlane], views: &[BallView]) -> Result<Vec<Prepared>, CalibrateError> {
+    let robust = RobustParams {
+        min_scale: 0.0,
+        ..RobustParams::default()
+    };
+    let mut out = Vec::with_capacity(views.len());
+    for view in views {
+        let mut kept = Vec::new();
+        for (k, pts) in view.planes.iter().enumerate() {
+            let refuse = |why: String| {
+                CalibrateError::Refinement(format!("{}: laser {k}: {why}", view.name))
+            };
+            let too_few = |n: usize| {
+                refuse(format!(
+                    "{n} points on the ball, at least {MIN_SECTION_POINTS} needed; aim so that \
+                     both lines cross the ball"
+                ))
+            };
+            if pts.len() < MIN_SECTION_POINTS {
+                return Err(too_few(pts.len()));
+            }
+            let plane = &nominal[k];
+            let a = plane.normal.cross(&Vec3::z()).normalize();
+            let b = plane.normal.cross(&a);
+            let flat: Vec<Vec2> = pts
+                .iter()
+                .map(|x| Vec2::new(x.dot(&a), x.dot(&b)))
+                .collect();
+            let mut scratch = vec![0.0; flat.len()];
+            let circle = fit_hyper(&flat)
+                .and_then(|c| fit_robust(&flat, c, &robust, &mut scratch))
+                .map_err(|e| refuse(format!("no circle through the section: {e}")))?
+                .circle;
+            // (index, L, move along L) of the points whose L is within 60° of the radius.
+            let moves: Vec<(usize, Vec3, f64)> = pts
+                .iter()
+                .zip(&flat)
+                .enumerate()
+                .filter_map(|(i, (x, f))| {
+                    let along = displacement(plane, x);
+                    let radial = (f - circle.centre).try_normalize(0.0)?;
+                    let cos = Vec2::new(along.dot(&a), along.dot(&b)).dot(&radial);
+                    let d = (f - circle.centre).norm() - circle.radius;
+                    (cos.abs() >= MIN_RADIAL_SHARE).then_some((i, along, d / cos))
+                })
+                .collect();
+            let t: Vec<f64> = moves.iter().map(|m| m.2).collect();
+            let cut = OUTLIER_CUT * robust_scale(&t);
+            let on_ball: Vec<&(usize, Vec3, f64)> =
+                moves.iter().filter(|m| m.2.abs() <= cut).collect();
+            if on_ball.len() < MIN_SECTION_POINTS {
+                return Err(too_few(on_ball.len()));
+            }
+            let kept_t: Vec<f64> = on_ball.iter().map(|m| m.2).collect();
+            let sigma = robust_scale(&kept_t) * correlation_length(&kept_t).max(1.0).sqrt();
+            if !(sigma > 0.0 && sigma.is_finite()) {
+                return Err(refuse(
+                    "the points have no spread about their circle".into(),
+                ));
+            }
+            kept.extend(on_ball.iter().map(|&&(i, along, _)| {
+                (
+                    k,
+                    Observed {
+                        x: pts[i],
+                        along,
+                        sigma,
+                    },
+                )
+            }));
+        }
+        // The sphere of the uncorrected planes, the start of every re-fit.
+        let all: Vec<Observed> = kept.iter().map(|(_, o)| *o).collect();
+        let sphere = fit_fixed(&all, None, &view.start, &mut Vec::new()).map_err(|e| {
+            CalibrateError::Refinement(format!("{}: no sphere through its points: {e}", view.name))
+        })?;
+        out.push(Prepared { kept, sphere });
+    }
+    Ok(out)
+}
+
+/// Refines the planes of `calibration` (each plane's `e` and `δ`; roll and camera kept) on
+/// `views` of one ball, each plane's prior the board calibration's σ in `prior`
+/// (`NoiseModel::baseline`, `::tilt`). With `known` the ball's certified diameter joins.
+///
+/// Errors: fewer than [`MIN_BALL_VIEWS`] views or two planes; a view whose section keeps
+/// fewer than [`MIN_SECTION_POINTS`]; no convergence; views that leave the relative tilt
+/// undetermined (posterior σ above [`MAX_RELATIVE_TILT_SHARE`] of its prior).
+pub fn refine_planes(
+    calibration: &Calibration,
+    views: &[BallView],
+    prior: &NoiseModel,
+    known: Option<KnownDiameter>,
+) -> Result<BallRefinement, CalibrateError> {
+    let nominal: &[LaserPlane] = &calibration.planes;
+    if nominal.len() < 2 {
+        return Err(CalibrateError::Undetermined(
+            "a ball refines the planes against each other: the calibration has one plane".into(),
+        ));
+    }
+    if views.len() < MIN_BALL_VIEWS {
+        return Err(CalibrateError::TooFewViews {
+            found: views.len(),
+            needed: MIN_BALL_VIEWS,
+        });
+    }
+    if let Some(v) = views.iter().find(|v| v.planes.len() != nominal.len()) {
+        return Err(CalibrateError::Refinement(format!(
+            "{}: {} planes' points, the calibration has {}",
+            v.name,
+            v.planes.len(),
+            nominal.len()
+        )));
+    }
+    if !(prior.baseline > 0.0 && prior.tilt > 0.0) {
+        return Err(CalibrateError::Refinement(
+            "the prior σ of e and δ must be positive".into(),
+        ));
+    }
+    match nominal.len() {
+        2 => refine_n::<4>(calibration, views, prior, known),
+        3 => refine_n::<6>(calibration, views, prior, known),
+        n => Err(CalibrateError::Refinement(format!(
+            "{n} planes: the ball refinement handles two or three"
+        ))),
+    }
+}
+
+fn refine_n<const N: usize>(
+    calibration: &Calibration,
+    views: &[BallView],
+    prior: &NoiseModel,
+    known: Option<KnownDiameter>,
+) -> Result<BallRefinement, CalibrateError> {
+    let nominal: &[LaserPlane] = &calibration.planes;
+    let prepared = prepare(nominal, views)?;
+    let problem = Planes {
+        nominal,
+        prior,
+        views,
+        prepared: &prepared,
+        known,
+    };
+    let fail = |e: SolveError| CalibrateError::Refinement(format!("plane corrections: {e}"));
+    let start = Evaluated::at(&problem, SVector::<f64, N>::zeros()).map_err(fail)?;
+    let (min, _) = minimise(&problem, start, &LmParams::default()).map_err(fail)?;
+    let (u, normal) = (min.params, min.normal);
+    let cov = normal.jtj.try_inverse().ok_or_else(|| {
+        CalibrateError::Refinement("the corrections' normal matrix is singular".into())
+    })?;
+    let scales = |i: usize| {
+        if i % 2 == 0 {
+            prior.baseline
+        } else {
+            prior.tilt
+        }
+    };
+    let corrections: Vec<PlaneCorrection> = (0..nominal.len())
+        .map(|k| PlaneCorrection {
+            baseline: u[2 * k] * prior.baseline,
+            baseline_sigma: cov[(2 * k, 2 * k)].max(0.0).sqrt() * prior.baseline,
+            tilt: u[2 * k + 1] * prior.tilt,
+            tilt_sigma: cov[(2 * k + 1, 2 * k + 1)].max(0.0).sqrt() * prior.tilt,
+        })
+        .collect();
+    // σ of a difference of two corrections from the covariance (prior-σ units → SI).
+    let difference_sigma = |i: usize, j: usize| {
+        let v = cov[(i, i)] + cov[(j, j)] - 2.0 * cov[(i, j)];
+        v.max(0.0).sqrt() * scales(i)
+    };
+    let relative_tilt_sigma = difference_sigma(1, 3);
+    let relative_baseline_sigma = difference_sigma(0, 2);
+    if relative_tilt_sigma > MAX_RELATIVE_TILT_SHARE * std::f64::consts::SQRT_2 * prior.tilt {
+        return Err(CalibrateError::Undetermined(format!(
+            "the ball views determine the planes' relative tilt to σ = {:.3} mrad only (the \
+             board's {:.3} mrad); add views at other distances (0.5–1.5 m) with both lines \
+             across the ball",
+            relative_tilt_sigma * 1e3,
+            std::f64::consts::SQRT_2 * prior.tilt * 1e3
+        )));
+    }
+    let planes = corrected_planes(nominal, u.as_slice(), prior)
+        .map_err(|e| CalibrateError::Refinement(format!("corrected planes: {e}")))?;
+    let refined = Calibration::new(calibration.id, calibration.camera, &planes)
+        .map_err(|e| CalibrateError::Refinement(format!("refined calibration: {e:?}")))?;
+    let sphere_fits = |u: &[f64]| {
+        let plain = Planes {
+            known: None,
+            ..problem
+        };
+        plain
+            .residuals(u)
+            .map(|(_, s)| s)
+            .map_err(|e| CalibrateError::Refinement(format!("spheres of the views: {e}")))
+    };
+    let before = sphere_fits(&[0.0; N])?;
+    let after = sphere_fits(u.as_slice())?;
+    let rms = |prep: &Prepared, planes: &[LaserPlane], s: &Sphere| {
+        let sum: f64 = prep
+            .kept
+            .iter()
+            .map(|(k, o)| ((retriangulate(&o.x, &planes[*k]) - s.centre).norm() - s.radius).powi(2))
+            .sum();
+        (sum / prep.kept.len().max(1) as f64).sqrt()
+    };
+    let views_fit = views
+        .iter()
+        .zip(&prepared)
+        .zip(before.iter().zip(&after))
+        .map(|((view, prep), (b, a))| ViewFit {
+            name: view.name.clone(),
+            distance: a.centre.norm(),
+            diameter: (2.0 * b.radius, 2.0 * a.radius),
+            rms: (rms(prep, nominal, b), rms(prep, &planes, a)),
+            kept: (prep.kept.len(), view.planes.iter().map(Vec::len).sum()),
+        })
+        .collect();
+    Ok(BallRefinement {
+        calibration: refined,
+        corrections,
+        relative_tilt_sigma,
+        relative_baseline_sigma,
+        views: views_fit,
+    })
+}
+
+#[cfg(test)]
+#[path = "ball_tests.rs"]
+mod tests;
