@@ -19,6 +19,9 @@
 //! plane's robust residual scale times the square root of its residuals' correlation length,
 //! so the posterior covariance `(JᵀJ)⁻¹` counts correlated speckle once.
 
+// `!(x > 0.0)` is deliberate: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use nalgebra::{DMatrix, SMatrix, SVector};
 use tangent_core::calibration::Calibration;
 use tangent_core::laser_plane::LaserPlane;
@@ -568,7 +571,7 @@ fn refine_n<const N: usize>(
         CalibrateError::Refinement("the corrections' normal matrix is singular".into())
     })?;
     let scales = |i: usize| {
-        if i % 2 == 0 {
+        if i.is_multiple_of(2) {
             prior.baseline
         } else {
             prior.tilt

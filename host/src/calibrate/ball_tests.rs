@@ -34,7 +34,11 @@ fn views(
     zs.iter()
         .enumerate()
         .map(|(i, &z)| {
-            let x = if i % 2 == 0 { 0.1 * z } else { -0.08 * z };
+            let x = if i.is_multiple_of(2) {
+                0.1 * z
+            } else {
+                -0.08 * z
+            };
             let c = Vec3::new(x, mid_plane_y(z), z);
             let planes = truth
                 .planes

@@ -373,7 +373,11 @@ pub fn cylinder_with_ends(r: f64, len: f64, end: [f64; 3], axis: [f64; 3]) -> Ve
 /// between the lines; `session` seeds the rendering's noise.
 pub fn reference_ball_spec(i: u64, session: u64) -> SimSpec {
     let z = 0.6 + 0.2 * i as f64;
-    let x = if i % 2 == 0 { 0.08 * z } else { -0.06 * z };
+    let x = if i.is_multiple_of(2) {
+        0.08 * z
+    } else {
+        -0.06 * z
+    };
     let shift = 0.1 * (i as f64 - 2.5);
     SimSpec {
         mode: Mode::Sphere,
