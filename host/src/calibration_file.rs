@@ -267,6 +267,13 @@ pub fn write_accelerometer(
     })
 }
 
+/// Writes `calibration`'s laser planes as the `[[planes]]` of an existing calibration file,
+/// every other key (camera, id, `[road]`, `[accelerometer]`) kept; errors name the file.
+pub fn write_planes(path: &Path, calibration: &Calibration) -> Result<(), CalibrationFileError> {
+    let planes = CalibrationToml::from_calibration(calibration).planes;
+    update_file(path, |file| file.planes = planes)
+}
+
 /// Reads the calibration file at `path`, changes it with `change` and writes it back, after
 /// checking that what is written reads back (so a file that would not is never left behind).
 fn update_file(

@@ -1,5 +1,6 @@
 //! `tangent calibrate camera IMAGES… --board 9x6 --square 25mm`,
 //! `tangent calibrate laser CAPTURES… --camera FILE` and
+//! `tangent calibrate ball CAPTURES… --calib FILE [--diameter-mm D]`,
 //! `tangent calibrate road CAPTURES… --steps-mm 0,0.1,… --calib FILE` and
 //! `tangent calibrate accelerometer POSES.toml --calib FILE`.
 //!
@@ -9,7 +10,9 @@
 //! command reads the camera from such a file and writes the complete calibration. The road
 //! command (a road head's piezo height-scale calibration, `docs/road.md`) fits the measured
 //! heights of a flat target against the stage's known steps and writes the result with its
-//! residuals into the file's `[road]` table. The accelerometer command solves the sensor's
+//! residuals into the file's `[road]` table. The ball command refines the laser planes
+//! against each other on sphere-mode captures of one ball (`docs/calibration.md`, section 9)
+//! and rewrites the file's `[[planes]]`. The accelerometer command solves the sensor's
 //! bias, scale and alignment to the camera from static poses (`docs/hardware.md`,
 //! "Accelerometer calibration") and writes the file's `[accelerometer]` table.
 
@@ -21,7 +24,7 @@ use clap::Subcommand;
 use tangent_core::instrument::road::RoadParams;
 use tangent_core::pipeline::PipelineConfig;
 use tangent_core::protocol::codes::Failure;
-use tangent_host::calibrate::{corners, laser, refine, report, Board};
+use tangent_host::calibrate::{ball, corners, laser, refine, report, Board};
 use tangent_host::calibration_file::{
     self, AccelerometerToml, CalibrationToml, CameraToml, DistortionToml, RoadToml,
 };
@@ -80,6 +83,27 @@ enum Which {
         /// Directory for the report (text, and one PNG per capture: corners and stripes).
         #[arg(long)]
         report: Option<PathBuf>,
+    },
+    /// Laser planes refined against each other on sphere-mode captures of one ball at
+    /// several distances (`docs/calibration.md`, section 9); rewrites `[[planes]]` in --calib.
+    Ball {
+        /// Capture directories of the ball (sphere mode), at least three, at 0.5–1.6 m, both
+        /// lines across the ball.
+        #[arg(required = true)]
+        captures: Vec<PathBuf>,
+        /// The head's calibration file: its planes are the start and the prior; they are
+        /// rewritten, every other key kept.
+        #[arg(long)]
+        calib: PathBuf,
+        /// The ball's certified diameter in millimetres, if it has one (adds the common scale).
+        #[arg(long)]
+        diameter_mm: Option<f64>,
+        /// 1σ of that diameter in millimetres.
+        #[arg(long, default_value_t = 0.005)]
+        diameter_sigma_mm: f64,
+        /// Print the result without writing the file.
+        #[arg(long)]
+        dry_run: bool,
     },
     /// Road head: height scale from a flat target on a piezo stage raised in known steps
     /// (`docs/road.md`, "Height-scale calibration"); writes `[road]` into the --calib file.
@@ -169,6 +193,18 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             steps_mm,
             calib,
         } => road_cmd(&captures, &steps_mm, &calib),
+        Which::Ball {
+            captures,
+            calib,
+            diameter_mm,
+            diameter_sigma_mm,
+            dry_run,
+        } => ball_cmd(
+            &captures,
+            &calib,
+            diameter_mm.map(|d| (d, diameter_sigma_mm)),
+            dry_run,
+        ),
         Which::Accelerometer { poses, calib } => accelerometer_cmd(&poses, &calib),
     }
 }
@@ -236,6 +272,75 @@ fn accelerometer_cmd(poses: &Path, calib: &Path) -> anyhow::Result<ExitCode> {
 /// `tangent calibrate road`: each capture's mean profile height, measured with no height
 /// correction, fitted against the stage's steps ([`fit_height_scale`]); the table of
 /// residuals is printed and `[road]` written.
+/// `tangent calibrate ball`: each capture measured with the file's calibration, the planes
+/// refined ([`ball::refine_planes`], prior the error model's calibration σ), the corrections
+/// and the views' fits printed, `[[planes]]` rewritten.
+fn ball_cmd(
+    captures: &[PathBuf],
+    calib: &Path,
+    diameter_mm: Option<(f64, f64)>,
+    dry_run: bool,
+) -> anyhow::Result<ExitCode> {
+    let calibration = calibration_file::read(calib)?;
+    let known = match diameter_mm {
+        Some((d, s)) if d > 0.0 && s > 0.0 && d.is_finite() && s.is_finite() => {
+            Some(ball::KnownDiameter {
+                diameter: d * 1e-3,
+                sigma: s * 1e-3,
+            })
+        }
+        Some((d, s)) => bail!(
+            "--diameter-mm {d} --diameter-sigma-mm {s}: both must be positive and finite"
+        ),
+        None => None,
+    };
+    let mut views = Vec::with_capacity(captures.len());
+    for dir in captures {
+        let name = dir.display().to_string();
+        let capture = Capture::read(dir).map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
+        views.push(ball::BallView::measure(&capture, &calibration, &name)?);
+    }
+    let prior = tangent_core::noise::NoiseModel::reference();
+    let fit = ball::refine_planes(&calibration, &views, &prior, known)?;
+    println!("view                                   distance   diameter before → after   RMS before → after   points");
+    for v in &fit.views {
+        println!(
+            "{:<38} {:6.3} m   {:9.2} → {:9.2} mm   {:6.3} → {:6.3} mm   {}/{}",
+            v.name,
+            v.distance,
+            v.diameter.0 * 1e3,
+            v.diameter.1 * 1e3,
+            v.rms.0 * 1e3,
+            v.rms.1 * 1e3,
+            v.kept.0,
+            v.kept.1
+        );
+    }
+    for (k, c) in fit.corrections.iter().enumerate() {
+        println!(
+            "laser {k}: e {:+.3} ± {:.3} mm, δ {:+.4} ± {:.4} mrad",
+            c.baseline * 1e3,
+            c.baseline_sigma * 1e3,
+            c.tilt * 1e3,
+            c.tilt_sigma * 1e3
+        );
+    }
+    println!(
+        "laser 1 against laser 0: δ ± {:.4} mrad, e ± {:.3} mm (the board calibration's: ± {:.4} mrad, ± {:.3} mm)",
+        fit.relative_tilt_sigma * 1e3,
+        fit.relative_baseline_sigma * 1e3,
+        std::f64::consts::SQRT_2 * prior.tilt * 1e3,
+        std::f64::consts::SQRT_2 * prior.baseline * 1e3
+    );
+    if dry_run {
+        eprintln!("--dry-run: {} not written", calib.display());
+    } else {
+        calibration_file::write_planes(calib, &fit.calibration)?;
+        eprintln!("wrote [[planes]] in {}", calib.display());
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
 fn road_cmd(captures: &[PathBuf], steps_mm: &[f64], calib: &Path) -> anyhow::Result<ExitCode> {
     if captures.len() != steps_mm.len() {
         bail!(
