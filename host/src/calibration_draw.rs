@@ -11,7 +11,11 @@ use tangent_core::calibration::Calibration;
 use tangent_core::laser_plane::LaserPlane;
 use tangent_core::noise::NoiseModel;
 
+use crate::calibrate::ball::{refine_planes, BallView};
 use crate::capture::Capture;
+use crate::simulate::rig::two_plane_calibration;
+use crate::simulate::simulate;
+use crate::simulate::sphere_corpus::reference_ball_spec;
 
 /// `calibration` off by one draw from `noise`'s calibration σ, seeded by `seed` (a stream of
 /// its own: the capture's frames do not depend on it). The focal length is the camera's,
@@ -49,6 +53,104 @@ pub fn with_drawn(capture: Capture, noise: &NoiseModel, seed: u64) -> anyhow::Re
         calibration,
         ..capture
     })
+}
+
+/// Views per ball-calibration session ([`crate::simulate::sphere_corpus::reference_ball_spec`]).
+pub const VIEWS_PER_SESSION: u64 = 6;
+
+/// Rendered sessions of the reference ball on the two-plane head, each a unit's
+/// `tangent calibrate ball` (`docs/calibration.md`, section 9).
+#[derive(Debug)]
+pub struct BallSessions {
+    sessions: Vec<Vec<Capture>>,
+}
+
+impl BallSessions {
+    /// `count` sessions (≥ 1), each of [`VIEWS_PER_SESSION`] views with its own noise.
+    pub fn render(count: u64) -> anyhow::Result<BallSessions> {
+        use rayon::prelude::*;
+        let sessions = (0..count.max(1))
+            .into_par_iter()
+            .map(|session| {
+                (0..VIEWS_PER_SESSION)
+                    .map(|i| {
+                        simulate(&reference_ball_spec(i, session))
+                            .map(|(c, _)| c)
+                            .map_err(|e| anyhow::anyhow!("ball session {session}, view {i}: {e}"))
+                    })
+                    .collect::<anyhow::Result<Vec<Capture>>>()
+            })
+            .collect::<anyhow::Result<Vec<_>>>()?;
+        Ok(BallSessions { sessions })
+    }
+
+    /// `calibration` (a two-plane head's, off by a draw) refined on session `seed mod count`
+    /// as `tangent calibrate ball` does, its prior `noise`'s calibration σ. Errors: a
+    /// calibration of another head than the sessions were rendered with.
+    pub fn refine(
+        &self,
+        calibration: &Calibration,
+        noise: &NoiseModel,
+        seed: u64,
+    ) -> anyhow::Result<Calibration> {
+        let session = &self.sessions[(seed % self.sessions.len() as u64) as usize];
+        let head = two_plane_calibration();
+        if calibration.planes.len() != head.planes.len() {
+            anyhow::bail!(
+                "seed {seed}: {} planes; the ball sessions were rendered with the {}-plane head",
+                calibration.planes.len(),
+                head.planes.len()
+            );
+        }
+        // A view the sphere solver refuses with this calibration is left out, as
+        // `tangent calibrate ball` skips it (three are needed).
+        let views: Vec<BallView> = session
+            .iter()
+            .enumerate()
+            .filter_map(|(i, c)| BallView::measure(c, calibration, &format!("ball view {i}")).ok())
+            .collect();
+        let fit = refine_planes(calibration, &views, noise, None)
+            .map_err(|e| anyhow::anyhow!("seed {seed}: {e}"))?;
+        Ok(fit.calibration)
+    }
+}
+
+/// Which calibration an evaluation measures with.
+#[derive(Debug, Clone, Copy)]
+pub enum CalibrationUsed<'a> {
+    /// The exact one each capture was rendered with (only the random σ is exercised).
+    Exact,
+    /// The exact one off by a draw of the calibration σ ([`drawn`]).
+    Drawn,
+    /// The drawn one refined on a reference-ball session ([`BallSessions::refine`]) where
+    /// the head has two planes; a one-plane head keeps the drawn one (a ball needs two).
+    BallRefined(&'a BallSessions),
+}
+
+impl CalibrationUsed<'_> {
+    /// `capture` with the calibration to measure it with (seed `seed`'s draw); `None` for
+    /// [`CalibrationUsed::Exact`] (measure the capture as it is).
+    pub fn apply(
+        &self,
+        capture: &Capture,
+        noise: &NoiseModel,
+        seed: u64,
+    ) -> anyhow::Result<Option<Capture>> {
+        let drawn = match self {
+            CalibrationUsed::Exact => return Ok(None),
+            _ => with_drawn(capture.clone(), noise, seed)?,
+        };
+        match self {
+            CalibrationUsed::BallRefined(sessions) if drawn.calibration.planes.len() >= 2 => {
+                let calibration = sessions.refine(&drawn.calibration, noise, seed)?;
+                Ok(Some(Capture {
+                    calibration,
+                    ..drawn
+                }))
+            }
+            _ => Ok(Some(drawn)),
+        }
+    }
 }
 
 #[cfg(test)]

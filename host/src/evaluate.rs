@@ -87,15 +87,15 @@ pub struct Sample {
 
 /// Simulates and measures `count` random stems from `first_seed` (lean up to `tilt_max_deg`;
 /// a lean > 0 uses the two-plane device), each with the physics model of its seed
-/// ([`model_for_seed`]), by Tangent and by the baseline, in parallel. With
-/// `calibration_errors` Tangent measures with the capture's calibration off by a draw from
-/// the calibration σ its solver states ([`crate::calibration_draw`]; the baseline keeps the
-/// exact one).
+/// ([`model_for_seed`]), by Tangent and by the baseline, in parallel. Tangent measures
+/// with `calibration` ([`crate::calibration_draw::CalibrationUsed`]: exact, off by a draw from
+/// the calibration σ its solver states, or that draw refined on a reference ball); the
+/// baseline keeps the exact one.
 pub fn run(
     first_seed: u64,
     count: u64,
     tilt_max_deg: f64,
-    calibration_errors: bool,
+    calibration: crate::calibration_draw::CalibrationUsed<'_>,
 ) -> anyhow::Result<Vec<Sample>> {
     let config = PipelineConfig::default();
     let params = CylinderParams::default();
@@ -107,15 +107,7 @@ pub fn run(
             physics::apply(model, seed, &mut spec);
             let (capture, _) = simulate(&spec)?;
             // The baseline below keeps the exact calibration.
-            let drawn = if calibration_errors {
-                Some(crate::calibration_draw::with_drawn(
-                    capture.clone(),
-                    &params.noise,
-                    seed,
-                )?)
-            } else {
-                None
-            };
+            let drawn = calibration.apply(&capture, &params.noise, seed)?;
             let measured = drawn.as_ref().unwrap_or(&capture);
             let outcome =
                 measure_loaded(measured, &format!("seed {seed}"), None, &config, &params)?;

@@ -78,16 +78,16 @@ pub fn kasa_baseline(capture: &Capture) -> Result<f64, String> {
 
 /// Simulates and measures `count` random balls from `first_seed`, in parallel. With `cache`,
 /// each ball's capture is read from `cache/<seed>` when there and written there otherwise
-/// (re-measuring a set after a solver change without simulating it again). With
-/// `calibration_errors` each ball is measured with its calibration off by a draw from the
-/// calibration σ the sphere solver states ([`crate::calibration_draw`]), so that *within
-/// 2σ* checks the whole stated σ; else with the exact calibration the capture was rendered
-/// with.
+/// (re-measuring a set after a solver change without simulating it again). Each ball
+/// is measured with `calibration` ([`crate::calibration_draw::CalibrationUsed`]): the exact
+/// one it was rendered with, one off by a draw from the calibration σ the sphere solver
+/// states (so that *within 2σ* checks the whole stated σ), or that draw refined on a
+/// reference ball.
 pub fn run(
     first_seed: u64,
     count: u64,
     cache: Option<&Path>,
-    calibration_errors: bool,
+    calibration: calibration_draw::CalibrationUsed<'_>,
 ) -> anyhow::Result<Vec<SphereSample>> {
     let config = PipelineConfig::default();
     let params = CylinderParams::default();
@@ -107,11 +107,9 @@ pub fn run(
                     capture
                 }
             };
-            let capture = if calibration_errors {
-                calibration_draw::with_drawn(capture, &sphere_params(&params).noise, seed)?
-            } else {
-                capture
-            };
+            let capture = calibration
+                .apply(&capture, &sphere_params(&params).noise, seed)?
+                .unwrap_or(capture);
             let outcome =
                 measure_loaded(&capture, &format!("seed {seed}"), None, &config, &params)?;
             let (truth_m, distance_m) = spec

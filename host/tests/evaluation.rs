@@ -3,6 +3,7 @@
 //! are computed and that the baseline column exists and is sane — not accuracy thresholds
 //! of the solver (those are the full evaluation's business, `docs/accuracy.md`).
 
+use tangent_host::calibration_draw::CalibrationUsed;
 use tangent_host::evaluate::{
     baseline_metrics, compare, comparison_section, metrics, run, tangent_metrics, wins, Sample,
     SeedSet, DISTANCE_BINS_M,
@@ -48,8 +49,13 @@ fn metrics_of_known_errors() {
 #[test]
 fn small_evaluation_per_model_with_the_baseline_column() {
     // Two captures per model: 16 consecutive seeds of the tuning set.
-    let samples: Vec<Sample> =
-        run(SeedSet::Tuning.first_seed(false), 16, 0.0, false).expect("runs");
+    let samples: Vec<Sample> = run(
+        SeedSet::Tuning.first_seed(false),
+        16,
+        0.0,
+        CalibrationUsed::Exact,
+    )
+    .expect("runs");
     assert_eq!(samples.len(), 16);
     for model in PhysicsModel::ALL {
         assert_eq!(

@@ -83,10 +83,7 @@ impl BallView {
     ) -> Result<BallView, CalibrateError> {
         let refuse = |why: String| CalibrateError::Refinement(format!("{name}: {why}"));
         if capture.meta.mode != Mode::Sphere {
-            return Err(refuse(format!(
-                "mode is `{:?}`; a ball's captures are taken in sphere mode",
-                capture.meta.mode
-            )));
+            return Err(CalibrateError::NotABallCapture(name.to_string()));
         }
         let outcome = measure_loaded(
             capture,
@@ -166,6 +163,8 @@ pub struct BallRefinement {
     pub relative_baseline_sigma: f64,
     /// Each view's fit.
     pub views: Vec<ViewFit>,
+    /// The views set aside, each with its reason (no sphere with the uncorrected planes).
+    pub skipped: Vec<String>,
 }
 
 /// A point as the inner fit reads it: where it is, the unit direction `L` in which its
@@ -250,6 +249,13 @@ impl LeastSquares<4> for FixedSphere<'_> {
     fn step_scale(&self, p: &Self::Params) -> f64 {
         1e-3 + p.norm()
     }
+
+    /// Settled when the cost (χ², σ units) drops by less than 10⁻¹⁰: the sphere is then
+    /// within ~10⁻⁵ of its σ of the minimum, far below the outer Jacobian's steps, and a
+    /// last ulp of a flat valley is not chased into `NotConverged`.
+    fn settled(&self, before: f64, after: f64) -> bool {
+        before - after < 1e-10
+    }
 }
 
 /// The best sphere through `points` from `start`, and the residuals `t/σ` appended to `out`.
@@ -261,11 +267,7 @@ fn fit_fixed(
 ) -> Result<Sphere, SolveError> {
     let problem = FixedSphere { points, known };
     let begin = Evaluated::at(&problem, start.params())?;
-    let lm = LmParams {
-        tolerance: 1e-13,
-        ..LmParams::default()
-    };
-    let (min, _) = minimise(&problem, begin, &lm)?;
+    let (min, _) = minimise(&problem, begin, &LmParams::default())?;
     let sphere = Sphere::of_params(&min.params);
     out.extend(
         points
@@ -318,6 +320,10 @@ fn retriangulate(x: &Vec3, to: &LaserPlane) -> Vec3 {
 /// One view's kept points and each plane's scale `s` (see the module documentation).
 #[derive(Debug, Clone)]
 struct Prepared {
+    /// The view's name.
+    name: String,
+    /// Points the view gave.
+    given: usize,
     /// Plane of each kept point, and the point (σ: its plane's scale).
     kept: Vec<(usize, Observed)>,
     /// The sphere at the current corrections (start of the next fit).
@@ -338,7 +344,6 @@ fn robust_scale(r: &[f64]) -> f64 {
 struct Planes<'a> {
     nominal: &'a [LaserPlane],
     prior: &'a NoiseModel,
-    views: &'a [BallView],
     prepared: &'a [Prepared],
     known: Option<KnownDiameter>,
 }
@@ -348,7 +353,7 @@ impl Planes<'_> {
     fn residuals(&self, u: &[f64]) -> Result<(Vec<f64>, Vec<Sphere>), SolveError> {
         let planes = corrected_planes(self.nominal, u, self.prior)?;
         let mut r: Vec<f64> = u.to_vec();
-        let mut spheres = Vec::with_capacity(self.views.len());
+        let mut spheres = Vec::with_capacity(self.prepared.len());
         let mut pts = Vec::new();
         for prep in self.prepared {
             pts.clear();
@@ -420,13 +425,27 @@ impl<const N: usize> LeastSquares<N> for Planes<'_> {
 /// little and only second-order information) and points beyond the Tukey cut (a stand, a
 /// floor) are set aside. σ is the robust scale of the moves times the square root of their
 /// correlation length.
-fn prepare(nominal: &[LaserPlane], views: &[BallView]) -> Result<Vec<Prepared>, CalibrateError> {
+///
+/// A view that yields no sphere with the planes as they are is set aside with its reason.
+fn prepare(nominal: &[LaserPlane], views: &[BallView]) -> (Vec<Prepared>, Vec<String>) {
+    let mut out = Vec::with_capacity(views.len());
+    let mut skipped = Vec::new();
+    for view in views {
+        match prepare_view(nominal, view) {
+            Ok(p) => out.push(p),
+            Err(e) => skipped.push(e.to_string()),
+        }
+    }
+    (out, skipped)
+}
+
+/// One view of [`prepare`].
+fn prepare_view(nominal: &[LaserPlane], view: &BallView) -> Result<Prepared, CalibrateError> {
     let robust = RobustParams {
         min_scale: 0.0,
         ..RobustParams::default()
     };
-    let mut out = Vec::with_capacity(views.len());
-    for view in views {
+    {
         let mut kept = Vec::new();
         for (k, pts) in view.planes.iter().enumerate() {
             let refuse = |why: String| {
@@ -496,9 +515,13 @@ fn prepare(nominal: &[LaserPlane], views: &[BallView]) -> Result<Vec<Prepared>, 
         let sphere = fit_fixed(&all, None, &view.start, &mut Vec::new()).map_err(|e| {
             CalibrateError::Refinement(format!("{}: no sphere through its points: {e}", view.name))
         })?;
-        out.push(Prepared { kept, sphere });
+        Ok(Prepared {
+            name: view.name.clone(),
+            given: view.planes.iter().map(Vec::len).sum(),
+            kept,
+            sphere,
+        })
     }
-    Ok(out)
 }
 
 /// Refines the planes of `calibration` (each plane's `e` and `δ`; roll and camera kept) on
@@ -555,11 +578,18 @@ fn refine_n<const N: usize>(
     known: Option<KnownDiameter>,
 ) -> Result<BallRefinement, CalibrateError> {
     let nominal: &[LaserPlane] = &calibration.planes;
-    let prepared = prepare(nominal, views)?;
+    let (prepared, skipped) = prepare(nominal, views);
+    if prepared.len() < MIN_BALL_VIEWS {
+        return Err(CalibrateError::Undetermined(format!(
+            "{} of {} views give a sphere, at least {MIN_BALL_VIEWS} needed: {}",
+            prepared.len(),
+            views.len(),
+            skipped.join("; ")
+        )));
+    }
     let problem = Planes {
         nominal,
         prior,
-        views,
         prepared: &prepared,
         known,
     };
@@ -625,16 +655,15 @@ fn refine_n<const N: usize>(
             .sum();
         (sum / prep.kept.len().max(1) as f64).sqrt()
     };
-    let views_fit = views
+    let views_fit = prepared
         .iter()
-        .zip(&prepared)
         .zip(before.iter().zip(&after))
-        .map(|((view, prep), (b, a))| ViewFit {
-            name: view.name.clone(),
+        .map(|(prep, (b, a))| ViewFit {
+            name: prep.name.clone(),
             distance: a.centre.norm(),
             diameter: (2.0 * b.radius, 2.0 * a.radius),
             rms: (rms(prep, nominal, b), rms(prep, &planes, a)),
-            kept: (prep.kept.len(), view.planes.iter().map(Vec::len).sum()),
+            kept: (prep.kept.len(), prep.given),
         })
         .collect();
     Ok(BallRefinement {
@@ -643,6 +672,7 @@ fn refine_n<const N: usize>(
         relative_tilt_sigma,
         relative_baseline_sigma,
         views: views_fit,
+        skipped,
     })
 }
 

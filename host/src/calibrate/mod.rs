@@ -195,6 +195,9 @@ pub enum CalibrateError {
         /// Unit of both.
         unit: &'static str,
     },
+    /// A capture given as a ball's view that is not a sphere-mode capture ([`ball`]).
+    #[error("{0}: not a sphere-mode capture; a ball's views are taken in sphere mode")]
+    NotABallCapture(String),
     /// Too few stripe points to fit a laser plane.
     #[error("{found} laser-stripe point(s) on the board, at least {needed} needed")]
     TooFewStripePoints {

@@ -289,19 +289,31 @@ fn ball_cmd(
                 sigma: s * 1e-3,
             })
         }
-        Some((d, s)) => bail!(
-            "--diameter-mm {d} --diameter-sigma-mm {s}: both must be positive and finite"
-        ),
+        Some((d, s)) => {
+            bail!("--diameter-mm {d} --diameter-sigma-mm {s}: both must be positive and finite")
+        }
         None => None,
     };
     let mut views = Vec::with_capacity(captures.len());
     for dir in captures {
         let name = dir.display().to_string();
+        // A capture that cannot be read is the user's mistake: refused, named. One the
+        // sphere solver refuses with this calibration (its sections disagree too much, or a
+        // line misses the ball) is skipped with its reason, as `calibrate laser` skips a pose.
         let capture = Capture::read(dir).map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
-        views.push(ball::BallView::measure(&capture, &calibration, &name)?);
+        match ball::BallView::measure(&capture, &calibration, &name) {
+            Ok(v) => views.push(v),
+            Err(e @ tangent_host::calibrate::CalibrateError::NotABallCapture(_)) => {
+                return Err(e.into())
+            }
+            Err(e) => eprintln!("skipping {e}"),
+        }
     }
     let prior = tangent_core::noise::NoiseModel::reference();
     let fit = ball::refine_planes(&calibration, &views, &prior, known)?;
+    for why in &fit.skipped {
+        eprintln!("skipped {why}");
+    }
     println!("view                                   distance   diameter before → after   RMS before → after   points");
     for v in &fit.views {
         println!(

@@ -6,6 +6,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::Context;
+use tangent_host::calibration_draw::{BallSessions, CalibrationUsed};
 use tangent_host::evaluate::{comparison_section, run as run_samples, section, SeedSet};
 
 /// The long help of `tangent evaluate` (`main.rs` gives it to clap on the subcommand, where
@@ -65,6 +66,12 @@ pub struct Args {
     /// exercises only the random part).
     #[arg(long)]
     calibration_errors: bool,
+    /// With --calibration-errors: on a two-plane head, refine each drawn calibration on a
+    /// rendered session of the reference ball (`tangent calibrate ball`,
+    /// `docs/calibration.md` section 9) before measuring; this many sessions, shared round
+    /// robin by the captures' seeds.
+    #[arg(long, requires = "calibration_errors")]
+    ball_sessions: Option<u64>,
     /// Evaluate the road instrument instead (`docs/road.md`): MPD per surface type, furrow
     /// depths, piezo height-scale calibration, vertical resolution, captif-slp cross-check,
     /// bad input; `--count` fresh seeds per surface.
@@ -129,13 +136,10 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     }
     let start = Instant::now();
     let (t_seed, tilt_seed) = (args.set.first_seed(false), args.set.first_seed(true));
-    let transversal = run_samples(t_seed, args.count, 0.0, args.calibration_errors)?;
-    let tilted = run_samples(
-        tilt_seed,
-        args.tilted_count,
-        args.tilt_max_deg,
-        args.calibration_errors,
-    )?;
+    let sessions = ball_sessions(&args)?;
+    let used = calibration_used(&args, sessions.as_ref());
+    let transversal = run_samples(t_seed, args.count, 0.0, used)?;
+    let tilted = run_samples(tilt_seed, args.tilted_count, args.tilt_max_deg, used)?;
     let elapsed = start.elapsed().as_secs_f64();
     if let Some(path) = &args.samples {
         let lines: Vec<String> = transversal
@@ -205,16 +209,32 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     write(&args, &doc)
 }
 
+/// The reference-ball sessions of `--ball-sessions`, rendered.
+fn ball_sessions(args: &Args) -> anyhow::Result<Option<BallSessions>> {
+    args.ball_sessions.map(BallSessions::render).transpose()
+}
+
+/// The calibration the captures are measured with (`--calibration-errors`,
+/// `--ball-sessions`).
+fn calibration_used<'a>(args: &Args, sessions: Option<&'a BallSessions>) -> CalibrationUsed<'a> {
+    match (args.calibration_errors, sessions) {
+        (false, _) => CalibrationUsed::Exact,
+        (true, None) => CalibrationUsed::Drawn,
+        (true, Some(s)) => CalibrationUsed::BallRefined(s),
+    }
+}
+
 /// The sphere section: `--spheres` random balls from `--sphere-seed`.
 fn sphere_section(args: &Args) -> anyhow::Result<String> {
     let first = args
         .sphere_seed
         .unwrap_or_else(|| args.set.first_sphere_seed());
+    let sessions = ball_sessions(args)?;
     let samples = tangent_host::evaluate_sphere::run(
         first,
         args.spheres,
         args.sphere_cache.as_deref(),
-        args.calibration_errors,
+        calibration_used(args, sessions.as_ref()),
     )?;
     if let Some(path) = &args.sphere_csv {
         std::fs::write(path, tangent_host::evaluate_sphere::csv(&samples))
