@@ -159,11 +159,34 @@ fn bench_sphere(c: &mut Criterion) {
     }
 }
 
+/// `tangent calibrate ball`'s refinement on six rendered views of the reference ball
+/// (`docs/calibration.md` §12), the views measured once with a drawn calibration: the cost of
+/// the variable-projection fit alone.
+fn bench_ball_refinement(c: &mut Criterion) {
+    use tangent_host::calibrate::ball::{refine_planes, BallView};
+    use tangent_host::simulate::{simulate, sphere_corpus::reference_ball_spec};
+    let noise = tangent_core::noise::NoiseModel {
+        focal_px: 0.0,
+        ..tangent_core::noise::NoiseModel::reference()
+    };
+    let truth = tangent_host::simulate::rig::two_plane_calibration();
+    let Ok(off) = tangent_host::calibration_draw::drawn(&truth, &noise, 3) else {
+        return;
+    };
+    let views: Vec<BallView> = (0..6)
+        .filter_map(|i| simulate(&reference_ball_spec(i, 7)).ok())
+        .filter_map(|(capture, _)| BallView::measure(&capture, &off, "view").ok())
+        .collect();
+    c.bench_function("refine_planes_ball_six_views", |b| {
+        b.iter(|| refine_planes(&off, &views, &noise, None).map(|f| f.relative_tilt_sigma))
+    });
+}
+
 criterion_group! {
     name = benches;
     // Criterion's HTML plots need a system font that plotters (built here with the shipped
     // font only) cannot find; the numbers are what we record.
     config = Criterion::default().without_plots();
-    targets = bench, bench_sphere
+    targets = bench, bench_sphere, bench_ball_refinement
 }
 criterion_main!(benches);

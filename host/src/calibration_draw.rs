@@ -59,7 +59,7 @@ pub fn with_drawn(capture: Capture, noise: &NoiseModel, seed: u64) -> anyhow::Re
 pub const VIEWS_PER_SESSION: u64 = 6;
 
 /// Rendered sessions of the reference ball on the two-plane head, each a unit's
-/// `tangent calibrate ball` (`docs/calibration.md`, section 9).
+/// `tangent calibrate ball` (`docs/calibration.md`, section 12).
 #[derive(Debug)]
 pub struct BallSessions {
     sessions: Vec<Vec<Capture>>,

@@ -1,4 +1,4 @@
-//! The laser planes refined on captures of one ball (`docs/calibration.md`, section 9,
+//! The laser planes refined on captures of one ball (`docs/calibration.md`, section 12,
 //! "Refining the planes on a ball").
 //!
 //! The board calibration ([`super::laser`]) fixes each plane's baseline `e` and tilt `δ` to
@@ -182,7 +182,7 @@ struct Observed {
 /// closest approach `t = −L·(x − C)`. This is the stripe's own error, so the residual `t/σ`
 /// is Gaussian where a point's distance to the surface is not: near a section's limb `L`
 /// runs along the surface and a move `t` puts the point `t²/2R` outside it, always outward
-/// (`docs/calibration.md`, section 9).
+/// (`docs/calibration.md`, section 12).
 fn along_line(p: &Observed, c: &Vec3, radius: f64) -> (f64, SVector<f64, 4>) {
     let v = p.x - c;
     let b = p.along.dot(&v);

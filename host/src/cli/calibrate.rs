@@ -11,7 +11,7 @@
 //! command (a road head's piezo height-scale calibration, `docs/road.md`) fits the measured
 //! heights of a flat target against the stage's known steps and writes the result with its
 //! residuals into the file's `[road]` table. The ball command refines the laser planes
-//! against each other on sphere-mode captures of one ball (`docs/calibration.md`, section 9)
+//! against each other on sphere-mode captures of one ball (`docs/calibration.md`, section 12)
 //! and rewrites the file's `[[planes]]`. The accelerometer command solves the sensor's
 //! bias, scale and alignment to the camera from static poses (`docs/hardware.md`,
 //! "Accelerometer calibration") and writes the file's `[accelerometer]` table.
@@ -85,7 +85,7 @@ enum Which {
         report: Option<PathBuf>,
     },
     /// Laser planes refined against each other on sphere-mode captures of one ball at
-    /// several distances (`docs/calibration.md`, section 9); rewrites `[[planes]]` in --calib.
+    /// several distances (`docs/calibration.md`, section 12); rewrites `[[planes]]` in --calib.
     Ball {
         /// Capture directories of the ball (sphere mode), at least three, at 0.5–1.6 m, both
         /// lines across the ball.

@@ -68,7 +68,7 @@ pub struct Args {
     calibration_errors: bool,
     /// With --calibration-errors: on a two-plane head, refine each drawn calibration on a
     /// rendered session of the reference ball (`tangent calibrate ball`,
-    /// `docs/calibration.md` section 9) before measuring; this many sessions, shared round
+    /// `docs/calibration.md` section 12) before measuring; this many sessions, shared round
     /// robin by the captures' seeds.
     #[arg(long, requires = "calibration_errors")]
     ball_sessions: Option<u64>,

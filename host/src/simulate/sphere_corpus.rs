@@ -368,7 +368,7 @@ pub fn cylinder_with_ends(r: f64, len: f64, end: [f64; 3], axis: [f64; 3]) -> Ve
 
 /// A random ball for the accuracy evaluation (not the corpus): diameter log-uniform in
 /// View `i` (0–5) of a calibration session with a reference ball (`docs/calibration.md`,
-/// section 9): a matt 145 mm sphere (the size of a laser scanner's reference sphere) at
+/// section 12): a matt 145 mm sphere (the size of a laser scanner's reference sphere) at
 /// 0.6–1.6 m, alternately left and right of the axis and stepped across the free play
 /// between the lines; `session` seeds the rendering's noise.
 pub fn reference_ball_spec(i: u64, session: u64) -> SimSpec {
