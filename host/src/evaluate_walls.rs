@@ -15,6 +15,7 @@ use tangent_core::solvers::stem::CylinderParams;
 use tangent_core::solvers::walls::{WallParams, WallSolution};
 
 use crate::evaluate::SeedSet;
+use crate::calibration_draw::CalibrationUsed;
 use crate::measure::{measure_loaded, Outcome, Solved};
 use crate::measure_wall::WallReport;
 use crate::simulate::simulate;
@@ -58,8 +59,16 @@ pub struct WallSample {
 }
 
 /// Simulates and measures `count` random rooms from `first_seed`, in parallel; `crossing`:
-/// with the head's third, crossing line (the same rooms otherwise).
-pub fn run(first_seed: u64, count: u64, crossing: bool) -> anyhow::Result<Vec<WallSample>> {
+/// with the head's third, crossing line (the same rooms otherwise). Each room is measured
+/// with `calibration` ([`CalibrationUsed`]: the exact one, or off by a draw from the
+/// calibration σ, or that draw refined on a reference ball); the baseline reads Tangent's
+/// points.
+pub fn run(
+    first_seed: u64,
+    count: u64,
+    crossing: bool,
+    calibration: CalibrationUsed<'_>,
+) -> anyhow::Result<Vec<WallSample>> {
     let config = PipelineConfig::default();
     let params = CylinderParams::default();
     (first_seed..first_seed + count)
@@ -67,6 +76,9 @@ pub fn run(first_seed: u64, count: u64, crossing: bool) -> anyhow::Result<Vec<Wa
         .map(|seed| {
             let (spec, draw) = random_room(seed, RoomKind::of_seed(seed), RANGE_M, crossing);
             let (capture, _) = simulate(&spec)?;
+            let capture = calibration
+                .apply(&capture, &params.noise, seed)?
+                .unwrap_or(capture);
             let outcome =
                 measure_loaded(&capture, &format!("seed {seed}"), None, &config, &params)?;
             let gravity = capture

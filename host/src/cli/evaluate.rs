@@ -258,7 +258,13 @@ fn walls_section(args: &Args) -> anyhow::Result<String> {
     use tangent_host::evaluate_walls as ev;
     let first = args.walls_seed.unwrap_or_else(|| ev::first_seed(args.set));
     let start = Instant::now();
-    let samples = ev::run(first, args.walls, args.walls_crossing)?;
+    let sessions = ball_sessions(args)?;
+    let samples = ev::run(
+        first,
+        args.walls,
+        args.walls_crossing,
+        calibration_used(args, sessions.as_ref()),
+    )?;
     eprintln!(
         "evaluated {} rooms in {:.1} s",
         samples.len(),
