@@ -163,7 +163,7 @@ fn bench_sphere(c: &mut Criterion) {
 /// (`docs/calibration.md` §12), the views measured once with a drawn calibration: the cost of
 /// the variable-projection fit alone.
 fn bench_ball_refinement(c: &mut Criterion) {
-    use tangent_host::calibrate::ball::{refine_planes, BallView};
+    use tangent_host::calibrate::reference::{refine_planes, ReferenceView};
     use tangent_host::simulate::{simulate, sphere_corpus::reference_ball_spec};
     let noise = tangent_core::noise::NoiseModel {
         focal_px: 0.0,
@@ -173,9 +173,9 @@ fn bench_ball_refinement(c: &mut Criterion) {
     let Ok(off) = tangent_host::calibration_draw::drawn(&truth, &noise, 3) else {
         return;
     };
-    let views: Vec<BallView> = (0..6)
+    let views: Vec<ReferenceView> = (0..6)
         .filter_map(|i| simulate(&reference_ball_spec(i, 7)).ok())
-        .filter_map(|(capture, _)| BallView::measure(&capture, &off, "view").ok())
+        .filter_map(|(capture, _)| ReferenceView::of_ball(&capture, &off, "view").ok())
         .collect();
     c.bench_function("refine_planes_ball_six_views", |b| {
         b.iter(|| refine_planes(&off, &views, &noise, None).map(|f| f.relative_tilt_sigma))

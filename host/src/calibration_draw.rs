@@ -11,11 +11,11 @@ use tangent_core::calibration::Calibration;
 use tangent_core::laser_plane::LaserPlane;
 use tangent_core::noise::NoiseModel;
 
-use crate::calibrate::ball::{refine_planes, BallView};
+use crate::calibrate::reference::{refine_planes, ReferenceView};
 use crate::capture::Capture;
-use crate::simulate::rig::two_plane_calibration;
 use crate::simulate::simulate;
 use crate::simulate::sphere_corpus::reference_ball_spec;
+use crate::simulate::wall_corpus::reference_wall_spec;
 
 /// `calibration` off by one draw from `noise`'s calibration σ, seeded by `seed` (a stream of
 /// its own: the capture's frames do not depend on it). The focal length is the camera's,
@@ -55,63 +55,91 @@ pub fn with_drawn(capture: Capture, noise: &NoiseModel, seed: u64) -> anyhow::Re
     })
 }
 
-/// Views per ball-calibration session ([`crate::simulate::sphere_corpus::reference_ball_spec`]).
+/// Views per reference session ([`reference_ball_spec`], [`reference_wall_spec`]).
 pub const VIEWS_PER_SESSION: u64 = 6;
 
-/// Rendered sessions of the reference ball on the two-plane head, each a unit's
-/// `tangent calibrate ball` (`docs/calibration.md`, section 12).
+/// The reference a session views.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ReferenceKind {
+    /// The 145 mm matt ball, on the two-plane head (`tangent calibrate ball`).
+    Ball,
+    /// A flat plaster wall, on the two-plane head or (`crossing`) the three-line head
+    /// (`tangent calibrate wall`).
+    Wall {
+        /// The head with the crossing line.
+        crossing: bool,
+    },
+}
+
+/// Rendered sessions of a reference, each a unit's `tangent calibrate ball` or `wall`
+/// (`docs/calibration.md`, sections 12 and 13).
 #[derive(Debug)]
-pub struct BallSessions {
+pub struct ReferenceSessions {
+    kind: ReferenceKind,
+    head: Calibration,
     sessions: Vec<Vec<Capture>>,
 }
 
-impl BallSessions {
-    /// `count` sessions (≥ 1), each of [`VIEWS_PER_SESSION`] views with its own noise.
-    pub fn render(count: u64) -> anyhow::Result<BallSessions> {
+impl ReferenceSessions {
+    /// `count` sessions (≥ 1) of `kind`, each of [`VIEWS_PER_SESSION`] views with its own
+    /// noise.
+    pub fn render(kind: ReferenceKind, count: u64) -> anyhow::Result<ReferenceSessions> {
         use rayon::prelude::*;
+        let spec = |i: u64, session: u64| match kind {
+            ReferenceKind::Ball => reference_ball_spec(i, session),
+            ReferenceKind::Wall { crossing } => reference_wall_spec(i, session, crossing),
+        };
+        let head = spec(0, 0).calibration;
         let sessions = (0..count.max(1))
             .into_par_iter()
             .map(|session| {
                 (0..VIEWS_PER_SESSION)
                     .map(|i| {
-                        simulate(&reference_ball_spec(i, session))
-                            .map(|(c, _)| c)
-                            .map_err(|e| anyhow::anyhow!("ball session {session}, view {i}: {e}"))
+                        simulate(&spec(i, session)).map(|(c, _)| c).map_err(|e| {
+                            anyhow::anyhow!("reference session {session}, view {i}: {e}")
+                        })
                     })
                     .collect::<anyhow::Result<Vec<Capture>>>()
             })
             .collect::<anyhow::Result<Vec<_>>>()?;
-        Ok(BallSessions { sessions })
+        Ok(ReferenceSessions {
+            kind,
+            head,
+            sessions,
+        })
     }
 
-    /// `calibration` (a two-plane head's, off by a draw) refined on session `seed mod count`
-    /// as `tangent calibrate ball` does, its prior `noise`'s calibration σ. Errors: a
-    /// calibration of another head than the sessions were rendered with.
+    /// `calibration` (off by a draw) refined on session `seed mod count` as `tangent
+    /// calibrate ball` or `wall` does, its prior `noise`'s calibration σ; `None` when the
+    /// calibration is of another head than the sessions were rendered with (its number of
+    /// planes), which the sessions cannot refine.
     pub fn refine(
         &self,
         calibration: &Calibration,
         noise: &NoiseModel,
         seed: u64,
-    ) -> anyhow::Result<Calibration> {
-        let session = &self.sessions[(seed % self.sessions.len() as u64) as usize];
-        let head = two_plane_calibration();
-        if calibration.planes.len() != head.planes.len() {
-            anyhow::bail!(
-                "seed {seed}: {} planes; the ball sessions were rendered with the {}-plane head",
-                calibration.planes.len(),
-                head.planes.len()
-            );
+    ) -> anyhow::Result<Option<Calibration>> {
+        if calibration.planes.len() != self.head.planes.len() {
+            return Ok(None);
         }
-        // A view the sphere solver refuses with this calibration is left out, as
-        // `tangent calibrate ball` skips it (three are needed).
-        let views: Vec<BallView> = session
+        let session = &self.sessions[(seed % self.sessions.len() as u64) as usize];
+        // A view the solver refuses with this calibration is left out, as the command skips
+        // it (three are needed).
+        let views: Vec<ReferenceView> = session
             .iter()
             .enumerate()
-            .filter_map(|(i, c)| BallView::measure(c, calibration, &format!("ball view {i}")).ok())
+            .filter_map(|(i, c)| {
+                let name = format!("reference view {i}");
+                match self.kind {
+                    ReferenceKind::Ball => ReferenceView::of_ball(c, calibration, &name),
+                    ReferenceKind::Wall { .. } => ReferenceView::of_wall(c, calibration, &name),
+                }
+                .ok()
+            })
             .collect();
         let fit = refine_planes(calibration, &views, noise, None)
             .map_err(|e| anyhow::anyhow!("seed {seed}: {e}"))?;
-        Ok(fit.calibration)
+        Ok(Some(fit.calibration))
     }
 }
 
@@ -122,9 +150,10 @@ pub enum CalibrationUsed<'a> {
     Exact,
     /// The exact one off by a draw of the calibration σ ([`drawn`]).
     Drawn,
-    /// The drawn one refined on a reference-ball session ([`BallSessions::refine`]) where
-    /// the head has two planes; a one-plane head keeps the drawn one (a ball needs two).
-    BallRefined(&'a BallSessions),
+    /// The drawn one refined on a reference session ([`ReferenceSessions::refine`]) where
+    /// the head is the sessions' (a one-plane head, which no reference can refine, keeps
+    /// the drawn one).
+    Refined(&'a ReferenceSessions),
 }
 
 impl CalibrationUsed<'_> {
@@ -141,12 +170,20 @@ impl CalibrationUsed<'_> {
             _ => with_drawn(capture.clone(), noise, seed)?,
         };
         match self {
-            CalibrationUsed::BallRefined(sessions) if drawn.calibration.planes.len() >= 2 => {
-                let calibration = sessions.refine(&drawn.calibration, noise, seed)?;
-                Ok(Some(Capture {
-                    calibration,
-                    ..drawn
-                }))
+            CalibrationUsed::Refined(sessions) => {
+                match sessions.refine(&drawn.calibration, noise, seed)? {
+                    Some(calibration) => Ok(Some(Capture {
+                        calibration,
+                        ..drawn
+                    })),
+                    None if drawn.calibration.planes.len() < 2 => Ok(Some(drawn)),
+                    None => anyhow::bail!(
+                        "seed {seed}: a {}-plane head; the reference sessions were rendered \
+                         with the {}-plane head",
+                        drawn.calibration.planes.len(),
+                        sessions.head.planes.len()
+                    ),
+                }
             }
             _ => Ok(Some(drawn)),
         }

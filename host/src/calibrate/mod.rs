@@ -13,17 +13,18 @@
 //! 4. [`laser`]: board pose per capture, stripe points back-projected onto the board plane,
 //!    robust plane fit, repeatability (leave-one-pose-out spread of baseline, tilt, roll);
 //! 5. [`report`]: the text report and the PNG figures;
-//! 6. [`ball`] (optional, two planes or more): the planes' `e` and `δ` refined against each
-//!    other on captures of a ball, which both sections must fit;
+//! 6. [`reference`] (optional, two planes or more): the planes' `e` and `δ` refined against
+//!    each other on captures of a ball, which both sections must fit, or of a flat wall,
+//!    which every line must lie in;
 //! 7. [`sanity`]: what is refused — views that cannot determine the calibration,
 //!    parameters whose σ is beyond a sane bound, loaded values outside physical ranges.
 //!
 //! The camera model is the core's ([`tangent_core::camera::Camera`]): whatever is
 //! calibrated here is exactly what the instrument evaluates.
 
-pub mod ball;
 pub mod corners;
 pub mod laser;
+pub mod reference;
 pub mod refine;
 pub mod report;
 pub mod sanity;
@@ -195,9 +196,10 @@ pub enum CalibrateError {
         /// Unit of both.
         unit: &'static str,
     },
-    /// A capture given as a ball's view that is not a sphere-mode capture ([`ball`]).
-    #[error("{0}: not a sphere-mode capture; a ball's views are taken in sphere mode")]
-    NotABallCapture(String),
+    /// A capture given as a reference view that is not in the reference's mode
+    /// ([`reference`]): a ball's views are taken in sphere mode, a wall's in wall mode.
+    #[error("{0}: not a {1}-mode capture; the reference's views are taken in {1} mode")]
+    NotAReferenceCapture(String, &'static str),
     /// Too few stripe points to fit a laser plane.
     #[error("{found} laser-stripe point(s) on the board, at least {needed} needed")]
     TooFewStripePoints {

@@ -24,7 +24,8 @@ use clap::Subcommand;
 use tangent_core::instrument::road::RoadParams;
 use tangent_core::pipeline::PipelineConfig;
 use tangent_core::protocol::codes::Failure;
-use tangent_host::calibrate::{ball, corners, laser, refine, report, Board};
+use tangent_host::calibrate::reference::{self, ReferenceView};
+use tangent_host::calibrate::{corners, laser, refine, report, Board};
 use tangent_host::calibration_file::{
     self, AccelerometerToml, CalibrationToml, CameraToml, DistortionToml, RoadToml,
 };
@@ -101,6 +102,22 @@ enum Which {
         /// 1σ of that diameter in millimetres.
         #[arg(long, default_value_t = 0.005)]
         diameter_sigma_mm: f64,
+        /// Print the result without writing the file.
+        #[arg(long)]
+        dry_run: bool,
+    },
+    /// Laser planes refined against each other on wall-mode captures of one flat wall at
+    /// several distances, every line on it (`docs/calibration.md`, section 13); rewrites
+    /// `[[planes]]` in --calib.
+    Wall {
+        /// Capture directories of the wall (wall mode), at least three, at 1–3 m, turned
+        /// and tilted a little differently each time.
+        #[arg(required = true)]
+        captures: Vec<PathBuf>,
+        /// The head's calibration file: its planes are the start and the prior; they are
+        /// rewritten, every other key kept.
+        #[arg(long)]
+        calib: PathBuf,
         /// Print the result without writing the file.
         #[arg(long)]
         dry_run: bool,
@@ -199,12 +216,17 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             diameter_mm,
             diameter_sigma_mm,
             dry_run,
-        } => ball_cmd(
+        } => reference_cmd(
             &captures,
             &calib,
-            diameter_mm.map(|d| (d, diameter_sigma_mm)),
+            Reference::Ball(diameter_mm.map(|d| (d, diameter_sigma_mm))),
             dry_run,
         ),
+        Which::Wall {
+            captures,
+            calib,
+            dry_run,
+        } => reference_cmd(&captures, &calib, Reference::Wall, dry_run),
         Which::Accelerometer { poses, calib } => accelerometer_cmd(&poses, &calib),
     }
 }
@@ -272,19 +294,31 @@ fn accelerometer_cmd(poses: &Path, calib: &Path) -> anyhow::Result<ExitCode> {
 /// `tangent calibrate road`: each capture's mean profile height, measured with no height
 /// correction, fitted against the stage's steps ([`fit_height_scale`]); the table of
 /// residuals is printed and `[road]` written.
-/// `tangent calibrate ball`: each capture measured with the file's calibration, the planes
-/// refined ([`ball::refine_planes`], prior the error model's calibration σ), the corrections
-/// and the views' fits printed, `[[planes]]` rewritten.
-fn ball_cmd(
+/// The reference surface of `tangent calibrate ball` or `wall`.
+enum Reference {
+    /// A ball, with its certified diameter and σ in millimetres if it has one.
+    Ball(Option<(f64, f64)>),
+    /// A flat wall.
+    Wall,
+}
+
+/// `tangent calibrate ball` and `wall`: each capture measured with the file's calibration,
+/// the planes refined ([`reference::refine_planes`], prior the error model's calibration σ),
+/// the corrections and the views' fits printed, `[[planes]]` rewritten.
+fn reference_cmd(
     captures: &[PathBuf],
     calib: &Path,
-    diameter_mm: Option<(f64, f64)>,
+    which: Reference,
     dry_run: bool,
 ) -> anyhow::Result<ExitCode> {
     let calibration = calibration_file::read(calib)?;
+    let diameter_mm = match which {
+        Reference::Ball(d) => d,
+        Reference::Wall => None,
+    };
     let known = match diameter_mm {
         Some((d, s)) if d > 0.0 && s > 0.0 && d.is_finite() && s.is_finite() => {
-            Some(ball::KnownDiameter {
+            Some(reference::KnownDiameter {
                 diameter: d * 1e-3,
                 sigma: s * 1e-3,
             })
@@ -301,27 +335,35 @@ fn ball_cmd(
         // sphere solver refuses with this calibration (its sections disagree too much, or a
         // line misses the ball) is skipped with its reason, as `calibrate laser` skips a pose.
         let capture = Capture::read(dir).map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
-        match ball::BallView::measure(&capture, &calibration, &name) {
+        let view = match which {
+            Reference::Ball(_) => ReferenceView::of_ball(&capture, &calibration, &name),
+            Reference::Wall => ReferenceView::of_wall(&capture, &calibration, &name),
+        };
+        match view {
             Ok(v) => views.push(v),
-            Err(e @ tangent_host::calibrate::CalibrateError::NotABallCapture(_)) => {
+            Err(e @ tangent_host::calibrate::CalibrateError::NotAReferenceCapture(..)) => {
                 return Err(e.into())
             }
             Err(e) => eprintln!("skipping {e}"),
         }
     }
     let prior = tangent_core::noise::NoiseModel::reference();
-    let fit = ball::refine_planes(&calibration, &views, &prior, known)?;
+    let fit = reference::refine_planes(&calibration, &views, &prior, known)?;
     for why in &fit.skipped {
         eprintln!("skipped {why}");
     }
-    println!("view                                   distance   diameter before → after   RMS before → after   points");
+    let size = match which {
+        Reference::Ball(_) => "diameter",
+        Reference::Wall => "depth   ",
+    };
+    println!("view                                   distance   {size} before → after   RMS before → after   points");
     for v in &fit.views {
         println!(
             "{:<38} {:6.3} m   {:9.2} → {:9.2} mm   {:6.3} → {:6.3} mm   {}/{}",
             v.name,
             v.distance,
-            v.diameter.0 * 1e3,
-            v.diameter.1 * 1e3,
+            v.size.0 * 1e3,
+            v.size.1 * 1e3,
             v.rms.0 * 1e3,
             v.rms.1 * 1e3,
             v.kept.0,
@@ -337,13 +379,16 @@ fn ball_cmd(
             c.tilt_sigma * 1e3
         );
     }
-    println!(
-        "laser 1 against laser 0: δ ± {:.4} mrad, e ± {:.3} mm (the board calibration's: ± {:.4} mrad, ± {:.3} mm)",
-        fit.relative_tilt_sigma * 1e3,
-        fit.relative_baseline_sigma * 1e3,
-        std::f64::consts::SQRT_2 * prior.tilt * 1e3,
-        std::f64::consts::SQRT_2 * prior.baseline * 1e3
-    );
+    for (k, (tilt, baseline)) in fit.relative.iter().enumerate() {
+        println!(
+            "laser {} against laser 0: δ ± {:.4} mrad, e ± {:.3} mm (the board calibration's: ± {:.4} mrad, ± {:.3} mm)",
+            k + 1,
+            tilt * 1e3,
+            baseline * 1e3,
+            std::f64::consts::SQRT_2 * prior.tilt * 1e3,
+            std::f64::consts::SQRT_2 * prior.baseline * 1e3
+        );
+    }
     if dry_run {
         eprintln!("--dry-run: {} not written", calib.display());
     } else {

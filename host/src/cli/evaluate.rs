@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::Context;
-use tangent_host::calibration_draw::{BallSessions, CalibrationUsed};
+use tangent_host::calibration_draw::{CalibrationUsed, ReferenceKind, ReferenceSessions};
 use tangent_host::evaluate::{comparison_section, run as run_samples, section, SeedSet};
 
 /// The long help of `tangent evaluate` (`main.rs` gives it to clap on the subcommand, where
@@ -70,8 +70,14 @@ pub struct Args {
     /// rendered session of the reference ball (`tangent calibrate ball`,
     /// `docs/calibration.md` section 12) before measuring; this many sessions, shared round
     /// robin by the captures' seeds.
-    #[arg(long, requires = "calibration_errors")]
+    #[arg(long, requires = "calibration_errors", conflicts_with = "wall_sessions")]
     ball_sessions: Option<u64>,
+    /// With --calibration-errors: refine each drawn calibration on a rendered session of a
+    /// flat wall (`tangent calibrate wall`, `docs/calibration.md` section 13) of the head
+    /// measured (`--walls-crossing`: the three-line head) before measuring; this many
+    /// sessions, shared round robin by the captures' seeds.
+    #[arg(long, requires = "calibration_errors")]
+    wall_sessions: Option<u64>,
     /// Evaluate the road instrument instead (`docs/road.md`): MPD per surface type, furrow
     /// depths, piezo height-scale calibration, vertical resolution, captif-slp cross-check,
     /// bad input; `--count` fresh seeds per surface.
@@ -209,18 +215,28 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     write(&args, &doc)
 }
 
-/// The reference-ball sessions of `--ball-sessions`, rendered.
-fn ball_sessions(args: &Args) -> anyhow::Result<Option<BallSessions>> {
-    args.ball_sessions.map(BallSessions::render).transpose()
+/// The reference sessions of `--ball-sessions` or `--wall-sessions`, rendered.
+fn ball_sessions(args: &Args) -> anyhow::Result<Option<ReferenceSessions>> {
+    let wall = ReferenceKind::Wall {
+        crossing: args.walls_crossing,
+    };
+    match (args.ball_sessions, args.wall_sessions) {
+        (Some(n), _) => ReferenceSessions::render(ReferenceKind::Ball, n).map(Some),
+        (None, Some(n)) => ReferenceSessions::render(wall, n).map(Some),
+        (None, None) => Ok(None),
+    }
 }
 
 /// The calibration the captures are measured with (`--calibration-errors`,
 /// `--ball-sessions`).
-fn calibration_used<'a>(args: &Args, sessions: Option<&'a BallSessions>) -> CalibrationUsed<'a> {
+fn calibration_used<'a>(
+    args: &Args,
+    sessions: Option<&'a ReferenceSessions>,
+) -> CalibrationUsed<'a> {
     match (args.calibration_errors, sessions) {
         (false, _) => CalibrationUsed::Exact,
         (true, None) => CalibrationUsed::Drawn,
-        (true, Some(s)) => CalibrationUsed::BallRefined(s),
+        (true, Some(s)) => CalibrationUsed::Refined(s),
     }
 }
 

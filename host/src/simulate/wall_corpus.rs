@@ -228,6 +228,35 @@ pub fn wall_params(params: &mut SimParams) {
     params.accelerometer = Some(AccelerometerSim::reference());
 }
 
+/// View `i` (0–5) of a calibration session on a flat wall (`docs/calibration.md`, section
+/// 13): matt plaster at 1.0–3.0 m, turned ±15° and tilted ±5° differently each time, room
+/// light, every line of the head lit (`crossing`: the three-line head); `session` seeds the
+/// rendering's noise.
+pub fn reference_wall_spec(i: u64, session: u64, crossing: bool) -> SimSpec {
+    let z = 1.0 + 0.4 * i as f64;
+    let yaw = [12.0, -15.0, 6.0, -8.0, 15.0, -4.0][(i % 6) as usize];
+    let pitch = [-5.0, 3.0, 5.0, -2.0, -4.0, 4.0][(i % 6) as usize];
+    let mut params = SimParams {
+        seed: super::scene::splitmix(session.wrapping_mul(0x9E37_79B9) ^ (i + 101)) & ((1 << 62) - 1),
+        lit_planes: if crossing { vec![0, 1, 2] } else { vec![0, 1] },
+        ..SimParams::default()
+    };
+    wall_params(&mut params);
+    params.accelerometer = None;
+    SimSpec {
+        mode: Mode::Wall,
+        description: format!("reference wall, view {i} at {z:.1} m, turned {yaw}°, tilted {pitch}°"),
+        timestamp: "2025-06-02T12:00:00Z".into(),
+        calibration: if crossing {
+            three_plane_calibration()
+        } else {
+            two_plane_calibration()
+        },
+        objects: vec![turned_wall(z, yaw, pitch, PLASTER)],
+        params,
+    }
+}
+
 /// What a random room shows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RoomKind {

@@ -1,7 +1,7 @@
-//! `tangent calibrate ball`: rendered views of the reference ball and a calibration file whose
-//! planes are off by a draw of the board calibration's σ in; the `[[planes]]` rewritten with
-//! the relative tilt restored within its stated σ, every other key kept; bad input refused
-//! naming the capture.
+//! `tangent calibrate ball` and `wall`: rendered views of the reference (a ball, a flat wall)
+//! and a calibration file whose planes are off by a draw of the board calibration's σ in; the
+//! `[[planes]]` rewritten with the relative tilt restored within its stated σ, every other
+//! key kept; bad input refused naming the capture.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -9,9 +9,10 @@ use std::process::Command;
 use tangent_core::noise::NoiseModel;
 use tangent_host::calibration_draw::drawn;
 use tangent_host::calibration_file;
-use tangent_host::simulate::rig::two_plane_calibration;
+use tangent_host::simulate::rig::{three_plane_calibration, two_plane_calibration};
 use tangent_host::simulate::simulate;
 use tangent_host::simulate::sphere_corpus::reference_ball_spec;
+use tangent_host::simulate::wall_corpus::reference_wall_spec;
 
 fn tangent(args: &[&str]) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_tangent"))
@@ -98,7 +99,8 @@ fn the_ball_command_restores_the_planes_relative_tilt_and_keeps_the_rest() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("2 usable view(s), at least 3 needed"), "{err}");
-    let stem = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/captures/cyl-d300-z150-shade");
+    let stem =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/captures/cyl-d300-z150-shade");
     let with_stem = [
         "calibrate",
         "ball",
@@ -116,4 +118,74 @@ fn the_ball_command_restores_the_planes_relative_tilt_and_keeps_the_rest() {
         "{err}"
     );
     assert_eq!(std::fs::read_to_string(&calib).unwrap(), kept);
+}
+
+/// The same for a flat wall on the three-line head: `tangent calibrate wall` brings plane 1's
+/// tilt relative to plane 0 back within its printed σ and the crossing plane's to a few µrad.
+#[test]
+fn the_wall_command_restores_the_three_planes_relative_tilts() {
+    let tmp = tempfile::tempdir().unwrap();
+    let views: Vec<PathBuf> = (0..6)
+        .map(|i| {
+            let (capture, _) = simulate(&reference_wall_spec(i, 5, true)).unwrap();
+            let d = tmp.path().join(format!("wall-{i}"));
+            capture.write(&d).unwrap();
+            d
+        })
+        .collect();
+    let truth = three_plane_calibration();
+    let noise = NoiseModel {
+        focal_px: 0.0,
+        ..NoiseModel::reference()
+    };
+    let off = drawn(&truth, &noise, 4).unwrap();
+    let calib = tmp.path().join("unit.toml");
+    calibration_file::write(&calib, &off).unwrap();
+    let mut args: Vec<String> = vec!["calibrate".into(), "wall".into()];
+    args.extend(views.iter().map(|v| v.display().to_string()));
+    args.extend(["--calib".into(), calib.display().to_string()]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let out = tangent(&args);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    eprintln!("{stdout}");
+    let sigma_mrad: f64 = stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("laser 1 against laser 0: δ ± "))
+        .and_then(|l| l.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("{stdout}"));
+    let refined = calibration_file::read(&calib).unwrap();
+    let relative = |c: &tangent_core::calibration::Calibration, k: usize| {
+        (c.planes[k].baseline_tilt().1 - c.planes[0].baseline_tilt().1) * 1e3
+    };
+    let after1 = relative(&refined, 1) - relative(&truth, 1);
+    let after2 = relative(&refined, 2) - relative(&truth, 2);
+    assert!(after1.abs() < 3.5 * sigma_mrad, "{after1} ± {sigma_mrad}\n{stdout}");
+    assert!(after2.abs() < 0.01, "{after2} mrad\n{stdout}");
+    // A ball's capture among the wall's views is refused by name.
+    let ball = tmp.path().join("ball");
+    simulate(&reference_ball_spec(0, 1))
+        .unwrap()
+        .0
+        .write(&ball)
+        .unwrap();
+    let mixed = [
+        "calibrate",
+        "wall",
+        args[2],
+        args[3],
+        args[4],
+        ball.to_str().unwrap(),
+        "--calib",
+        calib.to_str().unwrap(),
+    ];
+    let out = tangent(&mixed);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("ball") && err.contains("wall mode"), "{err}");
 }

@@ -1,5 +1,6 @@
-//! The laser planes refined on captures of one ball (`docs/calibration.md`, section 12,
-//! "Refining the planes on a ball").
+//! The laser planes refined against each other on captures of a reference surface: a ball
+//! (`tangent calibrate ball`) or a flat wall (`tangent calibrate wall`; `docs/calibration.md`,
+//! section 12, "Refining the planes on a ball", and section 13, "… on a flat wall").
 //!
 //! The board calibration ([`super::laser`]) fixes each plane's baseline `e` and tilt `δ` to
 //! the σ the error model carries (0.2 mm, 0.2 mrad), each plane from its own stripe points.
@@ -8,14 +9,16 @@
 //! (`docs/error-model.md`, "Calibration errors across two planes"). A ball, of any size, cut
 //! by two planes is a check of exactly that: both sections must lie on one sphere. Seen at
 //! several distances it determines the planes' *relative* `e` and `δ` (the shift grows as `z`
-//! for `e` and as `z²` for `δ`).
+//! for `e` and as `z²` for `δ`). A flat wall lit by lines that cross is a stronger check:
+//! every line must lie in one plane.
 //!
 //! The refinement: every point of plane `k` was triangulated with the plane `(n, d)`; on the
 //! plane `(n', d')` of the corrected `e`, `δ` the same pixel's ray gives `X' = X·d'/(n'·X)`
 //! (the camera, hence the ray, is unchanged). The corrections `u` (in units of their prior
-//! σ) minimise `|u|² + Σ_views min_(C,R) Σ_points ((|X' − C| − R)/s)²`: the prior keeps what
-//! the ball cannot see (the common scale, with an unknown diameter) at the board's value,
-//! and each view's sphere is re-fitted for every `u` (variable projection). `s` is a view
+//! σ) minimise `|u|² + Σ_views min_surface Σ_points (t/s)²`, `t` a point's distance along
+//! its stripe's displacement line to the view's surface: the prior keeps what the reference
+//! cannot see (the common scale) at the board's value, and each view's surface is re-fitted
+//! for every `u` (variable projection). `s` is a view
 //! plane's robust residual scale times the square root of its residuals' correlation length,
 //! so the posterior covariance `(JᵀJ)⁻¹` counts correlated speckle once.
 
@@ -41,7 +44,7 @@ use tangent_core::solvers::stem::CylinderParams;
 
 /// Fewest views: a relative `e` and `δ` per extra plane from shifts that grow as `z` and
 /// `z²` need at least two distances, and a third checks them.
-pub const MIN_BALL_VIEWS: usize = 3;
+pub const MIN_VIEWS: usize = 3;
 
 /// Fewest points a plane's section must keep in a view: a section shorter than this
 /// determines its circle too poorly to check the other (as the sphere solver's own arcs).
@@ -60,30 +63,74 @@ pub const OUTLIER_CUT: f64 = 4.685;
 /// less than half (one distance only, tiny sections) did not determine it.
 pub const MAX_RELATIVE_TILT_SHARE: f64 = 0.5;
 
-/// One capture of the ball: each plane's 3-D points as the calibration being refined
-/// triangulated them, and that calibration's sphere as the start.
+/// The reference surface of a view: a ball's sphere or a flat wall's plane.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Surface {
+    /// A ball.
+    Sphere(Sphere),
+    /// A flat wall, `z = a·x + b·y + c` (camera frame, metres): a wall faces the camera.
+    Plane {
+        /// `∂z/∂x`.
+        a: f64,
+        /// `∂z/∂y`.
+        b: f64,
+        /// Depth on the optical axis (metres).
+        c: f64,
+    },
+}
+
+impl Surface {
+    /// Distance of `x` from the surface (metres; for the report).
+    fn distance(&self, x: &Vec3) -> f64 {
+        match self {
+            Surface::Sphere(s) => (x - s.centre).norm() - s.radius,
+            Surface::Plane { a, b, c } => {
+                (a * x.x + b * x.y + c - x.z) / (a * a + b * b + 1.0).sqrt()
+            }
+        }
+    }
+
+    /// The size the report shows: a sphere's diameter, a plane's depth on the axis (metres).
+    fn size(&self) -> f64 {
+        match self {
+            Surface::Sphere(s) => 2.0 * s.radius,
+            Surface::Plane { c, .. } => *c,
+        }
+    }
+
+    /// Distance of the surface's point nearest the camera's axis (metres).
+    fn range(&self) -> f64 {
+        match self {
+            Surface::Sphere(s) => s.centre.norm(),
+            Surface::Plane { c, .. } => *c,
+        }
+    }
+}
+
+/// One capture of the reference: each plane's 3-D points as the calibration being refined
+/// triangulated them, and that calibration's surface as the start.
 #[derive(Debug, Clone)]
-pub struct BallView {
+pub struct ReferenceView {
     /// Where the view came from (capture directory), for messages and the report.
     pub name: String,
     /// Plane `k`'s points (camera frame, metres, in image-column order).
     pub planes: Vec<Vec<Vec3>>,
-    /// The sphere measured with the calibration being refined.
-    pub start: Sphere,
+    /// The surface measured with the calibration being refined.
+    pub start: Surface,
 }
 
-impl BallView {
+impl ReferenceView {
     /// The view of `capture` (a sphere-mode capture of the ball) measured with
     /// `calibration`, the one being refined. Errors name the capture: not a sphere capture,
     /// frames that do not read, no sphere.
-    pub fn measure(
+    pub fn of_ball(
         capture: &Capture,
         calibration: &Calibration,
         name: &str,
-    ) -> Result<BallView, CalibrateError> {
+    ) -> Result<ReferenceView, CalibrateError> {
         let refuse = |why: String| CalibrateError::Refinement(format!("{name}: {why}"));
         if capture.meta.mode != Mode::Sphere {
-            return Err(CalibrateError::NotABallCapture(name.to_string()));
+            return Err(CalibrateError::NotAReferenceCapture(name.to_string(), "sphere"));
         }
         let outcome = measure_loaded(
             capture,
@@ -101,12 +148,62 @@ impl BallView {
         let planes = (0..calibration.planes.len())
             .map(|k| m.profile.points(&outcome.points, k).to_vec())
             .collect();
-        Ok(BallView {
+        Ok(ReferenceView {
             name: name.to_string(),
             planes,
-            start: Sphere {
+            start: Surface::Sphere(Sphere {
                 centre: m.solution.centre,
                 radius: 0.5 * m.solution.diameter,
+            }),
+        })
+    }
+
+    /// The view of `capture` (a wall-mode capture of a flat wall, every line on it) measured
+    /// with `calibration`. The start is the least-squares plane `z = ax + by + c` of all its
+    /// points. Errors name the capture: not a wall capture, frames that do not read, a line
+    /// with no points.
+    pub fn of_wall(
+        capture: &Capture,
+        calibration: &Calibration,
+        name: &str,
+    ) -> Result<ReferenceView, CalibrateError> {
+        let refuse = |why: String| CalibrateError::Refinement(format!("{name}: {why}"));
+        if capture.meta.mode != Mode::Wall {
+            return Err(CalibrateError::NotAReferenceCapture(name.to_string(), "wall"));
+        }
+        let outcome = measure_loaded(
+            capture,
+            name,
+            Some(calibration),
+            &PipelineConfig::default(),
+            &CylinderParams::default(),
+        )
+        .map_err(|e| refuse(e.to_string()))?;
+        let profile = match &outcome.result {
+            Ok(solved) => solved.profile(),
+            Err(e) => return Err(refuse(format!("no wall: {e}"))),
+        };
+        let planes: Vec<Vec<Vec3>> = (0..calibration.planes.len())
+            .map(|k| profile.points(&outcome.points, k).to_vec())
+            .collect();
+        let mut ata = nalgebra::Matrix3::<f64>::zeros();
+        let mut atz = nalgebra::Vector3::<f64>::zeros();
+        for x in planes.iter().flatten() {
+            let row = nalgebra::Vector3::new(x.x, x.y, 1.0);
+            ata += row * row.transpose();
+            atz += row * x.z;
+        }
+        let abc = ata
+            .try_inverse()
+            .map(|inv| inv * atz)
+            .ok_or_else(|| refuse("its points do not span a plane".into()))?;
+        Ok(ReferenceView {
+            name: name.to_string(),
+            planes,
+            start: Surface::Plane {
+                a: abc.x,
+                b: abc.y,
+                c: abc.z,
             },
         })
     }
@@ -140,11 +237,12 @@ pub struct PlaneCorrection {
 pub struct ViewFit {
     /// The view's name.
     pub name: String,
-    /// Distance of the ball's centre (metres).
+    /// Distance of the ball's centre, or the wall's depth on the axis (metres).
     pub distance: f64,
-    /// Diameter of the sphere through the kept points, before and after (metres).
-    pub diameter: (f64, f64),
-    /// RMS of the kept points' distance to that sphere, before and after (metres).
+    /// Diameter of the sphere, or depth on the axis of the plane, through the kept points,
+    /// before and after (metres).
+    pub size: (f64, f64),
+    /// RMS of the kept points' distance to that surface, before and after (metres).
     pub rms: (f64, f64),
     /// Points kept / given.
     pub kept: (usize, usize),
@@ -152,7 +250,7 @@ pub struct ViewFit {
 
 /// The result of [`refine_planes`].
 #[derive(Debug, Clone)]
-pub struct BallRefinement {
+pub struct Refinement {
     /// The calibration with the refined planes (camera and id unchanged).
     pub calibration: Calibration,
     /// Each plane's correction.
@@ -161,6 +259,9 @@ pub struct BallRefinement {
     pub relative_tilt_sigma: f64,
     /// Posterior 1σ of plane 1's baseline relative to plane 0's (metres).
     pub relative_baseline_sigma: f64,
+    /// For each plane `k ≥ 1`: posterior 1σ of its tilt (radians) and baseline (metres)
+    /// relative to plane 0's.
+    pub relative: Vec<(f64, f64)>,
     /// Each view's fit.
     pub views: Vec<ViewFit>,
     /// The views set aside, each with its reason (no sphere with the uncorrected planes).
@@ -204,8 +305,63 @@ fn along_line(p: &Observed, c: &Vec3, radius: f64) -> (f64, SVector<f64, 4>) {
     (t, j)
 }
 
+/// The signed distance `t` along `L` from `p.x` to the plane `z = ax + by + c`, with
+/// `∂t/∂(a, b, c)`: `F(X) = ax + by + c − z` vanishes at `X + tL`, so `t = −F(X)/(aL_x + bL_y −
+/// L_z)` and, with `P = X + tL`, `∂t/∂(a, b, c) = −(P_x, P_y, 1)/(aL_x + bL_y − L_z)`.
+fn along_line_plane(p: &Observed, q: &SVector<f64, 3>) -> (f64, SVector<f64, 3>) {
+    let (a, b, c) = (q[0], q[1], q[2]);
+    let den = a * p.along.x + b * p.along.y - p.along.z;
+    if den == 0.0 {
+        return (0.0, SVector::<f64, 3>::zeros());
+    }
+    let t = -(a * p.x.x + b * p.x.y + c - p.x.z) / den;
+    let at = p.x + p.along * t;
+    (t, SVector::<f64, 3>::new(-at.x, -at.y, -1.0) / den)
+}
+
+/// A plane through fixed points, each residual its distance along `L` over its σ: the inner
+/// problem of a flat wall.
+struct FixedPlane<'a> {
+    points: &'a [Observed],
+}
+
+impl LeastSquares<3> for FixedPlane<'_> {
+    type Params = SVector<f64, 3>;
+    type Extra = ();
+
+    fn evaluate(&self, q: &Self::Params) -> Result<(NormalEquations<3>, ()), SolveError> {
+        let mut jtj = SMatrix::<f64, 3, 3>::zeros();
+        let mut jtr = SVector::<f64, 3>::zeros();
+        let mut cost = 0.0;
+        for o in self.points {
+            let (t, j) = along_line_plane(o, q);
+            let (j, r) = (j / o.sigma, t / o.sigma);
+            jtj += j * j.transpose();
+            jtr += j * r;
+            cost += r * r;
+        }
+        if !cost.is_finite() {
+            return Err(SolveError::Degenerate);
+        }
+        Ok((NormalEquations { jtj, jtr, cost }, ()))
+    }
+
+    fn step(&self, q: &Self::Params, delta: &SVector<f64, 3>) -> Self::Params {
+        q + delta
+    }
+
+    fn step_scale(&self, q: &Self::Params) -> f64 {
+        1.0 + q.norm()
+    }
+
+    /// As [`FixedSphere::settled`].
+    fn settled(&self, before: f64, after: f64) -> bool {
+        before - after < 1e-10
+    }
+}
+
 /// Sphere through fixed points, each residual its distance along `L` over its σ: the
-/// inner problem.
+/// inner problem of a ball.
 struct FixedSphere<'a> {
     points: &'a [Observed],
     known: Option<KnownDiameter>,
@@ -258,8 +414,37 @@ impl LeastSquares<4> for FixedSphere<'_> {
     }
 }
 
-/// The best sphere through `points` from `start`, and the residuals `t/σ` appended to `out`.
+/// The best surface through `points` from `start` (of its kind), and the residuals `t/σ`
+/// appended to `out` (and, for a ball of known diameter, its radius's).
 fn fit_fixed(
+    points: &[Observed],
+    known: Option<KnownDiameter>,
+    start: &Surface,
+    out: &mut Vec<f64>,
+) -> Result<Surface, SolveError> {
+    match start {
+        Surface::Sphere(s) => fit_sphere_fixed(points, known, s, out).map(Surface::Sphere),
+        Surface::Plane { a, b, c } => {
+            let problem = FixedPlane { points };
+            let begin = Evaluated::at(&problem, SVector::<f64, 3>::new(*a, *b, *c))?;
+            let (min, _) = minimise(&problem, begin, &LmParams::default())?;
+            out.extend(
+                points
+                    .iter()
+                    .map(|o| along_line_plane(o, &min.params).0 / o.sigma),
+            );
+            let q = min.params;
+            Ok(Surface::Plane {
+                a: q[0],
+                b: q[1],
+                c: q[2],
+            })
+        }
+    }
+}
+
+/// [`fit_fixed`] for a ball.
+fn fit_sphere_fixed(
     points: &[Observed],
     known: Option<KnownDiameter>,
     start: &Sphere,
@@ -280,12 +465,19 @@ fn fit_fixed(
     Ok(sphere)
 }
 
-/// Unit direction in which a point `x` of `plane` moves when its stripe's row moves: the
-/// line the plane shares with the image column's plane through `x` (normal `(z, 0, −x)`).
+/// Unit direction in which a point `x` of `plane` moves when its stripe's centre moves: the
+/// line the plane shares with the image column's plane through `x` (normal `(z, 0, −x)`), or
+/// for a row-wise plane (the crossing line, whose centre is found along each row) the row's
+/// plane (normal `(0, z, −y)`).
 fn displacement(plane: &LaserPlane, x: &Vec3) -> Vec3 {
+    let across = if plane.is_row_wise() {
+        Vec3::new(0.0, x.z, -x.y)
+    } else {
+        Vec3::new(x.z, 0.0, -x.x)
+    };
     plane
         .normal
-        .cross(&Vec3::new(x.z, 0.0, -x.x))
+        .cross(&across)
         .try_normalize(0.0)
         .unwrap_or_else(Vec3::zeros)
 }
@@ -317,6 +509,23 @@ fn retriangulate(x: &Vec3, to: &LaserPlane) -> Vec3 {
     x * (to.offset / to.normal.dot(x))
 }
 
+/// A point of a plane re-triangulated on the corrected plane `to` ((B1)), with its
+/// displacement line and σ carried along: a pixel's move that moved `x` by `σ·L` moves
+/// `X' = x·g(x)`, `g = d'/(n'·x)`, by `σ·(g·L + x·(∇g·L))`, `∇g = −d'·n'/(n'·x)²`. Without
+/// this a correction that shrinks the depth scale would shrink every residual in metres
+/// and be preferred for it (`docs/calibration.md` §13).
+fn moved(o: &Observed, to: &LaserPlane) -> Observed {
+    let nx = to.normal.dot(&o.x);
+    let g = to.offset / nx;
+    let rate = o.along * g - o.x * (to.offset * to.normal.dot(&o.along) / (nx * nx));
+    let scale = rate.norm();
+    Observed {
+        x: o.x * g,
+        along: rate / scale,
+        sigma: o.sigma * scale,
+    }
+}
+
 /// One view's kept points and each plane's scale `s` (see the module documentation).
 #[derive(Debug, Clone)]
 struct Prepared {
@@ -326,8 +535,46 @@ struct Prepared {
     given: usize,
     /// Plane of each kept point, and the point (σ: its plane's scale).
     kept: Vec<(usize, Observed)>,
-    /// The sphere at the current corrections (start of the next fit).
-    sphere: Sphere,
+    /// The surface with the uncorrected planes (start of every re-fit).
+    surface: Surface,
+}
+
+/// A straight line through 2-D points by orthogonal regression, refitted once without the
+/// points beyond [`OUTLIER_CUT`] robust scales: its centroid and unit normal. `None` for
+/// fewer than two points or no direction.
+fn fit_line(points: &[Vec2]) -> Option<(Vec2, Vec2)> {
+    let fit = |pts: &[&Vec2]| -> Option<(Vec2, Vec2)> {
+        if pts.len() < 2 {
+            return None;
+        }
+        let n = pts.len() as f64;
+        let c = pts.iter().fold(Vec2::zeros(), |acc, p| acc + **p) / n;
+        let mut m = nalgebra::Matrix2::<f64>::zeros();
+        for p in pts {
+            let d = **p - c;
+            m += d * d.transpose();
+        }
+        let eig = nalgebra::SymmetricEigen::new(m);
+        // The normal: the eigenvector of the smaller eigenvalue.
+        let i = if eig.eigenvalues[0] <= eig.eigenvalues[1] {
+            0
+        } else {
+            1
+        };
+        let normal = Vec2::new(eig.eigenvectors[(0, i)], eig.eigenvectors[(1, i)]);
+        Some((c, normal.try_normalize(0.0)?))
+    };
+    let all: Vec<&Vec2> = points.iter().collect();
+    let (c, normal) = fit(&all)?;
+    let r: Vec<f64> = points.iter().map(|p| (p - c).dot(&normal)).collect();
+    let cut = OUTLIER_CUT * robust_scale(&r);
+    let kept: Vec<&Vec2> = points
+        .iter()
+        .zip(&r)
+        .filter(|(_, ri)| ri.abs() <= cut)
+        .map(|(p, _)| p)
+        .collect();
+    fit(&kept)
 }
 
 /// The robust scale `1.4826·median|r|`.
@@ -350,18 +597,15 @@ struct Planes<'a> {
 
 impl Planes<'_> {
     /// The residual vector at `u`: the prior's, then every view's at its re-fitted sphere.
-    fn residuals(&self, u: &[f64]) -> Result<(Vec<f64>, Vec<Sphere>), SolveError> {
+    fn residuals(&self, u: &[f64]) -> Result<(Vec<f64>, Vec<Surface>), SolveError> {
         let planes = corrected_planes(self.nominal, u, self.prior)?;
         let mut r: Vec<f64> = u.to_vec();
         let mut spheres = Vec::with_capacity(self.prepared.len());
         let mut pts = Vec::new();
         for prep in self.prepared {
             pts.clear();
-            pts.extend(prep.kept.iter().map(|(k, o)| Observed {
-                x: retriangulate(&o.x, &planes[*k]),
-                ..*o
-            }));
-            spheres.push(fit_fixed(&pts, self.known, &prep.sphere, &mut r)?);
+            pts.extend(prep.kept.iter().map(|(k, o)| moved(o, &planes[*k])));
+            spheres.push(fit_fixed(&pts, self.known, &prep.surface, &mut r)?);
         }
         Ok((r, spheres))
     }
@@ -427,7 +671,7 @@ impl<const N: usize> LeastSquares<N> for Planes<'_> {
 /// correlation length.
 ///
 /// A view that yields no sphere with the planes as they are is set aside with its reason.
-fn prepare(nominal: &[LaserPlane], views: &[BallView]) -> (Vec<Prepared>, Vec<String>) {
+fn prepare(nominal: &[LaserPlane], views: &[ReferenceView]) -> (Vec<Prepared>, Vec<String>) {
     let mut out = Vec::with_capacity(views.len());
     let mut skipped = Vec::new();
     for view in views {
@@ -440,7 +684,10 @@ fn prepare(nominal: &[LaserPlane], views: &[BallView]) -> (Vec<Prepared>, Vec<St
 }
 
 /// One view of [`prepare`].
-fn prepare_view(nominal: &[LaserPlane], view: &BallView) -> Result<Prepared, CalibrateError> {
+fn prepare_view(
+    nominal: &[LaserPlane],
+    view: &ReferenceView,
+) -> Result<Prepared, CalibrateError> {
     let robust = RobustParams {
         min_scale: 0.0,
         ..RobustParams::default()
@@ -453,8 +700,8 @@ fn prepare_view(nominal: &[LaserPlane], view: &BallView) -> Result<Prepared, Cal
             };
             let too_few = |n: usize| {
                 refuse(format!(
-                    "{n} points on the ball, at least {MIN_SECTION_POINTS} needed; aim so that \
-                     both lines cross the ball"
+                    "{n} points on the reference, at least {MIN_SECTION_POINTS} needed; aim \
+                     so that every line crosses it"
                 ))
             };
             if pts.len() < MIN_SECTION_POINTS {
@@ -467,21 +714,35 @@ fn prepare_view(nominal: &[LaserPlane], view: &BallView) -> Result<Prepared, Cal
                 .iter()
                 .map(|x| Vec2::new(x.dot(&a), x.dot(&b)))
                 .collect();
-            let mut scratch = vec![0.0; flat.len()];
-            let circle = fit_hyper(&flat)
-                .and_then(|c| fit_robust(&flat, c, &robust, &mut scratch))
-                .map_err(|e| refuse(format!("no circle through the section: {e}")))?
-                .circle;
-            // (index, L, move along L) of the points whose L is within 60° of the radius.
+            // The section's own shape: a circle on a ball, a straight line on a wall; for a
+            // point, the shape's in-plane normal there and the point's distance from it.
+            let own: Box<dyn Fn(&Vec2) -> Option<(Vec2, f64)>> = match view.start {
+                Surface::Sphere(_) => {
+                    let mut scratch = vec![0.0; flat.len()];
+                    let circle = fit_hyper(&flat)
+                        .and_then(|c| fit_robust(&flat, c, &robust, &mut scratch))
+                        .map_err(|e| refuse(format!("no circle through the section: {e}")))?
+                        .circle;
+                    Box::new(move |f: &Vec2| {
+                        let radial = (f - circle.centre).try_normalize(0.0)?;
+                        Some((radial, (f - circle.centre).norm() - circle.radius))
+                    })
+                }
+                Surface::Plane { .. } => {
+                    let (centre, normal) = fit_line(&flat)
+                        .ok_or_else(|| refuse("its points do not make a line".into()))?;
+                    Box::new(move |f: &Vec2| Some((normal, (f - centre).dot(&normal))))
+                }
+            };
+            // (index, L, move along L) of the points whose L is within 60° of the normal.
             let moves: Vec<(usize, Vec3, f64)> = pts
                 .iter()
                 .zip(&flat)
                 .enumerate()
                 .filter_map(|(i, (x, f))| {
                     let along = displacement(plane, x);
-                    let radial = (f - circle.centre).try_normalize(0.0)?;
-                    let cos = Vec2::new(along.dot(&a), along.dot(&b)).dot(&radial);
-                    let d = (f - circle.centre).norm() - circle.radius;
+                    let (normal, d) = own(f)?;
+                    let cos = Vec2::new(along.dot(&a), along.dot(&b)).dot(&normal);
                     (cos.abs() >= MIN_RADIAL_SHARE).then_some((i, along, d / cos))
                 })
                 .collect();
@@ -495,9 +756,7 @@ fn prepare_view(nominal: &[LaserPlane], view: &BallView) -> Result<Prepared, Cal
             let kept_t: Vec<f64> = on_ball.iter().map(|m| m.2).collect();
             let sigma = robust_scale(&kept_t) * correlation_length(&kept_t).max(1.0).sqrt();
             if !(sigma > 0.0 && sigma.is_finite()) {
-                return Err(refuse(
-                    "the points have no spread about their circle".into(),
-                ));
+                return Err(refuse("the points have no spread about their shape".into()));
             }
             kept.extend(on_ball.iter().map(|&&(i, along, _)| {
                 (
@@ -510,16 +769,19 @@ fn prepare_view(nominal: &[LaserPlane], view: &BallView) -> Result<Prepared, Cal
                 )
             }));
         }
-        // The sphere of the uncorrected planes, the start of every re-fit.
+        // The surface of the uncorrected planes, the start of every re-fit.
         let all: Vec<Observed> = kept.iter().map(|(_, o)| *o).collect();
-        let sphere = fit_fixed(&all, None, &view.start, &mut Vec::new()).map_err(|e| {
-            CalibrateError::Refinement(format!("{}: no sphere through its points: {e}", view.name))
+        let surface = fit_fixed(&all, None, &view.start, &mut Vec::new()).map_err(|e| {
+            CalibrateError::Refinement(format!(
+                "{}: no surface through its points: {e}",
+                view.name
+            ))
         })?;
         Ok(Prepared {
             name: view.name.clone(),
             given: view.planes.iter().map(Vec::len).sum(),
             kept,
-            sphere,
+            surface,
         })
     }
 }
@@ -528,25 +790,25 @@ fn prepare_view(nominal: &[LaserPlane], view: &BallView) -> Result<Prepared, Cal
 /// `views` of one ball, each plane's prior the board calibration's σ in `prior`
 /// (`NoiseModel::baseline`, `::tilt`). With `known` the ball's certified diameter joins.
 ///
-/// Errors: fewer than [`MIN_BALL_VIEWS`] views or two planes; a view whose section keeps
+/// Errors: fewer than [`MIN_VIEWS`] views or two planes; a view whose section keeps
 /// fewer than [`MIN_SECTION_POINTS`]; no convergence; views that leave the relative tilt
 /// undetermined (posterior σ above [`MAX_RELATIVE_TILT_SHARE`] of its prior).
 pub fn refine_planes(
     calibration: &Calibration,
-    views: &[BallView],
+    views: &[ReferenceView],
     prior: &NoiseModel,
     known: Option<KnownDiameter>,
-) -> Result<BallRefinement, CalibrateError> {
+) -> Result<Refinement, CalibrateError> {
     let nominal: &[LaserPlane] = &calibration.planes;
     if nominal.len() < 2 {
         return Err(CalibrateError::Undetermined(
             "a ball refines the planes against each other: the calibration has one plane".into(),
         ));
     }
-    if views.len() < MIN_BALL_VIEWS {
+    if views.len() < MIN_VIEWS {
         return Err(CalibrateError::TooFewViews {
             found: views.len(),
-            needed: MIN_BALL_VIEWS,
+            needed: MIN_VIEWS,
         });
     }
     if let Some(v) = views.iter().find(|v| v.planes.len() != nominal.len()) {
@@ -573,15 +835,15 @@ pub fn refine_planes(
 
 fn refine_n<const N: usize>(
     calibration: &Calibration,
-    views: &[BallView],
+    views: &[ReferenceView],
     prior: &NoiseModel,
     known: Option<KnownDiameter>,
-) -> Result<BallRefinement, CalibrateError> {
+) -> Result<Refinement, CalibrateError> {
     let nominal: &[LaserPlane] = &calibration.planes;
     let (prepared, skipped) = prepare(nominal, views);
-    if prepared.len() < MIN_BALL_VIEWS {
+    if prepared.len() < MIN_VIEWS {
         return Err(CalibrateError::Undetermined(format!(
-            "{} of {} views give a sphere, at least {MIN_BALL_VIEWS} needed: {}",
+            "{} of {} views give a sphere, at least {MIN_VIEWS} needed: {}",
             prepared.len(),
             views.len(),
             skipped.join("; ")
@@ -622,6 +884,9 @@ fn refine_n<const N: usize>(
     };
     let relative_tilt_sigma = difference_sigma(1, 3);
     let relative_baseline_sigma = difference_sigma(0, 2);
+    let relative = (1..nominal.len())
+        .map(|k| (difference_sigma(1, 2 * k + 1), difference_sigma(0, 2 * k)))
+        .collect();
     if relative_tilt_sigma > MAX_RELATIVE_TILT_SHARE * std::f64::consts::SQRT_2 * prior.tilt {
         return Err(CalibrateError::Undetermined(format!(
             "the ball views determine the planes' relative tilt to σ = {:.3} mrad only (the \
@@ -635,7 +900,7 @@ fn refine_n<const N: usize>(
         .map_err(|e| CalibrateError::Refinement(format!("corrected planes: {e}")))?;
     let refined = Calibration::new(calibration.id, calibration.camera, &planes)
         .map_err(|e| CalibrateError::Refinement(format!("refined calibration: {e:?}")))?;
-    let sphere_fits = |u: &[f64]| {
+    let surfaces = |u: &[f64]| {
         let plain = Planes {
             known: None,
             ..problem
@@ -643,15 +908,15 @@ fn refine_n<const N: usize>(
         plain
             .residuals(u)
             .map(|(_, s)| s)
-            .map_err(|e| CalibrateError::Refinement(format!("spheres of the views: {e}")))
+            .map_err(|e| CalibrateError::Refinement(format!("surfaces of the views: {e}")))
     };
-    let before = sphere_fits(&[0.0; N])?;
-    let after = sphere_fits(u.as_slice())?;
-    let rms = |prep: &Prepared, planes: &[LaserPlane], s: &Sphere| {
+    let before = surfaces(&[0.0; N])?;
+    let after = surfaces(u.as_slice())?;
+    let rms = |prep: &Prepared, planes: &[LaserPlane], s: &Surface| {
         let sum: f64 = prep
             .kept
             .iter()
-            .map(|(k, o)| ((retriangulate(&o.x, &planes[*k]) - s.centre).norm() - s.radius).powi(2))
+            .map(|(k, o)| s.distance(&retriangulate(&o.x, &planes[*k])).powi(2))
             .sum();
         (sum / prep.kept.len().max(1) as f64).sqrt()
     };
@@ -660,22 +925,23 @@ fn refine_n<const N: usize>(
         .zip(before.iter().zip(&after))
         .map(|(prep, (b, a))| ViewFit {
             name: prep.name.clone(),
-            distance: a.centre.norm(),
-            diameter: (2.0 * b.radius, 2.0 * a.radius),
+            distance: a.range(),
+            size: (b.size(), a.size()),
             rms: (rms(prep, nominal, b), rms(prep, &planes, a)),
             kept: (prep.kept.len(), prep.given),
         })
         .collect();
-    Ok(BallRefinement {
+    Ok(Refinement {
         calibration: refined,
         corrections,
         relative_tilt_sigma,
         relative_baseline_sigma,
+        relative,
         views: views_fit,
         skipped,
     })
 }
 
 #[cfg(test)]
-#[path = "ball_tests.rs"]
+#[path = "reference_tests.rs"]
 mod tests;
