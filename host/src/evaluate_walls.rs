@@ -14,8 +14,8 @@ use tangent_core::solvers::plane_pca::{fit_plane, normal_angle, parallel_distanc
 use tangent_core::solvers::stem::CylinderParams;
 use tangent_core::solvers::walls::{WallParams, WallSolution};
 
-use crate::evaluate::SeedSet;
 use crate::calibration_draw::CalibrationUsed;
+use crate::evaluate::SeedSet;
 use crate::measure::{measure_loaded, Outcome, Solved};
 use crate::measure_wall::WallReport;
 use crate::simulate::simulate;

@@ -99,8 +99,7 @@ fn the_ball_command_restores_the_planes_relative_tilt_and_keeps_the_rest() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("2 usable view(s), at least 3 needed"), "{err}");
-    let stem =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/captures/cyl-d300-z150-shade");
+    let stem = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/captures/cyl-d300-z150-shade");
     let with_stem = [
         "calibrate",
         "ball",
@@ -165,7 +164,10 @@ fn the_wall_command_restores_the_three_planes_relative_tilts() {
     };
     let after1 = relative(&refined, 1) - relative(&truth, 1);
     let after2 = relative(&refined, 2) - relative(&truth, 2);
-    assert!(after1.abs() < 3.5 * sigma_mrad, "{after1} ± {sigma_mrad}\n{stdout}");
+    assert!(
+        after1.abs() < 3.5 * sigma_mrad,
+        "{after1} ± {sigma_mrad}\n{stdout}"
+    );
     assert!(after2.abs() < 0.01, "{after2} mrad\n{stdout}");
     // A ball's capture among the wall's views is refused by name.
     let ball = tmp.path().join("ball");

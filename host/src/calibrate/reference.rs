@@ -33,14 +33,16 @@ use tangent_core::real::{Vec2, Vec3};
 use tangent_core::solvers::circle::{fit_hyper, fit_robust, RobustParams};
 use tangent_core::solvers::correlation::correlation_length;
 use tangent_core::solvers::lm::{minimise, Evaluated, LeastSquares, LmParams, NormalEquations};
-use tangent_core::solvers::sphere_sections::Sphere;
 use tangent_core::solvers::SolveError;
 
 use super::CalibrateError;
-use crate::capture::{Capture, Mode};
-use crate::measure::{measure_loaded, Solved};
-use tangent_core::pipeline::PipelineConfig;
-use tangent_core::solvers::stem::CylinderParams;
+
+mod surface;
+mod views;
+
+use surface::{fit_fixed, Observed};
+pub use surface::{KnownDiameter, Surface};
+pub use views::ReferenceView;
 
 /// Fewest views: a relative `e` and `δ` per extra plane from shifts that grow as `z` and
 /// `z²` need at least two distances, and a third checks them.
@@ -62,162 +64,6 @@ pub const OUTLIER_CUT: f64 = 4.685;
 /// its prior σ (`√2·σ_δ` for two independently calibrated planes): views that shrink it by
 /// less than half (one distance only, tiny sections) did not determine it.
 pub const MAX_RELATIVE_TILT_SHARE: f64 = 0.5;
-
-/// The reference surface of a view: a ball's sphere or a flat wall's plane.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Surface {
-    /// A ball.
-    Sphere(Sphere),
-    /// A flat wall, `z = a·x + b·y + c` (camera frame, metres): a wall faces the camera.
-    Plane {
-        /// `∂z/∂x`.
-        a: f64,
-        /// `∂z/∂y`.
-        b: f64,
-        /// Depth on the optical axis (metres).
-        c: f64,
-    },
-}
-
-impl Surface {
-    /// Distance of `x` from the surface (metres; for the report).
-    fn distance(&self, x: &Vec3) -> f64 {
-        match self {
-            Surface::Sphere(s) => (x - s.centre).norm() - s.radius,
-            Surface::Plane { a, b, c } => {
-                (a * x.x + b * x.y + c - x.z) / (a * a + b * b + 1.0).sqrt()
-            }
-        }
-    }
-
-    /// The size the report shows: a sphere's diameter, a plane's depth on the axis (metres).
-    fn size(&self) -> f64 {
-        match self {
-            Surface::Sphere(s) => 2.0 * s.radius,
-            Surface::Plane { c, .. } => *c,
-        }
-    }
-
-    /// Distance of the surface's point nearest the camera's axis (metres).
-    fn range(&self) -> f64 {
-        match self {
-            Surface::Sphere(s) => s.centre.norm(),
-            Surface::Plane { c, .. } => *c,
-        }
-    }
-}
-
-/// One capture of the reference: each plane's 3-D points as the calibration being refined
-/// triangulated them, and that calibration's surface as the start.
-#[derive(Debug, Clone)]
-pub struct ReferenceView {
-    /// Where the view came from (capture directory), for messages and the report.
-    pub name: String,
-    /// Plane `k`'s points (camera frame, metres, in image-column order).
-    pub planes: Vec<Vec<Vec3>>,
-    /// The surface measured with the calibration being refined.
-    pub start: Surface,
-}
-
-impl ReferenceView {
-    /// The view of `capture` (a sphere-mode capture of the ball) measured with
-    /// `calibration`, the one being refined. Errors name the capture: not a sphere capture,
-    /// frames that do not read, no sphere.
-    pub fn of_ball(
-        capture: &Capture,
-        calibration: &Calibration,
-        name: &str,
-    ) -> Result<ReferenceView, CalibrateError> {
-        let refuse = |why: String| CalibrateError::Refinement(format!("{name}: {why}"));
-        if capture.meta.mode != Mode::Sphere {
-            return Err(CalibrateError::NotAReferenceCapture(name.to_string(), "sphere"));
-        }
-        let outcome = measure_loaded(
-            capture,
-            name,
-            Some(calibration),
-            &PipelineConfig::default(),
-            &CylinderParams::default(),
-        )
-        .map_err(|e| refuse(e.to_string()))?;
-        let m = match &outcome.result {
-            Ok(Solved::Sphere(m)) => m,
-            Ok(_) => return Err(refuse("not measured as a sphere".into())),
-            Err(e) => return Err(refuse(format!("no sphere: {e}"))),
-        };
-        let planes = (0..calibration.planes.len())
-            .map(|k| m.profile.points(&outcome.points, k).to_vec())
-            .collect();
-        Ok(ReferenceView {
-            name: name.to_string(),
-            planes,
-            start: Surface::Sphere(Sphere {
-                centre: m.solution.centre,
-                radius: 0.5 * m.solution.diameter,
-            }),
-        })
-    }
-
-    /// The view of `capture` (a wall-mode capture of a flat wall, every line on it) measured
-    /// with `calibration`. The start is the least-squares plane `z = ax + by + c` of all its
-    /// points. Errors name the capture: not a wall capture, frames that do not read, a line
-    /// with no points.
-    pub fn of_wall(
-        capture: &Capture,
-        calibration: &Calibration,
-        name: &str,
-    ) -> Result<ReferenceView, CalibrateError> {
-        let refuse = |why: String| CalibrateError::Refinement(format!("{name}: {why}"));
-        if capture.meta.mode != Mode::Wall {
-            return Err(CalibrateError::NotAReferenceCapture(name.to_string(), "wall"));
-        }
-        let outcome = measure_loaded(
-            capture,
-            name,
-            Some(calibration),
-            &PipelineConfig::default(),
-            &CylinderParams::default(),
-        )
-        .map_err(|e| refuse(e.to_string()))?;
-        let profile = match &outcome.result {
-            Ok(solved) => solved.profile(),
-            Err(e) => return Err(refuse(format!("no wall: {e}"))),
-        };
-        let planes: Vec<Vec<Vec3>> = (0..calibration.planes.len())
-            .map(|k| profile.points(&outcome.points, k).to_vec())
-            .collect();
-        let mut ata = nalgebra::Matrix3::<f64>::zeros();
-        let mut atz = nalgebra::Vector3::<f64>::zeros();
-        for x in planes.iter().flatten() {
-            let row = nalgebra::Vector3::new(x.x, x.y, 1.0);
-            ata += row * row.transpose();
-            atz += row * x.z;
-        }
-        let abc = ata
-            .try_inverse()
-            .map(|inv| inv * atz)
-            .ok_or_else(|| refuse("its points do not span a plane".into()))?;
-        Ok(ReferenceView {
-            name: name.to_string(),
-            planes,
-            start: Surface::Plane {
-                a: abc.x,
-                b: abc.y,
-                c: abc.z,
-            },
-        })
-    }
-}
-
-/// A known ball diameter (a reference sphere's certificate), which makes the common scale
-/// observable as well.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct KnownDiameter {
-    /// The diameter (metres).
-    pub diameter: f64,
-    /// Its 1σ (metres, positive).
-    pub sigma: f64,
-}
 
 /// One plane's correction with its posterior σ.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -266,203 +112,6 @@ pub struct Refinement {
     pub views: Vec<ViewFit>,
     /// The views set aside, each with its reason (no sphere with the uncorrected planes).
     pub skipped: Vec<String>,
-}
-
-/// A point as the inner fit reads it: where it is, the unit direction `L` in which its
-/// stripe's error moves it (its plane's line in the image column's plane through it), and
-/// the 1σ of that move.
-#[derive(Debug, Clone, Copy)]
-struct Observed {
-    x: Vec3,
-    along: Vec3,
-    sigma: f64,
-}
-
-/// The signed distance `t` along `L` from `x` to the sphere (the root of
-/// `|x + tL − C|² = R²` nearest 0), with `∂t/∂(C, R)`; where the line misses the sphere, the
-/// closest approach `t = −L·(x − C)`. This is the stripe's own error, so the residual `t/σ`
-/// is Gaussian where a point's distance to the surface is not: near a section's limb `L`
-/// runs along the surface and a move `t` puts the point `t²/2R` outside it, always outward
-/// (`docs/calibration.md`, section 12).
-fn along_line(p: &Observed, c: &Vec3, radius: f64) -> (f64, SVector<f64, 4>) {
-    let v = p.x - c;
-    let b = p.along.dot(&v);
-    let cc = v.norm_squared() - radius * radius;
-    let disc = b * b - cc;
-    if disc < 0.0 {
-        let j = SVector::<f64, 4>::new(p.along.x, p.along.y, p.along.z, 0.0);
-        return (-b, j);
-    }
-    let q = b + b.signum() * disc.sqrt();
-    let t = if q != 0.0 { -cc / q } else { 0.0 };
-    // |x + tL − C|² = R² differentiated: (P − C)·(L dt − dC) = R dR.
-    let pc = v + p.along * t;
-    let den = pc.dot(&p.along);
-    if den == 0.0 {
-        return (t, SVector::<f64, 4>::zeros());
-    }
-    let j = SVector::<f64, 4>::new(pc.x / den, pc.y / den, pc.z / den, radius / den);
-    (t, j)
-}
-
-/// The signed distance `t` along `L` from `p.x` to the plane `z = ax + by + c`, with
-/// `∂t/∂(a, b, c)`: `F(X) = ax + by + c − z` vanishes at `X + tL`, so `t = −F(X)/(aL_x + bL_y −
-/// L_z)` and, with `P = X + tL`, `∂t/∂(a, b, c) = −(P_x, P_y, 1)/(aL_x + bL_y − L_z)`.
-fn along_line_plane(p: &Observed, q: &SVector<f64, 3>) -> (f64, SVector<f64, 3>) {
-    let (a, b, c) = (q[0], q[1], q[2]);
-    let den = a * p.along.x + b * p.along.y - p.along.z;
-    if den == 0.0 {
-        return (0.0, SVector::<f64, 3>::zeros());
-    }
-    let t = -(a * p.x.x + b * p.x.y + c - p.x.z) / den;
-    let at = p.x + p.along * t;
-    (t, SVector::<f64, 3>::new(-at.x, -at.y, -1.0) / den)
-}
-
-/// A plane through fixed points, each residual its distance along `L` over its σ: the inner
-/// problem of a flat wall.
-struct FixedPlane<'a> {
-    points: &'a [Observed],
-}
-
-impl LeastSquares<3> for FixedPlane<'_> {
-    type Params = SVector<f64, 3>;
-    type Extra = ();
-
-    fn evaluate(&self, q: &Self::Params) -> Result<(NormalEquations<3>, ()), SolveError> {
-        let mut jtj = SMatrix::<f64, 3, 3>::zeros();
-        let mut jtr = SVector::<f64, 3>::zeros();
-        let mut cost = 0.0;
-        for o in self.points {
-            let (t, j) = along_line_plane(o, q);
-            let (j, r) = (j / o.sigma, t / o.sigma);
-            jtj += j * j.transpose();
-            jtr += j * r;
-            cost += r * r;
-        }
-        if !cost.is_finite() {
-            return Err(SolveError::Degenerate);
-        }
-        Ok((NormalEquations { jtj, jtr, cost }, ()))
-    }
-
-    fn step(&self, q: &Self::Params, delta: &SVector<f64, 3>) -> Self::Params {
-        q + delta
-    }
-
-    fn step_scale(&self, q: &Self::Params) -> f64 {
-        1.0 + q.norm()
-    }
-
-    /// As [`FixedSphere::settled`].
-    fn settled(&self, before: f64, after: f64) -> bool {
-        before - after < 1e-10
-    }
-}
-
-/// Sphere through fixed points, each residual its distance along `L` over its σ: the
-/// inner problem of a ball.
-struct FixedSphere<'a> {
-    points: &'a [Observed],
-    known: Option<KnownDiameter>,
-}
-
-impl LeastSquares<4> for FixedSphere<'_> {
-    type Params = SVector<f64, 4>;
-    type Extra = ();
-
-    fn evaluate(&self, p: &Self::Params) -> Result<(NormalEquations<4>, ()), SolveError> {
-        let c = Vec3::new(p[0], p[1], p[2]);
-        let mut jtj = SMatrix::<f64, 4, 4>::zeros();
-        let mut jtr = SVector::<f64, 4>::zeros();
-        let mut cost = 0.0;
-        let mut add = |j: SVector<f64, 4>, r: f64| {
-            jtj += j * j.transpose();
-            jtr += j * r;
-            cost += r * r;
-        };
-        for o in self.points {
-            let (t, j) = along_line(o, &c, p[3]);
-            add(j / o.sigma, t / o.sigma);
-        }
-        if let Some(k) = self.known {
-            let r = (p[3] - 0.5 * k.diameter) / (0.5 * k.sigma);
-            add(
-                SVector::<f64, 4>::new(0.0, 0.0, 0.0, 1.0 / (0.5 * k.sigma)),
-                r,
-            );
-        }
-        if !cost.is_finite() || !(p[3] > 0.0) {
-            return Err(SolveError::Degenerate);
-        }
-        Ok((NormalEquations { jtj, jtr, cost }, ()))
-    }
-
-    fn step(&self, p: &Self::Params, delta: &SVector<f64, 4>) -> Self::Params {
-        p + delta
-    }
-
-    fn step_scale(&self, p: &Self::Params) -> f64 {
-        1e-3 + p.norm()
-    }
-
-    /// Settled when the cost (χ², σ units) drops by less than 10⁻¹⁰: the sphere is then
-    /// within ~10⁻⁵ of its σ of the minimum, far below the outer Jacobian's steps, and a
-    /// last ulp of a flat valley is not chased into `NotConverged`.
-    fn settled(&self, before: f64, after: f64) -> bool {
-        before - after < 1e-10
-    }
-}
-
-/// The best surface through `points` from `start` (of its kind), and the residuals `t/σ`
-/// appended to `out` (and, for a ball of known diameter, its radius's).
-fn fit_fixed(
-    points: &[Observed],
-    known: Option<KnownDiameter>,
-    start: &Surface,
-    out: &mut Vec<f64>,
-) -> Result<Surface, SolveError> {
-    match start {
-        Surface::Sphere(s) => fit_sphere_fixed(points, known, s, out).map(Surface::Sphere),
-        Surface::Plane { a, b, c } => {
-            let problem = FixedPlane { points };
-            let begin = Evaluated::at(&problem, SVector::<f64, 3>::new(*a, *b, *c))?;
-            let (min, _) = minimise(&problem, begin, &LmParams::default())?;
-            out.extend(
-                points
-                    .iter()
-                    .map(|o| along_line_plane(o, &min.params).0 / o.sigma),
-            );
-            let q = min.params;
-            Ok(Surface::Plane {
-                a: q[0],
-                b: q[1],
-                c: q[2],
-            })
-        }
-    }
-}
-
-/// [`fit_fixed`] for a ball.
-fn fit_sphere_fixed(
-    points: &[Observed],
-    known: Option<KnownDiameter>,
-    start: &Sphere,
-    out: &mut Vec<f64>,
-) -> Result<Sphere, SolveError> {
-    let problem = FixedSphere { points, known };
-    let begin = Evaluated::at(&problem, start.params())?;
-    let (min, _) = minimise(&problem, begin, &LmParams::default())?;
-    let sphere = Sphere::of_params(&min.params);
-    out.extend(
-        points
-            .iter()
-            .map(|o| along_line(o, &sphere.centre, sphere.radius).0 / o.sigma),
-    );
-    if let Some(k) = known {
-        out.push((sphere.radius - 0.5 * k.diameter) / (0.5 * k.sigma));
-    }
-    Ok(sphere)
 }
 
 /// Unit direction in which a point `x` of `plane` moves when its stripe's centre moves: the
@@ -577,6 +226,9 @@ fn fit_line(points: &[Vec2]) -> Option<(Vec2, Vec2)> {
     fit(&kept)
 }
 
+/// A section's own shape at an in-plane point: its normal there and the point's distance.
+type OwnShape = dyn Fn(&Vec2) -> Option<(Vec2, f64)>;
+
 /// The robust scale `1.4826·median|r|`.
 fn robust_scale(r: &[f64]) -> f64 {
     let mut a: Vec<f64> = r.iter().map(|x| x.abs()).collect();
@@ -684,10 +336,7 @@ fn prepare(nominal: &[LaserPlane], views: &[ReferenceView]) -> (Vec<Prepared>, V
 }
 
 /// One view of [`prepare`].
-fn prepare_view(
-    nominal: &[LaserPlane],
-    view: &ReferenceView,
-) -> Result<Prepared, CalibrateError> {
+fn prepare_view(nominal: &[LaserPlane], view: &ReferenceView) -> Result<Prepared, CalibrateError> {
     let robust = RobustParams {
         min_scale: 0.0,
         ..RobustParams::default()
@@ -716,7 +365,7 @@ fn prepare_view(
                 .collect();
             // The section's own shape: a circle on a ball, a straight line on a wall; for a
             // point, the shape's in-plane normal there and the point's distance from it.
-            let own: Box<dyn Fn(&Vec2) -> Option<(Vec2, f64)>> = match view.start {
+            let own: Box<OwnShape> = match view.start {
                 Surface::Sphere(_) => {
                     let mut scratch = vec![0.0; flat.len()];
                     let circle = fit_hyper(&flat)
@@ -772,10 +421,7 @@ fn prepare_view(
         // The surface of the uncorrected planes, the start of every re-fit.
         let all: Vec<Observed> = kept.iter().map(|(_, o)| *o).collect();
         let surface = fit_fixed(&all, None, &view.start, &mut Vec::new()).map_err(|e| {
-            CalibrateError::Refinement(format!(
-                "{}: no surface through its points: {e}",
-                view.name
-            ))
+            CalibrateError::Refinement(format!("{}: no surface through its points: {e}", view.name))
         })?;
         Ok(Prepared {
             name: view.name.clone(),

@@ -3,10 +3,12 @@
 
 use super::*;
 use crate::calibration_draw::drawn;
+use crate::capture::Capture;
 use crate::simulate::sphere_corpus::mid_plane_y;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use rand_pcg::Pcg64;
+use tangent_core::solvers::sphere_sections::Sphere;
 
 /// The board calibration's σ of `e` and `δ` only (the camera exact).
 fn planes_only() -> NoiseModel {
@@ -254,9 +256,8 @@ fn rendered_views_of_a_flat_wall_restore_the_three_planes_relative_tilts() {
     let captures: Vec<Capture> = (0..6)
         .map(|i| simulate(&reference_wall_spec(i, 7, true)).unwrap().0)
         .collect();
-    let relative = |c: &Calibration, k: usize| {
-        c.planes[k].baseline_tilt().1 - c.planes[0].baseline_tilt().1
-    };
+    let relative =
+        |c: &Calibration, k: usize| c.planes[k].baseline_tilt().1 - c.planes[0].baseline_tilt().1;
     for seed in 0..3 {
         let off = drawn(&truth, &prior, seed).unwrap();
         let v: Vec<ReferenceView> = captures
@@ -280,7 +281,11 @@ fn rendered_views_of_a_flat_wall_restore_the_three_planes_relative_tilts() {
             after[0].abs() < 3.5 * fit.relative_tilt_sigma,
             "seed {seed}: {after:?}"
         );
-        assert!(fit.relative_tilt_sigma < 0.25 * prior.tilt, "{}", fit.relative_tilt_sigma);
+        assert!(
+            fit.relative_tilt_sigma < 0.25 * prior.tilt,
+            "{}",
+            fit.relative_tilt_sigma
+        );
         assert!(after[1].abs() < 0.05 * prior.tilt, "seed {seed}: {after:?}");
     }
 }

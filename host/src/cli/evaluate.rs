@@ -70,7 +70,11 @@ pub struct Args {
     /// rendered session of the reference ball (`tangent calibrate ball`,
     /// `docs/calibration.md` section 12) before measuring; this many sessions, shared round
     /// robin by the captures' seeds.
-    #[arg(long, requires = "calibration_errors", conflicts_with = "wall_sessions")]
+    #[arg(
+        long,
+        requires = "calibration_errors",
+        conflicts_with = "wall_sessions"
+    )]
     ball_sessions: Option<u64>,
     /// With --calibration-errors: refine each drawn calibration on a rendered session of a
     /// flat wall (`tangent calibrate wall`, `docs/calibration.md` section 13) of the head

@@ -237,7 +237,8 @@ pub fn reference_wall_spec(i: u64, session: u64, crossing: bool) -> SimSpec {
     let yaw = [12.0, -15.0, 6.0, -8.0, 15.0, -4.0][(i % 6) as usize];
     let pitch = [-5.0, 3.0, 5.0, -2.0, -4.0, 4.0][(i % 6) as usize];
     let mut params = SimParams {
-        seed: super::scene::splitmix(session.wrapping_mul(0x9E37_79B9) ^ (i + 101)) & ((1 << 62) - 1),
+        seed: super::scene::splitmix(session.wrapping_mul(0x9E37_79B9) ^ (i + 101))
+            & ((1 << 62) - 1),
         lit_planes: if crossing { vec![0, 1, 2] } else { vec![0, 1] },
         ..SimParams::default()
     };
@@ -245,7 +246,9 @@ pub fn reference_wall_spec(i: u64, session: u64, crossing: bool) -> SimSpec {
     params.accelerometer = None;
     SimSpec {
         mode: Mode::Wall,
-        description: format!("reference wall, view {i} at {z:.1} m, turned {yaw}°, tilted {pitch}°"),
+        description: format!(
+            "reference wall, view {i} at {z:.1} m, turned {yaw}°, tilted {pitch}°"
+        ),
         timestamp: "2025-06-02T12:00:00Z".into(),
         calibration: if crossing {
             three_plane_calibration()
