@@ -341,95 +341,91 @@ fn prepare_view(nominal: &[LaserPlane], view: &ReferenceView) -> Result<Prepared
         min_scale: 0.0,
         ..RobustParams::default()
     };
-    {
-        let mut kept = Vec::new();
-        for (k, pts) in view.planes.iter().enumerate() {
-            let refuse = |why: String| {
-                CalibrateError::Refinement(format!("{}: laser {k}: {why}", view.name))
-            };
-            let too_few = |n: usize| {
-                refuse(format!(
-                    "{n} points on the reference, at least {MIN_SECTION_POINTS} needed; aim \
-                     so that every line crosses it"
-                ))
-            };
-            if pts.len() < MIN_SECTION_POINTS {
-                return Err(too_few(pts.len()));
-            }
-            let plane = &nominal[k];
-            let a = plane.normal.cross(&Vec3::z()).normalize();
-            let b = plane.normal.cross(&a);
-            let flat: Vec<Vec2> = pts
-                .iter()
-                .map(|x| Vec2::new(x.dot(&a), x.dot(&b)))
-                .collect();
-            // The section's own shape: a circle on a ball, a straight line on a wall; for a
-            // point, the shape's in-plane normal there and the point's distance from it.
-            let own: Box<OwnShape> = match view.start {
-                Surface::Sphere(_) => {
-                    let mut scratch = vec![0.0; flat.len()];
-                    let circle = fit_hyper(&flat)
-                        .and_then(|c| fit_robust(&flat, c, &robust, &mut scratch))
-                        .map_err(|e| refuse(format!("no circle through the section: {e}")))?
-                        .circle;
-                    Box::new(move |f: &Vec2| {
-                        let radial = (f - circle.centre).try_normalize(0.0)?;
-                        Some((radial, (f - circle.centre).norm() - circle.radius))
-                    })
-                }
-                Surface::Plane { .. } => {
-                    let (centre, normal) = fit_line(&flat)
-                        .ok_or_else(|| refuse("its points do not make a line".into()))?;
-                    Box::new(move |f: &Vec2| Some((normal, (f - centre).dot(&normal))))
-                }
-            };
-            // (index, L, move along L) of the points whose L is within 60° of the normal.
-            let moves: Vec<(usize, Vec3, f64)> = pts
-                .iter()
-                .zip(&flat)
-                .enumerate()
-                .filter_map(|(i, (x, f))| {
-                    let along = displacement(plane, x);
-                    let (normal, d) = own(f)?;
-                    let cos = Vec2::new(along.dot(&a), along.dot(&b)).dot(&normal);
-                    (cos.abs() >= MIN_RADIAL_SHARE).then_some((i, along, d / cos))
-                })
-                .collect();
-            let t: Vec<f64> = moves.iter().map(|m| m.2).collect();
-            let cut = OUTLIER_CUT * robust_scale(&t);
-            let on_ball: Vec<&(usize, Vec3, f64)> =
-                moves.iter().filter(|m| m.2.abs() <= cut).collect();
-            if on_ball.len() < MIN_SECTION_POINTS {
-                return Err(too_few(on_ball.len()));
-            }
-            let kept_t: Vec<f64> = on_ball.iter().map(|m| m.2).collect();
-            let sigma = robust_scale(&kept_t) * correlation_length(&kept_t).max(1.0).sqrt();
-            if !(sigma > 0.0 && sigma.is_finite()) {
-                return Err(refuse("the points have no spread about their shape".into()));
-            }
-            kept.extend(on_ball.iter().map(|&&(i, along, _)| {
-                (
-                    k,
-                    Observed {
-                        x: pts[i],
-                        along,
-                        sigma,
-                    },
-                )
-            }));
+    let mut kept = Vec::new();
+    for (k, pts) in view.planes.iter().enumerate() {
+        let refuse =
+            |why: String| CalibrateError::Refinement(format!("{}: laser {k}: {why}", view.name));
+        let too_few = |n: usize| {
+            refuse(format!(
+                "{n} points on the reference, at least {MIN_SECTION_POINTS} needed; aim \
+                 so that every line crosses it"
+            ))
+        };
+        if pts.len() < MIN_SECTION_POINTS {
+            return Err(too_few(pts.len()));
         }
-        // The surface of the uncorrected planes, the start of every re-fit.
-        let all: Vec<Observed> = kept.iter().map(|(_, o)| *o).collect();
-        let surface = fit_fixed(&all, None, &view.start, &mut Vec::new()).map_err(|e| {
-            CalibrateError::Refinement(format!("{}: no surface through its points: {e}", view.name))
-        })?;
-        Ok(Prepared {
-            name: view.name.clone(),
-            given: view.planes.iter().map(Vec::len).sum(),
-            kept,
-            surface,
-        })
+        let plane = &nominal[k];
+        let a = plane.normal.cross(&Vec3::z()).normalize();
+        let b = plane.normal.cross(&a);
+        let flat: Vec<Vec2> = pts
+            .iter()
+            .map(|x| Vec2::new(x.dot(&a), x.dot(&b)))
+            .collect();
+        // The section's own shape: a circle on a ball, a straight line on a wall; for a
+        // point, the shape's in-plane normal there and the point's distance from it.
+        let own: Box<OwnShape> = match view.start {
+            Surface::Sphere(_) => {
+                let mut scratch = vec![0.0; flat.len()];
+                let circle = fit_hyper(&flat)
+                    .and_then(|c| fit_robust(&flat, c, &robust, &mut scratch))
+                    .map_err(|e| refuse(format!("no circle through the section: {e}")))?
+                    .circle;
+                Box::new(move |f: &Vec2| {
+                    let radial = (f - circle.centre).try_normalize(0.0)?;
+                    Some((radial, (f - circle.centre).norm() - circle.radius))
+                })
+            }
+            Surface::Plane { .. } => {
+                let (centre, normal) = fit_line(&flat)
+                    .ok_or_else(|| refuse("its points do not make a line".into()))?;
+                Box::new(move |f: &Vec2| Some((normal, (f - centre).dot(&normal))))
+            }
+        };
+        // (index, L, move along L) of the points whose L is within 60° of the normal.
+        let moves: Vec<(usize, Vec3, f64)> = pts
+            .iter()
+            .zip(&flat)
+            .enumerate()
+            .filter_map(|(i, (x, f))| {
+                let along = displacement(plane, x);
+                let (normal, d) = own(f)?;
+                let cos = Vec2::new(along.dot(&a), along.dot(&b)).dot(&normal);
+                (cos.abs() >= MIN_RADIAL_SHARE).then_some((i, along, d / cos))
+            })
+            .collect();
+        let t: Vec<f64> = moves.iter().map(|m| m.2).collect();
+        let cut = OUTLIER_CUT * robust_scale(&t);
+        let on_ball: Vec<&(usize, Vec3, f64)> = moves.iter().filter(|m| m.2.abs() <= cut).collect();
+        if on_ball.len() < MIN_SECTION_POINTS {
+            return Err(too_few(on_ball.len()));
+        }
+        let kept_t: Vec<f64> = on_ball.iter().map(|m| m.2).collect();
+        let sigma = robust_scale(&kept_t) * correlation_length(&kept_t).max(1.0).sqrt();
+        if !(sigma > 0.0 && sigma.is_finite()) {
+            return Err(refuse("the points have no spread about their shape".into()));
+        }
+        kept.extend(on_ball.iter().map(|&&(i, along, _)| {
+            (
+                k,
+                Observed {
+                    x: pts[i],
+                    along,
+                    sigma,
+                },
+            )
+        }));
     }
+    // The surface of the uncorrected planes, the start of every re-fit.
+    let all: Vec<Observed> = kept.iter().map(|(_, o)| *o).collect();
+    let surface = fit_fixed(&all, None, &view.start, &mut Vec::new()).map_err(|e| {
+        CalibrateError::Refinement(format!("{}: no surface through its points: {e}", view.name))
+    })?;
+    Ok(Prepared {
+        name: view.name.clone(),
+        given: view.planes.iter().map(Vec::len).sum(),
+        kept,
+        surface,
+    })
 }
 
 /// Refines the planes of `calibration` (each plane's `e` and `δ`; roll and camera kept) on
