@@ -25,6 +25,31 @@ fn relative_tilt(c: &tangent_core::calibration::Calibration) -> f64 {
     c.planes[1].baseline_tilt().1 - c.planes[0].baseline_tilt().1
 }
 
+/// Runs `command views… --calib calib`, which must succeed: its arguments, its output and
+/// the σ of laser 1's tilt against laser 0's it prints ("laser 1 against laser 0: δ ±
+/// 0.0660 mrad").
+fn refine(command: &[&str], views: &[PathBuf], calib: &Path) -> (Vec<String>, String, f64) {
+    let mut args: Vec<String> = command.iter().map(|a| a.to_string()).collect();
+    args.extend(views.iter().map(|v| v.display().to_string()));
+    args.extend(["--calib".into(), calib.display().to_string()]);
+    let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+    let out = tangent(&refs);
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    eprintln!("{stdout}");
+    let sigma_mrad: f64 = stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("laser 1 against laser 0: δ ± "))
+        .and_then(|l| l.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("{stdout}"));
+    (args, stdout, sigma_mrad)
+}
+
 /// Six views rendered into `dir`, their paths.
 fn write_views(dir: &Path) -> Vec<PathBuf> {
     (0..6)
@@ -54,25 +79,8 @@ fn the_ball_command_restores_the_planes_relative_tilt_and_keeps_the_rest() {
         std::fs::read_to_string(&calib).unwrap() + "\n[road]\nheight_scale = 1.01\n",
     )
     .unwrap();
-    let mut args: Vec<String> = vec!["calibrate".into(), "ball".into()];
-    args.extend(views.iter().map(|v| v.display().to_string()));
-    args.extend(["--calib".into(), calib.display().to_string()]);
+    let (args, stdout, sigma_mrad) = refine(&["calibrate", "ball"], &views, &calib);
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    let out = tangent(&args);
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{stdout}{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    // The printed σ of the relative tilt, e.g. "laser 1 against laser 0: δ ± 0.0660 mrad".
-    let sigma_mrad: f64 = stdout
-        .lines()
-        .find_map(|l| l.strip_prefix("laser 1 against laser 0: δ ± "))
-        .and_then(|l| l.split_whitespace().next())
-        .and_then(|v| v.parse().ok())
-        .unwrap_or_else(|| panic!("{stdout}"));
-    eprintln!("{stdout}");
     let refined = calibration_file::read(&calib).unwrap();
     let before = (relative_tilt(&off) - relative_tilt(&truth)) * 1e3;
     let after = (relative_tilt(&refined) - relative_tilt(&truth)) * 1e3;
@@ -140,24 +148,8 @@ fn the_wall_command_restores_the_three_planes_relative_tilts() {
     let off = drawn(&truth, &noise, 4).unwrap();
     let calib = tmp.path().join("unit.toml");
     calibration_file::write(&calib, &off).unwrap();
-    let mut args: Vec<String> = vec!["calibrate".into(), "wall".into()];
-    args.extend(views.iter().map(|v| v.display().to_string()));
-    args.extend(["--calib".into(), calib.display().to_string()]);
+    let (args, stdout, sigma_mrad) = refine(&["calibrate", "wall"], &views, &calib);
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    let out = tangent(&args);
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{stdout}{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    eprintln!("{stdout}");
-    let sigma_mrad: f64 = stdout
-        .lines()
-        .find_map(|l| l.strip_prefix("laser 1 against laser 0: δ ± "))
-        .and_then(|l| l.split_whitespace().next())
-        .and_then(|v| v.parse().ok())
-        .unwrap_or_else(|| panic!("{stdout}"));
     let refined = calibration_file::read(&calib).unwrap();
     let relative = |c: &tangent_core::calibration::Calibration, k: usize| {
         (c.planes[k].baseline_tilt().1 - c.planes[0].baseline_tilt().1) * 1e3

@@ -444,7 +444,8 @@ pub fn refine_planes(
     let nominal: &[LaserPlane] = &calibration.planes;
     if nominal.len() < 2 {
         return Err(CalibrateError::Undetermined(
-            "a ball refines the planes against each other: the calibration has one plane".into(),
+            "a reference refines the planes against each other: the calibration has one plane"
+                .into(),
         ));
     }
     if views.len() < MIN_VIEWS {
@@ -470,7 +471,7 @@ pub fn refine_planes(
         2 => refine_n::<4>(calibration, views, prior, known),
         3 => refine_n::<6>(calibration, views, prior, known),
         n => Err(CalibrateError::Refinement(format!(
-            "{n} planes: the ball refinement handles two or three"
+            "{n} planes: the refinement handles two or three"
         ))),
     }
 }

@@ -10,7 +10,7 @@ use tangent_core::solvers::stem::CylinderParams;
 use super::super::CalibrateError;
 use super::Surface;
 use crate::capture::{Capture, Mode};
-use crate::measure::{measure_loaded, Solved};
+use crate::measure::{measure_loaded, Outcome, Solved};
 
 /// One capture of the reference: each plane's 3-D points as the calibration being refined
 /// triangulated them, and that calibration's surface as the start.
@@ -24,6 +24,28 @@ pub struct ReferenceView {
     pub start: Surface,
 }
 
+/// `capture` measured with `calibration` by its own instrument, which must be `mode`
+/// (`word` in the refusal); errors name the capture.
+fn measured(
+    capture: &Capture,
+    calibration: &Calibration,
+    name: &str,
+    mode: Mode,
+    word: &'static str,
+) -> Result<Outcome, CalibrateError> {
+    if capture.meta.mode != mode {
+        return Err(CalibrateError::NotAReferenceCapture(name.to_string(), word));
+    }
+    measure_loaded(
+        capture,
+        name,
+        Some(calibration),
+        &PipelineConfig::default(),
+        &CylinderParams::default(),
+    )
+    .map_err(|e| CalibrateError::Refinement(format!("{name}: {e}")))
+}
+
 impl ReferenceView {
     /// The view of `capture` (a sphere-mode capture of the ball) measured with
     /// `calibration`, the one being refined. Errors name the capture: not a sphere capture,
@@ -34,20 +56,7 @@ impl ReferenceView {
         name: &str,
     ) -> Result<ReferenceView, CalibrateError> {
         let refuse = |why: String| CalibrateError::Refinement(format!("{name}: {why}"));
-        if capture.meta.mode != Mode::Sphere {
-            return Err(CalibrateError::NotAReferenceCapture(
-                name.to_string(),
-                "sphere",
-            ));
-        }
-        let outcome = measure_loaded(
-            capture,
-            name,
-            Some(calibration),
-            &PipelineConfig::default(),
-            &CylinderParams::default(),
-        )
-        .map_err(|e| refuse(e.to_string()))?;
+        let outcome = measured(capture, calibration, name, Mode::Sphere, "sphere")?;
         let m = match &outcome.result {
             Ok(Solved::Sphere(m)) => m,
             Ok(_) => return Err(refuse("not measured as a sphere".into())),
@@ -76,20 +85,7 @@ impl ReferenceView {
         name: &str,
     ) -> Result<ReferenceView, CalibrateError> {
         let refuse = |why: String| CalibrateError::Refinement(format!("{name}: {why}"));
-        if capture.meta.mode != Mode::Wall {
-            return Err(CalibrateError::NotAReferenceCapture(
-                name.to_string(),
-                "wall",
-            ));
-        }
-        let outcome = measure_loaded(
-            capture,
-            name,
-            Some(calibration),
-            &PipelineConfig::default(),
-            &CylinderParams::default(),
-        )
-        .map_err(|e| refuse(e.to_string()))?;
+        let outcome = measured(capture, calibration, name, Mode::Wall, "wall")?;
         let profile = match &outcome.result {
             Ok(solved) => solved.profile(),
             Err(e) => return Err(refuse(format!("no wall: {e}"))),
