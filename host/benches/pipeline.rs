@@ -159,9 +159,9 @@ fn bench_sphere(c: &mut Criterion) {
     }
 }
 
-/// `tangent calibrate ball`'s refinement on six rendered views of the reference ball
-/// (`docs/calibration.md` §12), the views measured once with a drawn calibration: the cost of
-/// the variable-projection fit alone.
+/// `tangent calibrate ball`'s and `wall`'s refinement on six rendered views of the reference
+/// ball and of a flat wall (`docs/calibration.md` §12–13), the views measured once with a
+/// drawn calibration: the cost of the variable-projection fit alone.
 fn bench_ball_refinement(c: &mut Criterion) {
     use tangent_host::calibrate::reference::{refine_planes, ReferenceView};
     use tangent_host::simulate::{simulate, sphere_corpus::reference_ball_spec};
@@ -178,6 +178,23 @@ fn bench_ball_refinement(c: &mut Criterion) {
         .filter_map(|(capture, _)| ReferenceView::of_ball(&capture, &off, "view").ok())
         .collect();
     c.bench_function("refine_planes_ball_six_views", |b| {
+        b.iter(|| refine_planes(&off, &views, &noise, None).map(|f| f.relative_tilt_sigma))
+    });
+    // The same on six views of a flat wall, three-line head (§13): six plane parameters.
+    let truth = tangent_host::simulate::rig::three_plane_calibration();
+    let Ok(off) = tangent_host::calibration_draw::drawn(&truth, &noise, 3) else {
+        return;
+    };
+    let views: Vec<ReferenceView> = (0..6)
+        .filter_map(|i| {
+            simulate(&tangent_host::simulate::wall_corpus::reference_wall_spec(
+                i, 7, true,
+            ))
+            .ok()
+        })
+        .filter_map(|(capture, _)| ReferenceView::of_wall(&capture, &off, "view").ok())
+        .collect();
+    c.bench_function("refine_planes_wall_six_views", |b| {
         b.iter(|| refine_planes(&off, &views, &noise, None).map(|f| f.relative_tilt_sigma))
     });
 }
