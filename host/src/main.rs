@@ -16,8 +16,9 @@ struct Cli {
 #[derive(Subcommand, Debug)]
 enum Command {
     // Each variant: `Name(cli::name::Args)`; keep one per line, alphabetical.
-    /// Compute a calibration: camera from chessboard images, laser planes from board captures
-    /// (`calibrate camera`, `calibrate laser`).
+    /// Compute a calibration: camera from chessboard images, laser planes from board captures,
+    /// the planes refined against each other on a ball or a flat wall (`calibrate camera`,
+    /// `laser`, `ball`, `wall`; also `road`, `accelerometer`).
     Calibrate(cli::calibrate::Args),
     /// The calibration stored on the device: copy a file to it or read it back
     /// (`device-calibration push|pull`).
