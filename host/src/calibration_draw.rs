@@ -232,4 +232,50 @@ mod tests {
         assert!((rms(e2) / noise.baseline - 1.0).abs() < 0.05, "{}", rms(e2));
         assert!((rms(d2) / noise.tilt - 1.0).abs() < 0.05, "{}", rms(d2));
     }
+
+    /// What an evaluation measures with under `--ball-sessions`: a two-plane capture's drawn
+    /// calibration refined (its planes' relative tilt nearer the truth than the draw), a
+    /// one-plane capture's left drawn (no reference refines one plane), and a capture of
+    /// another head refused with both heads named.
+    #[test]
+    fn the_sessions_refine_their_own_head_and_leave_one_plane_drawn() {
+        let sessions = ReferenceSessions::render(ReferenceKind::Ball, 1).unwrap();
+        let noise = NoiseModel {
+            focal_px: 0.0,
+            ..NoiseModel::reference()
+        };
+        let capture = sessions.sessions[0][2].clone();
+        let truth = capture.calibration.clone();
+        let used = CalibrationUsed::Refined(&sessions);
+        let relative =
+            |c: &Calibration| c.planes[1].baseline_tilt().1 - c.planes[0].baseline_tilt().1;
+        let seed = 5;
+        let drawn_cal = drawn(&truth, &noise, seed).unwrap();
+        let refined = used.apply(&capture, &noise, seed).unwrap().unwrap();
+        let before = (relative(&drawn_cal) - relative(&truth)).abs();
+        let after = (relative(&refined.calibration) - relative(&truth)).abs();
+        assert!(after < 0.5 * before, "{before} → {after}");
+
+        let one = Calibration::new(truth.id, truth.camera, &truth.planes[..1]).unwrap();
+        let one_plane = Capture {
+            calibration: one.clone(),
+            ..capture.clone()
+        };
+        let kept = used.apply(&one_plane, &noise, seed).unwrap().unwrap();
+        assert_eq!(kept.calibration, drawn(&one, &noise, seed).unwrap());
+
+        let three = crate::simulate::rig::three_plane_calibration();
+        let other_head = Capture {
+            calibration: three,
+            ..capture
+        };
+        let err = used
+            .apply(&other_head, &noise, seed)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("3-plane head") && err.contains("2-plane head"),
+            "{err}"
+        );
+    }
 }
