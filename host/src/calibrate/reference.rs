@@ -56,8 +56,8 @@ pub const MIN_SECTION_POINTS: usize = 30;
 /// section's radius for the point to be used (60°; see [`prepare`]).
 pub const MIN_RADIAL_SHARE: f64 = 0.5;
 
-/// Tukey-style hard cut (robust-scale units) that sets a point aside as not on the ball
-/// (a stand, a floor): the biweight's zero-weight point, as in the sphere fits.
+/// Tukey-style hard cut (robust-scale units) that sets a point aside as not on the reference
+/// (a stand, a floor, a cable): the biweight's zero-weight point, as in the sphere fits.
 pub const OUTLIER_CUT: f64 = 4.685;
 
 /// Largest posterior σ of the planes' relative tilt the refinement accepts, as a share of
@@ -312,9 +312,9 @@ impl<const N: usize> LeastSquares<N> for Planes<'_> {
     }
 }
 
-/// Each view's points on the ball with their `L` and σ: every section alone is fitted by a
-/// robust circle in its plane. A calibration error moves and scales a whole section, which
-/// its own circle absorbs, so these residuals are the points' noise alone, whatever the
+/// Each view's points on the reference with their `L` and σ: every section alone is fitted by its
+/// own shape in its plane (a robust circle on a ball, a straight line on a wall). A
+/// calibration error moves and scales a whole section, which its own shape absorbs, so these residuals are the points' noise alone, whatever the
 /// calibration's error. Each residual is turned into the move along `L` that explains it
 /// (`d/(L·m̂)`, `m̂` the circle's radial direction); points where `L` is more than 60° off
 /// the radial direction (the limbs: a move there hardly leaves the surface, so they carry
@@ -395,16 +395,17 @@ fn prepare_view(nominal: &[LaserPlane], view: &ReferenceView) -> Result<Prepared
             .collect();
         let t: Vec<f64> = moves.iter().map(|m| m.2).collect();
         let cut = OUTLIER_CUT * robust_scale(&t);
-        let on_ball: Vec<&(usize, Vec3, f64)> = moves.iter().filter(|m| m.2.abs() <= cut).collect();
-        if on_ball.len() < MIN_SECTION_POINTS {
-            return Err(too_few(on_ball.len()));
+        let on_reference: Vec<&(usize, Vec3, f64)> =
+            moves.iter().filter(|m| m.2.abs() <= cut).collect();
+        if on_reference.len() < MIN_SECTION_POINTS {
+            return Err(too_few(on_reference.len()));
         }
-        let kept_t: Vec<f64> = on_ball.iter().map(|m| m.2).collect();
+        let kept_t: Vec<f64> = on_reference.iter().map(|m| m.2).collect();
         let sigma = robust_scale(&kept_t) * correlation_length(&kept_t).max(1.0).sqrt();
         if !(sigma > 0.0 && sigma.is_finite()) {
             return Err(refuse("the points have no spread about their shape".into()));
         }
-        kept.extend(on_ball.iter().map(|&&(i, along, _)| {
+        kept.extend(on_reference.iter().map(|&&(i, along, _)| {
             (
                 k,
                 Observed {
@@ -429,8 +430,9 @@ fn prepare_view(nominal: &[LaserPlane], view: &ReferenceView) -> Result<Prepared
 }
 
 /// Refines the planes of `calibration` (each plane's `e` and `δ`; roll and camera kept) on
-/// `views` of one ball, each plane's prior the board calibration's σ in `prior`
-/// (`NoiseModel::baseline`, `::tilt`). With `known` the ball's certified diameter joins.
+/// `views` of one reference (a ball or a flat wall), each plane's prior the board
+/// calibration's σ in `prior` (`NoiseModel::baseline`, `::tilt`). With `known` a ball's
+/// certified diameter joins.
 ///
 /// Errors: fewer than [`MIN_VIEWS`] views or two planes; a view whose section keeps
 /// fewer than [`MIN_SECTION_POINTS`]; no convergence; views that leave the relative tilt
@@ -532,9 +534,9 @@ fn refine_n<const N: usize>(
         .collect();
     if relative_tilt_sigma > MAX_RELATIVE_TILT_SHARE * std::f64::consts::SQRT_2 * prior.tilt {
         return Err(CalibrateError::Undetermined(format!(
-            "the ball views determine the planes' relative tilt to σ = {:.3} mrad only (the \
-             board's {:.3} mrad); add views at other distances (0.5–1.5 m) with both lines \
-             across the ball",
+            "the views determine the planes' relative tilt to σ = {:.3} mrad only (the \
+             board's {:.3} mrad); add views at other distances (a ball at 0.5–1.5 m, a wall \
+             at 1–3 m) with every line across the reference",
             relative_tilt_sigma * 1e3,
             std::f64::consts::SQRT_2 * prior.tilt * 1e3
         )));
