@@ -27,6 +27,10 @@
 //! offset_m = 0.099778
 //! source_m = [0.0, 0.1, 0.0]
 //!
+//! [planes_uncertainty]         # `tangent calibrate ball|wall`; optional (docs/calibration.md §14)
+//! sigma = [2.0e-4, 1.9e-4, 2.0e-4, 1.9e-4]      # 1σ of e₀ (m), δ₀ (rad), e₁, δ₁, …
+//! correlation = [[1.0, 0.1, 0.9, 0.1], [0.1, 1.0, 0.1, 0.95], [0.9, 0.1, 1.0, 0.1], [0.1, 0.95, 0.1, 1.0]]
+//!
 //! [road]                       # road head only: piezo height-scale calibration; optional
 //! height_scale = 0.9901
 //!
@@ -47,7 +51,9 @@
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
-use tangent_core::calibration::{Calibration, CalibrationError, MAX_PLANES};
+use tangent_core::calibration::{
+    Calibration, CalibrationError, PlanesUncertainty, UncertaintyError, MAX_PLANES,
+};
 use tangent_core::camera::{Camera, Distortion};
 use tangent_core::laser_plane::LaserPlane;
 use tangent_core::real::{Real, Vec3};
@@ -91,6 +97,9 @@ pub enum CalibrationFileError {
     /// The values parse but do not form a valid calibration (e.g. a normal of zero length).
     #[error("invalid calibration: {0}")]
     Invalid(CalibrationError),
+    /// `[planes_uncertainty]` is not a covariance of the planes' `(e, δ)`.
+    #[error("[planes_uncertainty]: {0}")]
+    Uncertainty(UncertaintyError),
     /// The file could not be read or written (always inside [`CalibrationFileError::File`],
     /// which names it).
     #[error("{0}")]
@@ -195,6 +204,10 @@ pub struct CalibrationToml {
     /// a camera-only file, [`parse_camera`], has none and does not write the key).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub planes: Vec<PlaneToml>,
+    /// The planes' `(e, δ)` covariance from a refinement on a reference
+    /// (`tangent calibrate ball` / `wall`); absent for independent board-calibrated planes.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub planes_uncertainty: Option<PlanesUncertaintyToml>,
     /// The road head's height-scale calibration (`docs/road.md`); absent on other heads.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub road: Option<RoadToml>,
@@ -202,6 +215,52 @@ pub struct CalibrationToml {
     /// absent on a device without one or not yet calibrated.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub accelerometer: Option<AccelerometerToml>,
+}
+
+/// `[planes_uncertainty]`: the 1σ of `e₀, δ₀, e₁, δ₁, …` (metres, radians) and their
+/// correlation matrix ([`PlanesUncertainty`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlanesUncertaintyToml {
+    /// 1σ of each parameter.
+    pub sigma: Vec<f64>,
+    /// Correlation, one row per parameter.
+    pub correlation: Vec<Vec<f64>>,
+}
+
+impl PlanesUncertaintyToml {
+    /// The table of a core covariance.
+    pub fn from_uncertainty(u: &PlanesUncertainty) -> Self {
+        let n = u.sigmas().len();
+        PlanesUncertaintyToml {
+            sigma: u.sigmas().iter().map(|&s| s as f64).collect(),
+            correlation: (0..n)
+                .map(|i| (0..n).map(|j| u.correlation(i, j) as f64).collect())
+                .collect(),
+        }
+    }
+
+    /// The core covariance, validated; a ragged matrix is refused by its shape.
+    pub fn to_uncertainty(&self) -> Result<PlanesUncertainty, CalibrationFileError> {
+        let n = self.sigma.len();
+        let entries: usize = self.correlation.iter().map(Vec::len).sum();
+        if self.correlation.len() != n || self.correlation.iter().any(|row| row.len() != n) {
+            return Err(CalibrationFileError::Uncertainty(
+                UncertaintyError::CorrelationShape {
+                    expected: n * n,
+                    got: entries,
+                },
+            ));
+        }
+        let sigma: Vec<Real> = self.sigma.iter().map(|&s| s as Real).collect();
+        let flat: Vec<Real> = self
+            .correlation
+            .iter()
+            .flatten()
+            .map(|&r| r as Real)
+            .collect();
+        PlanesUncertainty::new(&sigma, &flat).map_err(CalibrationFileError::Uncertainty)
+    }
 }
 
 /// `[accelerometer]`: bias, scale and the rotation of the sensor's axes into the camera
@@ -268,10 +327,18 @@ pub fn write_accelerometer(
 }
 
 /// Writes `calibration`'s laser planes as the `[[planes]]` of an existing calibration file,
-/// every other key (camera, id, `[road]`, `[accelerometer]`) kept; errors name the file.
+/// with their `[planes_uncertainty]` (removed when `calibration` has none), every other key
+/// (camera, id, `[road]`, `[accelerometer]`) kept; errors name the file.
 pub fn write_planes(path: &Path, calibration: &Calibration) -> Result<(), CalibrationFileError> {
-    let planes = CalibrationToml::from_calibration(calibration).planes;
-    update_file(path, |file| file.planes = planes)
+    let CalibrationToml {
+        planes,
+        planes_uncertainty,
+        ..
+    } = CalibrationToml::from_calibration(calibration);
+    update_file(path, |file| {
+        file.planes = planes;
+        file.planes_uncertainty = planes_uncertainty;
+    })
 }
 
 /// Reads the calibration file at `path`, changes it with `change` and writes it back, after
@@ -399,6 +466,10 @@ impl CalibrationToml {
                     source_m: a3(p.source),
                 })
                 .collect(),
+            planes_uncertainty: c
+                .uncertainty
+                .as_ref()
+                .map(PlanesUncertaintyToml::from_uncertainty),
             road: None,
             accelerometer: None,
         }
@@ -428,8 +499,17 @@ impl CalibrationToml {
             )?;
             planes.push(plane);
         }
-        let calibration =
+        let mut calibration =
             Calibration::new(self.id, camera, &planes).map_err(CalibrationFileError::Invalid)?;
+        if let Some(u) = &self.planes_uncertainty {
+            calibration =
+                calibration
+                    .with_uncertainty(u.to_uncertainty()?)
+                    .map_err(|e| match e {
+                        CalibrationError::Uncertainty(e) => CalibrationFileError::Uncertainty(e),
+                        e => CalibrationFileError::Invalid(e),
+                    })?;
+        }
         crate::calibration_bounds::check_camera(&calibration.camera)?;
         Ok(calibration)
     }

@@ -817,6 +817,7 @@ fn camera_only_file_round_trip() {
             },
         },
         planes: vec![],
+        planes_uncertainty: None,
         road: None,
         accelerometer: None,
     };

@@ -16,6 +16,10 @@ use crate::laser_plane::{LaserPlane, LaserPlaneError};
 use crate::real::Float;
 use crate::real::{Real, PI};
 
+mod uncertainty;
+
+pub use uncertainty::{PlanesUncertainty, UncertaintyError, PLANE_PARAMS};
+
 /// Most laser planes a calibration holds (the instrument has one or two; four leaves room
 /// for a cross-hair or a multi-line head without changing the wire format).
 pub const MAX_PLANES: usize = 4;
@@ -43,6 +47,8 @@ pub enum CalibrationError {
         /// Number of planes in the calibration.
         count: usize,
     },
+    /// The planes' uncertainty is invalid or does not cover the planes.
+    Uncertainty(UncertaintyError),
 }
 
 impl fmt::Display for CalibrationError {
@@ -62,6 +68,7 @@ impl fmt::Display for CalibrationError {
             CalibrationError::NoSuchPlane { index, count } => {
                 write!(f, "laser plane {index} requested, calibration has {count}")
             }
+            CalibrationError::Uncertainty(e) => write!(f, "calibration planes' uncertainty: {e}"),
         }
     }
 }
@@ -79,6 +86,11 @@ pub struct Calibration {
     pub camera: Camera,
     /// The laser planes, in the order of the laser outputs.
     pub planes: heapless::Vec<LaserPlane, MAX_PLANES>,
+    /// The planes' `(e, δ)` covariance when they were refined against each other on a
+    /// reference; `None`: each plane from its own board poses, the planes' errors independent
+    /// with the head's budget ([`crate::noise::NoiseModel`]).
+    #[serde(default)]
+    pub uncertainty: Option<PlanesUncertainty>,
 }
 
 impl Calibration {
@@ -89,9 +101,25 @@ impl Calibration {
         }
         let planes = heapless::Vec::from_slice(planes)
             .map_err(|_| CalibrationError::TooManyPlanes(planes.len()))?;
-        let calibration = Calibration { id, camera, planes };
+        let calibration = Calibration {
+            id,
+            camera,
+            planes,
+            uncertainty: None,
+        };
         calibration.validate()?;
         Ok(calibration)
+    }
+
+    /// The same calibration with the planes' covariance `uncertainty`, which must cover
+    /// exactly its planes.
+    pub fn with_uncertainty(
+        mut self,
+        uncertainty: PlanesUncertainty,
+    ) -> Result<Self, CalibrationError> {
+        self.uncertainty = Some(uncertainty);
+        self.validate()?;
+        Ok(self)
     }
 
     /// Checks the camera ([`Camera::validate`]) and every plane ([`LaserPlane::validate`]),
@@ -105,6 +133,16 @@ impl Calibration {
             plane
                 .validate()
                 .map_err(|error| CalibrationError::Plane { index, error })?;
+        }
+        if let Some(u) = &self.uncertainty {
+            if u.planes() != self.planes.len() {
+                return Err(CalibrationError::Uncertainty(
+                    UncertaintyError::PlaneCount {
+                        covers: u.planes(),
+                        planes: self.planes.len(),
+                    },
+                ));
+            }
         }
         Ok(())
     }
@@ -148,6 +186,7 @@ impl Calibration {
             id: 0,
             camera: Camera::reference_design(),
             planes,
+            uncertainty: None,
         }
     }
 }

@@ -14,7 +14,7 @@
 //! * [`wall`]: [`Mode::Wall`], walls by principal components: orientation, corner angle,
 //!   distance between parallel walls, segment length (`docs/building.md`).
 
-use crate::calibration::{Calibration, MAX_PLANES};
+use crate::calibration::{Calibration, PlanesUncertainty, MAX_PLANES};
 use crate::curve::CurvePoint;
 use crate::image::{Frame, Pixel};
 use crate::laser_plane::LaserPlane;
@@ -47,6 +47,7 @@ pub struct PlanePoints<'a> {
     curve: &'a [CurvePoint],
     curves: [&'a [Vec3]; MAX_PLANES],
     planes: &'a [LaserPlane],
+    uncertainty: Option<&'a PlanesUncertainty>,
     /// The image part of the chain (flags, saturation, frame-edge contact).
     pub profile: &'a Profile,
     /// The laser-on frame's [`Frame::max_value`] (for [`Profile::image_flags`]).
@@ -71,6 +72,7 @@ impl<'a> PlanePoints<'a> {
             curve: &[],
             curves,
             planes: &calibration.planes[..n],
+            uncertainty: calibration.uncertainty.as_ref(),
             profile,
             full_scale,
         }
@@ -91,6 +93,12 @@ impl<'a> PlanePoints<'a> {
     /// The laser planes, in the order of [`PlanePoints::curves`].
     pub fn planes(&self) -> &'a [LaserPlane] {
         self.planes
+    }
+
+    /// The calibration's covariance of the planes' `(e, δ)`, indexed as the calibration's
+    /// planes (those of [`PlanePoints::planes`] first); `None` when they are independent.
+    pub fn uncertainty(&self) -> Option<&'a PlanesUncertainty> {
+        self.uncertainty
     }
 
     /// Each plane's curve points beside [`PlanePoints::curves`] (empty slices without

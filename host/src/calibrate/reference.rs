@@ -26,10 +26,10 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 use nalgebra::{DMatrix, SMatrix, SVector};
-use tangent_core::calibration::Calibration;
+use tangent_core::calibration::{Calibration, CalibrationError, PlanesUncertainty};
 use tangent_core::laser_plane::LaserPlane;
 use tangent_core::noise::NoiseModel;
-use tangent_core::real::{Vec2, Vec3};
+use tangent_core::real::{Real, Vec2, Vec3};
 use tangent_core::solvers::circle::{fit_hyper, fit_robust, RobustParams};
 use tangent_core::solvers::correlation::correlation_length;
 use tangent_core::solvers::lm::{minimise, Evaluated, LeastSquares, LmParams, NormalEquations};
@@ -151,6 +151,30 @@ fn corrected_planes(
             .map_err(|_| SolveError::Degenerate)
         })
         .collect()
+}
+
+/// The posterior `cov` of the corrections (prior-σ units; `scale(i)` the prior σ of
+/// parameter `i`) as the planes' covariance the calibration carries (σ in SI, correlation):
+/// what a reading's calibration σ then uses (`docs/calibration.md` §14).
+fn posterior<const N: usize>(
+    cov: &SMatrix<f64, N, N>,
+    scale: impl Fn(usize) -> f64,
+) -> Result<PlanesUncertainty, CalibrationError> {
+    let sd: Vec<f64> = (0..N).map(|i| cov[(i, i)].max(0.0).sqrt()).collect();
+    let sigma: Vec<Real> = (0..N).map(|i| (sd[i] * scale(i)) as Real).collect();
+    let mut correlation = vec![0.0 as Real; N * N];
+    for i in 0..N {
+        for j in 0..N {
+            correlation[i * N + j] = if i == j {
+                1.0
+            } else if sd[i] > 0.0 && sd[j] > 0.0 {
+                (cov[(i, j)] / (sd[i] * sd[j])).clamp(-1.0, 1.0) as Real
+            } else {
+                0.0
+            };
+        }
+    }
+    PlanesUncertainty::new(&sigma, &correlation).map_err(CalibrationError::Uncertainty)
 }
 
 /// A triangulated point moved along its ray onto the plane `to` (`X' = X·d'/(n'·X)`).
@@ -544,7 +568,8 @@ fn refine_n<const N: usize>(
     let planes = corrected_planes(nominal, u.as_slice(), prior)
         .map_err(|e| CalibrateError::Refinement(format!("corrected planes: {e}")))?;
     let refined = Calibration::new(calibration.id, calibration.camera, &planes)
-        .map_err(|e| CalibrateError::Refinement(format!("refined calibration: {e:?}")))?;
+        .and_then(|c| c.with_uncertainty(posterior(&cov, &scales)?))
+        .map_err(|e| CalibrateError::Refinement(format!("refined calibration: {e}")))?;
     let surfaces = |u: &[f64]| {
         let plain = Planes {
             known: None,

@@ -535,6 +535,8 @@ fn camera(
             },
         },
         planes: existing.map(|e| e.2).unwrap_or_default(),
+        // A refinement's covariance was of the planes seen through the old camera.
+        planes_uncertainty: None,
         road: None,
         accelerometer: None,
     };

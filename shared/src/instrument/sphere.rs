@@ -60,6 +60,7 @@ impl Instrument for Sphere {
             curves,
             sigmas: &sigmas[..curves.len()],
             planes: points.planes(),
+            uncertainty: points.uncertainty(),
         };
         let scratch = sphere::Scratch {
             points: scratch.points,

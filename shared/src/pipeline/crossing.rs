@@ -68,6 +68,9 @@ pub fn transposed_calibration(
         id: calibration.id,
         camera: transposed_camera(&calibration.camera),
         planes,
+        // The transposed plane is one plane out of several: its own share of the covariance
+        // is not kept, and the board budget (the larger) stands.
+        uncertainty: None,
     })
 }
 

@@ -4,7 +4,9 @@
 use serde::{Deserialize, Serialize};
 
 use crate::accelerometer::{Alignment, MeanReading};
-use crate::calibration::{Calibration, CalibrationError, MAX_PLANES};
+use crate::calibration::{
+    Calibration, CalibrationError, PlanesUncertainty, MAX_PLANES, PLANE_PARAMS,
+};
 use crate::camera::{Camera, Distortion};
 use crate::laser_plane::LaserPlane;
 use crate::measurement::{Measurement, Mode};
@@ -439,6 +441,71 @@ pub struct WireCalibration {
     /// The accelerometer's calibration, when the device has one (protocol version 5): what
     /// turns its readings into gravity in the camera frame for the plumb.
     pub accelerometer: Option<WireAccelerometer>,
+    /// The planes' `(e, δ)` covariance after a refinement on a reference (protocol version
+    /// 6; [`Calibration::uncertainty`]), `None` for independent board-calibrated planes.
+    pub uncertainty: Option<WirePlanesUncertainty>,
+}
+
+/// Entries above the diagonal of a [`PLANE_PARAMS`]-square correlation.
+const UPPER_ENTRIES: usize = PLANE_PARAMS * (PLANE_PARAMS - 1) / 2;
+
+/// The planes' covariance on the wire ([`PlanesUncertainty`]), in `f32`: an uncertainty
+/// needs no more digits, and the whole record stays inside one frame.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WirePlanesUncertainty {
+    /// 1σ of `e₀, δ₀, e₁, δ₁, …` (metres, radians).
+    pub sigma: heapless::Vec<f32, PLANE_PARAMS>,
+    /// The correlation above its diagonal, row by row (`(0,1), (0,2), …, (1,2), …`).
+    pub correlation: heapless::Vec<f32, UPPER_ENTRIES>,
+}
+
+impl From<&PlanesUncertainty> for WirePlanesUncertainty {
+    fn from(u: &PlanesUncertainty) -> Self {
+        let n = u.sigmas().len();
+        let mut out = WirePlanesUncertainty {
+            sigma: heapless::Vec::new(),
+            correlation: heapless::Vec::new(),
+        };
+        // Both capacities are the largest `n` can need: these pushes cannot fail.
+        for &s in u.sigmas() {
+            let _ = out.sigma.push(s as f32);
+        }
+        for i in 0..n {
+            for j in i + 1..n {
+                let _ = out.correlation.push(u.correlation(i, j) as f32);
+            }
+        }
+        out
+    }
+}
+
+impl WirePlanesUncertainty {
+    /// The core's covariance, validated ([`PlanesUncertainty::new`]).
+    pub fn to_uncertainty(&self) -> Result<PlanesUncertainty, CalibrationError> {
+        let n = self.sigma.len();
+        let invalid = CalibrationError::Uncertainty;
+        if self.correlation.len() != n * n.saturating_sub(1) / 2 {
+            return Err(invalid(
+                crate::calibration::UncertaintyError::CorrelationShape {
+                    expected: n * n.saturating_sub(1) / 2,
+                    got: self.correlation.len(),
+                },
+            ));
+        }
+        let mut sigma = [0.0 as Real; PLANE_PARAMS];
+        let mut correlation = [0.0 as Real; PLANE_PARAMS * PLANE_PARAMS];
+        let mut upper = self.correlation.iter();
+        for i in 0..n {
+            sigma[i] = self.sigma[i] as Real;
+            correlation[i * n + i] = 1.0;
+            for j in i + 1..n {
+                let r = upper.next().copied().unwrap_or(Real::NAN as f32) as Real;
+                correlation[i * n + j] = r;
+                correlation[j * n + i] = r;
+            }
+        }
+        PlanesUncertainty::new(&sigma[..n], &correlation[..n * n]).map_err(invalid)
+    }
 }
 
 /// The accelerometer's calibration on the wire (`f64`): the core's
@@ -528,6 +595,7 @@ impl From<&Calibration> for WireCalibration {
             ],
             planes,
             accelerometer: None,
+            uncertainty: c.uncertainty.as_ref().map(WirePlanesUncertainty::from),
         }
     }
 }
@@ -562,10 +630,15 @@ impl WireCalibration {
                 source: v(p.source),
             });
         }
+        let uncertainty = match &self.uncertainty {
+            Some(u) => Some(u.to_uncertainty()?),
+            None => None,
+        };
         let calibration = Calibration {
             id: self.id,
             camera,
             planes,
+            uncertainty,
         };
         calibration.validate()?;
         Ok(calibration)

@@ -54,13 +54,14 @@ pub use framing::{
 pub use messages::{
     self_test, AccelReading, Board, DeviceError, DeviceInfo, ErrorCode, FrameSel, FrameSetInfo,
     FromDevice, LinkStats, Method, ModeStoreState, Reading, Request, Response, RunningStats,
-    SelfTestReport, ToDevice, WireAccelerometer, WireCalibration, WirePlane, UNSOLICITED,
+    SelfTestReport, ToDevice, WireAccelerometer, WireCalibration, WirePlane, WirePlanesUncertainty,
+    UNSOLICITED,
 };
 
 /// Version of this protocol, the first byte of every raw frame. Bump it on any change to
 /// the message types (postcard has no field names: adding a variant in the middle or a
 /// field changes the bytes). The history of versions is in `docs/protocol.md`.
-pub const PROTOCOL_VERSION: u8 = 5;
+pub const PROTOCOL_VERSION: u8 = 6;
 
 /// Most pixel bytes in one [`Response::FrameChunk`].
 pub const FRAME_CHUNK_MAX: usize = 512;
@@ -71,7 +72,7 @@ pub const FRAME_CHUNK_MAX: usize = 512;
 /// header of at most 1 (tag varint ≤ 3) + 1 (variant) + 5 (capture varint) + 1 (frame)
 /// plus 5 (offset) + 5 (total) + 2 (length varint) = 22 bytes; with the version and CRC that
 /// is 537 bytes. A [`WireCalibration`] is at most 5 + 8 + 9·8 + 1 + 4·7·8 + 1 + 8·8 = 375
-/// bytes.
+/// bytes, and with the planes' uncertainty (1 + 1 + 8·4 + 1 + 28·4 = 147) 522 bytes.
 /// 640 leaves room for growth within this version.
 pub const MAX_RAW_LEN: usize = 640;
 

@@ -3,7 +3,9 @@
 use serde::Serialize;
 
 use super::*;
-use crate::calibration::{Calibration, CalibrationError, MAX_PLANES};
+use crate::calibration::{
+    Calibration, CalibrationError, PlanesUncertainty, UncertaintyError, MAX_PLANES, PLANE_PARAMS,
+};
 use crate::measurement::{Measurement, Mode, StemReading, TiltAngles};
 use crate::real::Real;
 use crate::solvers::result::Flags;
@@ -126,6 +128,7 @@ fn largest_messages_fit() {
     }
     cal.id = u32::MAX;
     cal.accelerometer = Some(wire_accelerometer());
+    cal.uncertainty = Some(WirePlanesUncertainty::from(&full_uncertainty()));
     let msg = FromDevice {
         tag: u16::MAX,
         response: Response::Calibration(cal),
@@ -133,6 +136,83 @@ fn largest_messages_fit() {
     let (mut out, n) = frame_of(&msg);
     let back: FromDevice = decode(&mut out[..n]).unwrap();
     assert_eq!(back, msg);
+}
+
+/// A covariance of [`MAX_PLANES`] planes, every parameter correlated with every other.
+fn full_uncertainty() -> PlanesUncertainty {
+    let n = PLANE_PARAMS;
+    let sigma: heapless::Vec<Real, PLANE_PARAMS> =
+        (0..n).map(|i| 1e-4 + 1e-6 * i as Real).collect();
+    let mut rho = [0.0 as Real; PLANE_PARAMS * PLANE_PARAMS];
+    for i in 0..n {
+        for j in 0..n {
+            rho[i * n + j] = if i == j { 1.0 } else { 0.3 };
+        }
+    }
+    PlanesUncertainty::new(&sigma, &rho).unwrap()
+}
+
+/// The planes' covariance a refinement leaves crosses the wire (in `f32`) and comes back
+/// validated; a correlation the core could not use is refused by name.
+#[test]
+fn the_planes_uncertainty_crosses_the_wire() {
+    let mut planes = Calibration::reference_design();
+    let two = PlanesUncertainty::new(
+        &[2e-4, 1.5e-4, 2e-4, 1.6e-4],
+        &[
+            1.0, 0.0, 0.8, 0.0, //
+            0.0, 1.0, 0.0, 0.97, //
+            0.8, 0.0, 1.0, 0.0, //
+            0.0, 0.97, 0.0, 1.0,
+        ],
+    )
+    .unwrap();
+    planes = planes.with_uncertainty(two).unwrap();
+    let back = WireCalibration::from(&planes).to_calibration().unwrap();
+    let u = back.uncertainty.expect("carried");
+    for i in 0..4 {
+        assert!((u.sigmas()[i] - two.sigmas()[i]).abs() <= 1e-7 * two.sigmas()[i]);
+        for j in 0..4 {
+            assert!((u.correlation(i, j) - two.correlation(i, j)).abs() <= 1e-6);
+        }
+    }
+    // One plane's covariance for a two-plane calibration.
+    let mut wire = WireCalibration::from(&planes);
+    let one = PlanesUncertainty::new(&[2e-4, 1e-4], &[1.0, 0.1, 0.1, 1.0]).unwrap();
+    wire.uncertainty = Some(WirePlanesUncertainty::from(&one));
+    assert_eq!(
+        wire.to_calibration(),
+        Err(CalibrationError::Uncertainty(
+            UncertaintyError::PlaneCount {
+                covers: 1,
+                planes: 2
+            }
+        ))
+    );
+    // A correlation above 1, and a correlation one entry short.
+    let mut wire = WireCalibration::from(&planes);
+    if let Some(u) = wire.uncertainty.as_mut() {
+        u.correlation[0] = 1.5;
+    }
+    assert_eq!(
+        wire.to_calibration(),
+        Err(CalibrationError::Uncertainty(
+            UncertaintyError::Correlation { row: 0, col: 1 }
+        ))
+    );
+    let mut wire = WireCalibration::from(&planes);
+    if let Some(u) = wire.uncertainty.as_mut() {
+        u.correlation.pop();
+    }
+    assert_eq!(
+        wire.to_calibration(),
+        Err(CalibrationError::Uncertainty(
+            UncertaintyError::CorrelationShape {
+                expected: 6,
+                got: 5
+            }
+        ))
+    );
 }
 
 #[test]
@@ -329,6 +409,7 @@ fn empty_frames_are_ignored() {
 fn calibration_record_round_trip_and_corruption() {
     let mut cal = WireCalibration::from(&Calibration::reference_design());
     cal.accelerometer = Some(wire_accelerometer());
+    cal.uncertainty = Some(WirePlanesUncertainty::from(&full_uncertainty()));
     let mut buf = [0xFFu8; calibration_record::MAX_RECORD];
     let n = calibration_record::encode(&cal, &mut buf).unwrap();
     assert_eq!(calibration_record::decode(&buf[..n]), Some(cal.clone()));

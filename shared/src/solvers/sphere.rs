@@ -36,7 +36,7 @@ use super::sphere_sections::{
 use super::sphere_three_tangent::three_tangent_section;
 use super::three_tangent::ThreeTangentParams;
 use super::SolveError;
-use crate::calibration::MAX_PLANES;
+use crate::calibration::{PlanesUncertainty, MAX_PLANES};
 use crate::laser_plane::LaserPlane;
 use crate::noise::{self, NoiseModel};
 
@@ -118,6 +118,10 @@ pub struct SphereInput<'a> {
     pub sigmas: &'a [&'a [Real]],
     /// The laser planes, in the order of `curves`.
     pub planes: &'a [LaserPlane],
+    /// The planes' `(e, δ)` covariance when they were refined on a reference
+    /// ([`crate::calibration::Calibration::uncertainty`]); `None`: independent, each with
+    /// the noise model's budget.
+    pub uncertainty: Option<&'a PlanesUncertainty>,
 }
 
 /// Memory the solver is lent, each at least as long as all points together.
@@ -403,7 +407,8 @@ pub fn solve(
         flags.insert(Flags::RANGE_LIMIT);
     }
     // Calibration: the joint fit's response to each calibration error, the planes' errors
-    // independent (`docs/sphere.md`, "Calibration errors", (S-cal)); without a joint fit, the
+    // independent or as a refinement left them (`docs/sphere.md`, "Calibration errors",
+    // (S-cal)); without a joint fit, the
     // relative scale error of the plane around the first section's centre, common to the
     // sections (which misses the planes' differential error: such readings are the fallbacks).
     let common_scale = || {
@@ -430,6 +435,7 @@ pub fn solve(
                 &params.fit,
                 &params.noise,
                 params.focal_px,
+                input.uncertainty,
             )?
         }
         None => common_scale(),

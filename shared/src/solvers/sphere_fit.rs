@@ -21,7 +21,7 @@ use super::correlation::correlation_length;
 use super::lm::{spd_inverse, LmParams, NormalEquations};
 use super::sphere_sections::{minimise_sphere, Sphere, SphereCost};
 use super::SolveError;
-use crate::calibration::MAX_PLANES;
+use crate::calibration::{PlanesUncertainty, MAX_PLANES, PLANE_PARAMS};
 use crate::laser_plane::LaserPlane;
 use crate::noise::{self, NoiseModel};
 
@@ -357,9 +357,16 @@ pub fn fit_sphere(
 /// one section against the other along the line of sight, which for the front arcs a camera
 /// sees is nearly a change of radius: that is the term a common scale misses.
 ///
+/// When the planes were refined against each other on a reference, their errors are
+/// correlated (`uncertainty`, [`PlanesUncertainty`]): each plane's `e` and `δ` are then moved
+/// by their own posterior 1σ and the radius's shifts combined through the correlation
+/// (`docs/calibration.md` §14), so the difference the reference pinned down no longer counts
+/// at the board's budget.
+///
 /// `curves`, `sigmas`, `planes` as given to [`fit_sphere`]; `noise` the calibration σ,
 /// `focal_px` the camera's. Errors: a plane or point that cannot be re-triangulated, or a
 /// singular normal matrix ([`SolveError::Degenerate`]).
+#[allow(clippy::too_many_arguments)]
 pub fn calibration_sigma_radius(
     fit: &SphereFit,
     curves: &[&[Vec3]],
@@ -368,6 +375,7 @@ pub fn calibration_sigma_radius(
     params: &SphereFitParams,
     noise: &NoiseModel,
     focal_px: Real,
+    uncertainty: Option<&PlanesUncertainty>,
 ) -> Result<Real, SolveError> {
     let n = curves
         .len()
@@ -381,8 +389,20 @@ pub fn calibration_sigma_radius(
     let mut per_plane = [[SVector::<Real, 4>::zeros(); 2]; MAX_PLANES];
     let mut failed = false;
     for k in 0..n {
-        let (by_e, ray_scale, by_tilt) =
-            noise::perturbed(&planes[k], focal_px, noise).map_err(|_| SolveError::Degenerate)?;
+        // Each plane moved by its own 1σ: the board's budget, or the refinement's posterior.
+        let plane_noise = match uncertainty {
+            Some(u) => {
+                let (baseline, tilt) = u.plane_sigma(k);
+                NoiseModel {
+                    baseline,
+                    tilt,
+                    ..*noise
+                }
+            }
+            None => *noise,
+        };
+        let (by_e, ray_scale, by_tilt) = noise::perturbed(&planes[k], focal_px, &plane_noise)
+            .map_err(|_| SolveError::Degenerate)?;
         let one = Joint {
             curves: &curves[k..k + 1],
             sigmas: &sigmas[k..k + 1],
@@ -424,13 +444,16 @@ pub fn calibration_sigma_radius(
     }
     let inverse = spd_inverse(&a).ok_or(SolveError::Degenerate)?;
     let radius_of = |b: &SVector<Real, 4>| (inverse * b)[3];
-    let mut variance = radius_of(&focal).powi(2);
-    for pair in per_plane.iter().take(n) {
-        for b in pair {
-            variance += radius_of(b).powi(2);
-        }
+    let mut shifts = [0.0; PLANE_PARAMS];
+    for (k, pair) in per_plane.iter().enumerate().take(n) {
+        shifts[2 * k] = radius_of(&pair[0]);
+        shifts[2 * k + 1] = radius_of(&pair[1]);
     }
-    let sigma = sqrt(variance);
+    let planes_sigma = match uncertainty {
+        Some(u) => u.spread(&shifts[..2 * n]),
+        None => sqrt(shifts.iter().map(|s| s * s).sum::<Real>()),
+    };
+    let sigma = sqrt(radius_of(&focal).powi(2) + planes_sigma * planes_sigma);
     if sigma.is_finite() {
         Ok(sigma)
     } else {
@@ -506,9 +529,17 @@ mod tests {
         };
         let base = refit(&curves, &mut scratch);
         let refs: [&[Vec3]; 2] = [&curves[0], &curves[1]];
-        let stated =
-            calibration_sigma_radius(&base, &refs, &sigs, &cal.planes, &params, &noise, focal)
-                .expect("evaluates");
+        let stated = calibration_sigma_radius(
+            &base,
+            &refs,
+            &sigs,
+            &cal.planes,
+            &params,
+            &noise,
+            focal,
+            None,
+        )
+        .expect("evaluates");
         let moved = |k: Option<usize>, which: usize| -> Real {
             let mut c = curves.clone();
             for (j, curve) in c.iter_mut().enumerate() {
@@ -538,6 +569,83 @@ mod tests {
         assert!(
             ((stated - refits) / refits).abs() < 0.1,
             "stated {stated} against re-fits {refits}"
+        );
+    }
+
+    /// Under a refinement's covariance the planes' errors are correlated. With both tilts
+    /// off by the same 1σ (correlation 1) the stated planes' term is the re-fit's change
+    /// under that common move (a common scale and shift, not the two sections' difference),
+    /// not what the same σ uncorrelated give; with the board's σ and no correlation it is
+    /// the independent term.
+    #[test]
+    fn the_planes_covariance_is_the_correlated_refits_spread() {
+        let (cal, curves, truth) = sections(1.5, 0.15, 0.0);
+        let sig: Vec<Vec<Real>> = curves.iter().map(|c| std::vec![5e-4; c.len()]).collect();
+        let sigs: [&[Real]; 2] = [&sig[0], &sig[1]];
+        let refs: [&[Vec3]; 2] = [&curves[0], &curves[1]];
+        let params = SphereFitParams::default();
+        let noise = NoiseModel::reference();
+        let focal = 1000.0;
+        let mut scratch = std::vec![0.0; curves[0].len() + curves[1].len()];
+        let base =
+            fit_sphere(&refs, &sigs, &cal.planes, truth, &params, &mut scratch).expect("fits");
+        let stated = |u: Option<&PlanesUncertainty>| {
+            calibration_sigma_radius(&base, &refs, &sigs, &cal.planes, &params, &noise, focal, u)
+                .expect("evaluates")
+        };
+        let identity = |e: Real, t: Real| {
+            PlanesUncertainty::new(
+                &[e, t, e, t],
+                &[
+                    1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0,
+                ],
+            )
+            .unwrap()
+        };
+        let board = identity(noise.baseline, noise.tilt);
+        let independent = stated(None);
+        assert!(((stated(Some(&board)) - independent) / independent).abs() < 1e-6);
+        // The focal length's share alone: every plane known exactly.
+        let focal_only = stated(Some(&identity(0.0, 0.0)));
+        let common_tilt = PlanesUncertainty::new(
+            &[0.0, noise.tilt, 0.0, noise.tilt],
+            &[
+                1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 1.0,
+            ],
+        )
+        .unwrap();
+        let planes_term = sqrt(stated(Some(&common_tilt)).powi(2) - focal_only.powi(2));
+        // The re-fit with both planes' tilts moved by σ at once.
+        let mut moved = curves.clone();
+        for (k, curve) in moved.iter_mut().enumerate() {
+            let (_, _, by_tilt) = noise::perturbed(&cal.planes[k], focal, &noise).unwrap();
+            for x in curve.iter_mut() {
+                *x = noise::retriangulate(*x, &by_tilt, 1.0).unwrap();
+            }
+        }
+        let moved_refs: [&[Vec3]; 2] = [&moved[0], &moved[1]];
+        let refit = fit_sphere(
+            &moved_refs,
+            &sigs,
+            &cal.planes,
+            truth,
+            &params,
+            &mut scratch,
+        )
+        .expect("fits")
+        .sphere
+        .radius
+            - base.sphere.radius;
+        assert!(
+            (planes_term - refit.abs()).abs() < 0.1 * refit.abs() + 2e-6,
+            "stated {planes_term} against the re-fit {refit}"
+        );
+        // The same σ uncorrelated is another number: the correlation is used.
+        let uncorrelated =
+            sqrt(stated(Some(&identity(0.0, noise.tilt))).powi(2) - focal_only.powi(2));
+        assert!(
+            (planes_term - uncorrelated).abs() > 0.2 * uncorrelated,
+            "{planes_term} {uncorrelated}"
         );
     }
 

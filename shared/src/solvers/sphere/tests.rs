@@ -69,6 +69,7 @@ fn solve_on(curves: &[Vec<Vec3>], sigma: Real) -> Result<SphereSolution, SolveEr
         curves: &refs,
         sigmas: &sig_refs,
         planes: &cal.planes[..curves.len()],
+        uncertainty: None,
     };
     solve(
         &input,
