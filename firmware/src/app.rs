@@ -18,7 +18,7 @@
 use embassy_futures::select::{select, select3, Either, Either3};
 use heapless::Deque;
 use tangent_core::accelerometer::{self, Alignment};
-use tangent_core::calibration::Calibration;
+use tangent_core::calibration::{Calibration, CalibrationError};
 use tangent_core::instrument;
 use tangent_core::measurement::{Measurement, Mode};
 use tangent_core::protocol::codes::Failure;
@@ -395,7 +395,11 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
             code: ErrorCode::InvalidCalibration,
             detail,
         };
-        let cal = wire.to_calibration().map_err(|_| invalid(1))?;
+        let cal = wire.to_calibration().map_err(|e| match e {
+            // The planes' covariance, apart: the planes themselves are fine.
+            CalibrationError::Uncertainty(_) => invalid(4),
+            _ => invalid(1),
+        })?;
         let alignment = match &wire.accelerometer {
             Some(a) => Some(a.to_alignment().ok_or(invalid(3))?),
             None => None,

@@ -151,6 +151,39 @@ fn calibration_round_trip_is_exact() {
     assert_eq!(calibration_file::parse(&reference_text()).unwrap(), c2);
 }
 
+/// A refined calibration's `[planes_uncertainty]` round-trips; one that is no covariance, or
+/// covers other planes than the file has, is refused naming the table.
+#[test]
+fn calibration_planes_uncertainty_round_trips_and_is_checked() {
+    use tangent_core::calibration::PlanesUncertainty;
+    let u = PlanesUncertainty::new(
+        &[2e-4, 1.9e-4, 2e-4, 1.8e-4],
+        &[
+            1.0, 0.0, 0.9, 0.0, //
+            0.0, 1.0, 0.0, 0.96, //
+            0.9, 0.0, 1.0, 0.0, //
+            0.0, 0.96, 0.0, 1.0,
+        ],
+    )
+    .unwrap();
+    let c = corpus::two_plane_calibration().with_uncertainty(u).unwrap();
+    let text = calibration_file::to_string(&c);
+    assert!(text.contains("[planes_uncertainty]"), "{text}");
+    assert_eq!(calibration_file::parse(&text).unwrap(), c);
+    let refused = |text: &str| match calibration_file::parse(text) {
+        Err(e @ CalibrationFileError::Uncertainty(_)) => e.to_string(),
+        other => panic!("expected [planes_uncertainty] refused, got {other:?}"),
+    };
+    let above_one = refused(&text.replacen("0.96", "1.5", 1));
+    assert!(above_one.starts_with("[planes_uncertainty]"), "{above_one}");
+    let one_plane = text.replace(
+        "sigma = [0.0002, 0.00019, 0.0002, 0.00018]",
+        "sigma = [0.0002, 0.00019]",
+    );
+    assert_ne!(one_plane, text);
+    assert!(refused(&one_plane).contains("correlation"), "{one_plane}");
+}
+
 #[test]
 fn calibration_units_are_in_the_keys() {
     let text = reference_text();

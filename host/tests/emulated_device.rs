@@ -12,7 +12,7 @@ use std::sync::mpsc::{self, Receiver};
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
-use tangent_core::calibration::Calibration;
+use tangent_core::calibration::{Calibration, PlanesUncertainty};
 use tangent_core::measurement::{Measurement, Mode};
 use tangent_core::protocol::codes::Failure;
 use tangent_core::protocol::{
@@ -625,7 +625,33 @@ fn on_device_spheres_equal_the_hosts() {
         "sphere-d055-z120-nearpole-2p",
         "notsphere-wall-z120-2p",
     ];
-    let entries = tangent_host::simulate::sphere_corpus::entries();
+    // Three balls are measured with planes refined on a reference: the calibration carries
+    // their covariance (`[planes_uncertainty]`, protocol v6), which sets the stated σ; the
+    // device receives it with the calibration and must state the host's σ.
+    let refined = PlanesUncertainty::new(
+        &[2e-4, 1.9e-4, 2e-4, 1.9e-4],
+        &[
+            1.0, 0.0, 0.9, 0.0, //
+            0.0, 1.0, 0.0, 0.94, //
+            0.9, 0.0, 1.0, 0.0, //
+            0.0, 0.94, 0.0, 1.0,
+        ],
+    )
+    .unwrap();
+    let with_covariance = [
+        "sphere-d150-z100-offcentre-2p",
+        "sphere-d400-z200-matt-2p",
+        "sphere-d055-z120-nearpole-2p",
+    ];
+    let entries = tangent_host::simulate::sphere_corpus::entries()
+        .into_iter()
+        .map(|mut e| {
+            if with_covariance.contains(&e.name.as_str()) {
+                e.spec.calibration = e.spec.calibration.with_uncertainty(refined).unwrap();
+            }
+            e
+        })
+        .collect();
     let same = |name: &str, h: &Measurement, d: &Measurement| {
         let (Measurement::Sphere(h), Measurement::Sphere(d)) = (h, d) else {
             panic!("{name}: sphere readings, got host {h:?}, device {d:?}")

@@ -90,6 +90,15 @@ fn the_ball_command_restores_the_planes_relative_tilt_and_keeps_the_rest() {
     );
     assert!(after.abs() < 0.5 * before.abs(), "{before} → {after}");
     assert_eq!(refined.camera, off.camera);
+    // The refinement's covariance is written beside the planes, and read back.
+    let u = refined.uncertainty.expect("[planes_uncertainty] written");
+    assert_eq!(u.planes(), 2);
+    let (t0, t1) = (u.sigmas()[1], u.sigmas()[3]);
+    let relative = (t0 * t0 + t1 * t1 - 2.0 * u.correlation(1, 3) * t0 * t1).sqrt() * 1e3;
+    assert!(
+        (relative - sigma_mrad).abs() < 0.002,
+        "{relative} vs printed {sigma_mrad} mrad"
+    );
     let road = calibration_file::read_road(&calib).unwrap().unwrap();
     assert_eq!(road.height_scale, 1.01);
 

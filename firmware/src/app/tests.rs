@@ -6,7 +6,7 @@
 use std::cell::RefCell;
 use std::rc::Rc;
 
-use tangent_core::protocol::{ErrorCode, Request, MAX_FRAME_LEN};
+use tangent_core::protocol::{ErrorCode, Request, WirePlanesUncertainty, MAX_FRAME_LEN};
 
 use super::*;
 use crate::adxl355::model::Adxl355Model;
@@ -580,6 +580,28 @@ fn instruments_without_a_plumb_do_not_read_the_accelerometer() {
         assert_eq!(verticals, [None], "{mode:?}");
         assert!(!set_up, "{mode:?}: the accelerometer was not touched");
     }
+}
+
+/// A planes' covariance that is no covariance (a correlation above 1) is refused with its
+/// own detail, and the calibration before stays active.
+#[test]
+fn a_planes_uncertainty_that_is_no_covariance_is_refused() {
+    let mut rig = Rig::new();
+    let mut app = rig.app(CameraBehaviour::Works, false);
+    let before = app.calibration.clone();
+    let mut wire = calibration_with_accelerometer();
+    wire.uncertainty = Some(WirePlanesUncertainty {
+        sigma: heapless::Vec::from_slice(&[2e-4, 2e-4, 2e-4, 2e-4]).unwrap(),
+        correlation: heapless::Vec::from_slice(&[0.0, 1.2, 0.0, 0.0, 0.9, 0.0]).unwrap(),
+    });
+    assert_eq!(
+        app.install_calibration(&wire),
+        Err(DeviceError {
+            code: ErrorCode::InvalidCalibration,
+            detail: 4
+        })
+    );
+    assert_eq!(app.calibration, before);
 }
 
 #[test]

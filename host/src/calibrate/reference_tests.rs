@@ -125,6 +125,17 @@ fn a_ball_at_four_distances_restores_the_planes_relative_tilt() {
             "seed {seed}: relative baseline {b_after:e}, σ {:e}",
             fit.relative_baseline_sigma
         );
+        // The calibration carries the posterior: the relative tilt's σ follows from it.
+        let u = fit.calibration.uncertainty.expect("a refined calibration carries it");
+        let (t0, t1) = (u.sigmas()[1], u.sigmas()[3]);
+        let from_covariance = (t0 * t0 + t1 * t1 - 2.0 * u.correlation(1, 3) * t0 * t1).sqrt();
+        assert!(
+            (from_covariance - fit.relative_tilt_sigma).abs() < 1e-6 * fit.relative_tilt_sigma,
+            "{from_covariance:e} vs {:e}",
+            fit.relative_tilt_sigma
+        );
+        // Each plane alone stays near the board's σ (the common part is unseen).
+        assert!(t0 > 0.3 * prior.tilt && t0 <= prior.tilt, "{t0:e}");
         before2 += before * before;
         after2 += after * after;
         worst = worst.max((after / fit.relative_tilt_sigma).abs());

@@ -393,7 +393,10 @@ fn reference_cmd(
         eprintln!("--dry-run: {} not written", calib.display());
     } else {
         calibration_file::write_planes(calib, &fit.calibration)?;
-        eprintln!("wrote [[planes]] in {}", calib.display());
+        eprintln!(
+            "wrote [[planes]] and their [planes_uncertainty] in {}",
+            calib.display()
+        );
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -486,6 +486,11 @@ impl fmt::Display for DeviceError {
             ),
             ErrorCode::InvalidCalibration => match d {
                 2 => write!(f, "the calibration does not match the device's sensor size"),
+                4 => write!(
+                    f,
+                    "the calibration's planes' uncertainty is not a covariance of its planes \
+                     (refine the planes again with `tangent calibrate ball` or `wall`)"
+                ),
                 _ => write!(
                     f,
                     "the calibration is invalid (check it with `tangent calibrate`)"
