@@ -56,6 +56,10 @@ pub enum MeasureError {
     /// The capture's `[accelerometer]` table gives no vertical reference.
     #[error("capture.toml [accelerometer]: {0}")]
     Accelerometer(String),
+    /// The calibration's `[planes_uncertainty]` does not cover the planes across the image
+    /// of a three-line wall capture.
+    #[error("calibration [planes_uncertainty]: {0}")]
+    Uncertainty(tangent_core::calibration::UncertaintyError),
 }
 
 /// Tilt of the stem, in degrees for people.
@@ -652,6 +656,12 @@ fn solve_wall_crossing(
 ) -> Result<(Result<WallMeasurement, PipelineError>, PlotBuffers), MeasureError> {
     let mut across = calibration.clone();
     across.planes.truncate(k);
+    // The planes across keep their share of the covariance; the whole one reaches the
+    // wall solver with the crossing line (`instrument::wall::Crossing`).
+    across.uncertainty = match &calibration.uncertainty {
+        Some(u) => Some(u.leading(k).map_err(MeasureError::Uncertainty)?),
+        None => None,
+    };
     let (off, on) = frame_pair(capture, k)?;
     let on_crossing = capture
         .on_frames()

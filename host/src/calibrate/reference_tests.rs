@@ -126,7 +126,10 @@ fn a_ball_at_four_distances_restores_the_planes_relative_tilt() {
             fit.relative_baseline_sigma
         );
         // The calibration carries the posterior: the relative tilt's σ follows from it.
-        let u = fit.calibration.uncertainty.expect("a refined calibration carries it");
+        let u = fit
+            .calibration
+            .uncertainty
+            .expect("a refined calibration carries it");
         let (t0, t1) = (u.sigmas()[1], u.sigmas()[3]);
         let from_covariance = (t0 * t0 + t1 * t1 - 2.0 * u.correlation(1, 3) * t0 * t1).sqrt();
         assert!(

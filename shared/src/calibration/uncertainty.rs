@@ -151,6 +151,28 @@ impl PlanesUncertainty {
         Ok(out)
     }
 
+    /// The covariance of the first `planes` planes alone (a Gaussian's marginal: the
+    /// leading block), for a calibration cut to those planes; `Length` when it covers
+    /// fewer or `planes` is 0.
+    pub fn leading(&self, planes: usize) -> Result<Self, UncertaintyError> {
+        if planes == 0 || planes > self.planes {
+            return Err(UncertaintyError::Length(2 * planes));
+        }
+        let mut out = *self;
+        out.planes = planes;
+        for i in 0..PLANE_PARAMS {
+            for j in 0..PLANE_PARAMS {
+                if i >= 2 * planes || j >= 2 * planes {
+                    out.correlation[i][j] = 0.0;
+                }
+            }
+            if i >= 2 * planes {
+                out.sigma[i] = 0.0;
+            }
+        }
+        Ok(out)
+    }
+
     /// Planes covered.
     pub fn planes(&self) -> usize {
         self.planes
@@ -222,6 +244,14 @@ mod tests {
         assert!((opposed - (2.0 - 2.0 * 0.95 as Real).sqrt()).abs() < 1e-6);
         let together = u.spread(&[0.0, 1.0, 0.0, 1.0]);
         assert!((together - (2.0 + 2.0 * 0.95 as Real).sqrt()).abs() < 1e-6);
+        // The first plane's marginal keeps its block and forgets the other plane.
+        let first = u.leading(1).unwrap();
+        assert_eq!(first.planes(), 1);
+        assert_eq!(first.plane_sigma(0), (2e-4, 2e-4));
+        assert_eq!(first.correlation(0, 1), 0.1);
+        assert_eq!(first.correlation(0, 2), 0.0);
+        assert_eq!(first.spread(&[0.0, 1.0, 0.0, -1.0]), 1.0);
+        assert_eq!(u.leading(3), Err(UncertaintyError::Length(6)));
     }
 
     #[test]

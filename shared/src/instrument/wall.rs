@@ -3,7 +3,7 @@
 //! readings) on the points of every plane, with the image's quality flags added
 //! (`docs/building.md`).
 
-use crate::calibration::{Calibration, MAX_PLANES};
+use crate::calibration::{Calibration, PlanesUncertainty, MAX_PLANES};
 use crate::image::{Frame, Pixel};
 use crate::laser_plane::LaserPlane;
 use crate::measurement::{Measurement, Mode, ValueSigma, WallReading};
@@ -85,6 +85,9 @@ pub struct Crossing<'a> {
     pub points: &'a [Vec3],
     /// Each point's 1σ along its noise direction.
     pub sigmas: &'a [Real],
+    /// The whole calibration's covariance of the planes' `(e, δ)` (the planes across the
+    /// image, then this one), `None` when they are independent.
+    pub uncertainty: Option<&'a PlanesUncertainty>,
 }
 
 /// Extracts the crossing line, plane `plane` of `calibration`, from its own frame pair
@@ -162,6 +165,19 @@ pub fn solve_walls(
         },
     };
     let mut solution = walls::solve(&input, &params.walls)?;
+    // With the crossing line the whole calibration's covariance, whose planes are the
+    // curves in order (the planes across, then the crossing one; `docs/building.md`, (B12)).
+    let uncertainty = match crossing {
+        Some(c) => c.uncertainty,
+        None => points.uncertainty(),
+    };
+    walls::add_calibration_sigma(
+        &input,
+        &params.walls,
+        &mut solution,
+        &params.noise,
+        uncertainty,
+    )?;
     solution
         .flags
         .insert(points.profile.image_flags(points.full_scale));
@@ -206,6 +222,7 @@ pub fn measure_with_crossing<P: Pixel>(
             .map_err(|_| PipelineError::Calibration)?,
         points: &crossing_ws.points[s..e],
         sigmas: &crossing_ws.sigmas[s..e],
+        uncertainty: calibration.uncertainty.as_ref(),
     };
     let (points, scratch) = super::lend(&profile, on.max_value(), calibration_across, ws);
     let solution = solve_walls(&points, Some(crossing), params, scratch)?;

@@ -23,7 +23,9 @@ use super::plane_pca::{
 use super::result::Flags;
 use super::SolveError;
 
+mod calibration;
 mod readings;
+pub use calibration::add_calibration_sigma;
 use readings::{corner, parallel, segment};
 
 /// Most straight runs kept over all curves of one capture.

@@ -83,6 +83,10 @@ impl Curves {
     }
 
     fn solve(&self, params: &WallParams) -> Result<WallSolution, SolveError> {
+        self.with_input(|input| solve(input, params))
+    }
+
+    fn with_input<R>(&self, f: impl FnOnce(&WallInput<'_>) -> R) -> R {
         let curves = [
             &self.points[0][..self.len[0]],
             &self.points[1][..self.len[1]],
@@ -91,16 +95,27 @@ impl Curves {
             &self.sigmas[0][..self.len[0]],
             &self.sigmas[1][..self.len[1]],
         ];
-        solve(
-            &WallInput {
-                curves: &curves,
-                sigmas: &sigmas,
-                planes: &self.planes,
-                stripes: &[],
-                threshold: 0.0,
-            },
-            params,
-        )
+        f(&WallInput {
+            curves: &curves,
+            sigmas: &sigmas,
+            planes: &self.planes,
+            stripes: &[],
+            threshold: 0.0,
+        })
+    }
+
+    /// The same curves with curve `k`'s points re-triangulated on `plane` (its pixels kept).
+    fn retriangulated(&self, k: usize, plane: &LaserPlane) -> Curves {
+        let mut c = Curves {
+            points: self.points,
+            sigmas: self.sigmas,
+            len: self.len,
+            planes: self.planes,
+        };
+        for x in c.points[k][..c.len[k]].iter_mut() {
+            *x = crate::noise::retriangulate(*x, plane, 1.0).unwrap();
+        }
+        c
     }
 }
 
@@ -416,4 +431,112 @@ fn a_crossing_line_beside_a_corner_edge_does_not_bend_the_corner() {
             .filter(|r| r.curve == 2)
             .all(|r| r.wall.is_none() || r.wall == left_wall));
     }
+}
+
+/// The readings' calibration σ against re-solving: one laser plane's tilt or baseline off by
+/// its 1σ (the others known exactly, `PlanesUncertainty` with that σ alone), the points of
+/// its line re-triangulated and the walls solved again. The σ added to each reading is the
+/// reading's change, for a room's corner (angle, yaw, plumb) and a door opening (segment,
+/// distance between the parallel front and back walls).
+#[test]
+fn the_calibration_sigma_is_the_resolved_readings_change() {
+    use crate::calibration::PlanesUncertainty;
+    let half = (45.0 as Real).to_radians();
+    let corner_scene = [
+        piece(
+            Vec3::new(-half.cos(), 0.0, half.sin()),
+            Vec3::new(0.0, 0.0, 2.0),
+            (-100.0, 0.0),
+        ),
+        piece(
+            Vec3::new(half.cos(), 0.0, half.sin()),
+            Vec3::new(0.0, 0.0, 2.0),
+            (0.0, 100.0),
+        ),
+    ];
+    let door_scene = [
+        piece(Vec3::z(), Vec3::new(0.0, 0.0, 1.5), (-100.0, -0.45)),
+        piece(Vec3::z(), Vec3::new(0.0, 0.0, 1.5), (0.45, 100.0)),
+        piece(Vec3::z(), Vec3::new(0.0, 0.0, 1.8), ALL),
+    ];
+    let params = WallParams {
+        gravity: Some((Vec3::new(0.0, 1.0, 0.05), 0.0)),
+        ..WallParams::default()
+    };
+    let noise = NoiseModel {
+        focal_px: 0.0,
+        ..NoiseModel::reference()
+    };
+    let mut checked = 0;
+    for (scene, seed) in [(&corner_scene[..], 2u64), (&door_scene[..], 6)] {
+        let curves = Curves::of(scene, 0.05, seed);
+        let base = curves.solve(&params).unwrap();
+        for (k, which) in [(1usize, 1usize), (0, 1), (1, 0)] {
+            let mut sigma = [0.0; 4];
+            sigma[2 * k + which] = if which == 0 {
+                noise.baseline
+            } else {
+                noise.tilt
+            };
+            let mut identity = [0.0; 16];
+            for i in 0..4 {
+                identity[5 * i] = 1.0;
+            }
+            let u = PlanesUncertainty::new(&sigma, &identity).unwrap();
+            let mut stated = base.clone();
+            curves
+                .with_input(|input| {
+                    add_calibration_sigma(input, &params, &mut stated, &noise, Some(&u))
+                })
+                .unwrap();
+            let (by_e, _, by_tilt) =
+                crate::noise::perturbed(&curves.planes[k], 1000.0, &noise).unwrap();
+            let moved = curves
+                .retriangulated(k, if which == 0 { &by_e } else { &by_tilt })
+                .solve(&params)
+                .unwrap();
+            let added = |before: Estimate, after: Estimate| {
+                sqrt((after.sigma * after.sigma - before.sigma * before.sigma).max(0.0))
+            };
+            let mut pairs: heapless::Vec<(&str, Real, Real, Real), 8> = heapless::Vec::new();
+            let mut push = |name, b: Estimate, a: Estimate, m: Real| {
+                let _ = pairs.push((name, added(b, a), (m - b.value).abs(), b.sigma));
+            };
+            push(
+                "yaw",
+                base.orientation.yaw,
+                stated.orientation.yaw,
+                moved.orientation.yaw.value,
+            );
+            push(
+                "axis distance",
+                base.orientation.axis_distance,
+                stated.orientation.axis_distance,
+                moved.orientation.axis_distance.value,
+            );
+            if let (Some(b), Some(a), Some(m)) = (base.plumb, stated.plumb, moved.plumb) {
+                push("plumb", b, a, m.value);
+            }
+            if let (Some(b), Some(a), Some(m)) = (base.corner, stated.corner, moved.corner) {
+                push("corner", b.angle, a.angle, m.angle.value);
+            }
+            if let (Some(b), Some(a), Some(m)) = (base.parallel, stated.parallel, moved.parallel) {
+                push("parallel", b, a, m.value);
+            }
+            if let (Some(b), Some(a), Some(m)) = (base.segment, stated.segment, moved.segment) {
+                push("segment", b.length, a.length, m.length.value);
+            }
+            for (name, stated, resolved, own) in pairs {
+                // Within a tenth, or a hundredth of the reading's own σ where the change is
+                // below what re-solving resolves.
+                assert!(
+                    (stated - resolved).abs() <= 0.1 * resolved + 0.01 * own + 1e-9,
+                    "plane {k} {}: {name} stated {stated:e}, re-solved {resolved:e} (σ {own:e})",
+                    ["e", "δ"][which]
+                );
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked >= 20, "{checked} readings compared");
 }
