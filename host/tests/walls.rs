@@ -180,7 +180,7 @@ fn bad_input_is_refused_with_its_reason() {
 
 /// The three-line head (`docs/building.md` §8): the crossing line, fired in its own frame and
 /// extracted row by row, lies on the wall with the parallel pair, and the reading is within
-/// 3σ of truth. The plumb's σ states the calibration's part (`docs/building.md`, (B12)): with
+/// 3σ of truth. The plumb's σ states the calibration's part (`docs/building.md`, (B10)): with
 /// the board calibration's budget it is several tenths of a degree (a 0.2 mrad tilt error of
 /// one line moves its depth by millimetres against the others); with the planes refined on a
 /// flat wall (one rendered session of `tangent calibrate wall`, the calibration drawn off by

@@ -166,7 +166,7 @@ pub fn solve_walls(
     };
     let mut solution = walls::solve(&input, &params.walls)?;
     // With the crossing line the whole calibration's covariance, whose planes are the
-    // curves in order (the planes across, then the crossing one; `docs/building.md`, (B12)).
+    // curves in order (the planes across, then the crossing one; `docs/building.md`, (B10)).
     let uncertainty = match crossing {
         Some(c) => c.uncertainty,
         None => points.uncertainty(),

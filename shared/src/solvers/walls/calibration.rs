@@ -1,5 +1,5 @@
 //! The readings' σ from the calibration's errors (`docs/building.md`, "Calibration errors",
-//! (B12)): what the walls' plane fits cannot see in their own scatter — a baseline or tilt
+//! (B10)): what the walls' plane fits cannot see in their own scatter — a baseline or tilt
 //! error of a laser plane, or of the focal length, moves every point of its line coherently
 //! and so tilts, shifts and scales the walls.
 //!
@@ -15,8 +15,10 @@ use crate::real::Float;
 use crate::real::{norm, sqrt, Real, Vec3};
 use nalgebra::{Matrix3, Vector3};
 
-use super::super::plane_pca::{orientation, plumb_deviation, Estimate, PlaneFit};
-use super::readings::{corner, parallel};
+use super::super::plane_pca::{
+    orientation, parallel_distance, plumb_deviation, Estimate, PlaneFit,
+};
+use super::readings::{corner_between, parallel_pair};
 use super::{line_samples, Wall, WallInput, WallParams, WallSolution, MAX_WALLS};
 use crate::calibration::{PlanesUncertainty, MAX_PLANES, PLANE_PARAMS};
 use crate::laser_plane::LaserPlane;
@@ -194,8 +196,9 @@ fn moved(
     Ok(d)
 }
 
-/// The readings from `walls` (the solution's, or moved ones); the segment's length is the
-/// solution's (its ends move separately).
+/// The readings from `walls` (the solution's, or moved ones), each between the walls the
+/// solution took it from (a moved pair must not trade places with another near the parallel
+/// or corner threshold); the segment's length is the solution's (its ends move separately).
 fn readings(
     params: &WallParams,
     solution: &WallSolution,
@@ -210,8 +213,12 @@ fn readings(
     r[YAW] = o.yaw.value;
     r[PITCH] = o.pitch.value;
     r[AXIS_DISTANCE] = o.axis_distance.value;
-    r[CORNER] = corner(walls).map_or(0.0, |c| c.angle.value);
-    r[PARALLEL] = parallel(walls, params).map_or(0.0, |p| p.value);
+    if let Some(c) = &solution.corner {
+        r[CORNER] = corner_between(walls, c.walls.0, c.walls.1).angle.value;
+    }
+    if let Some((a, b)) = parallel_pair(&solution.walls, params) {
+        r[PARALLEL] = parallel_distance(&walls[a].plane, &walls[b].plane).value;
+    }
     r[SEGMENT] = solution.segment.map_or(0.0, |s| s.length.value);
     r[PLUMB] = params
         .gravity
@@ -224,7 +231,7 @@ fn readings(
 /// in-plane axes and `c` its centroid, the weighted least squares of
 /// `n·δXⱼ + a₁ t₁·(Xⱼ − c) + a₂ t₂·(Xⱼ − c) − b` over its points (weights `1/σⱼ²` as in its
 /// fit) gives the normal `n + a₁t₁ + a₂t₂` (normalised) and the centroid `c` moved by the
-/// points' mean shift (`docs/building.md`, (B12)).
+/// points' mean shift (`docs/building.md`, (B10)).
 fn moved_plane(
     input: &WallInput<'_>,
     params: &WallParams,

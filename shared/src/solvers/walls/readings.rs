@@ -16,32 +16,41 @@ use crate::curve::CurvePoint;
 pub(super) fn corner(walls: &[Wall]) -> Option<Corner> {
     for a in 0..walls.len() {
         for b in a + 1..walls.len() {
-            let (pa, pb) = (&walls[a].plane, &walls[b].plane);
-            let between = normal_angle(pa, pb);
-            if between.value < PI / 6.0 {
+            if normal_angle(&walls[a].plane, &walls[b].plane).value < PI / 6.0 {
                 continue;
             }
-            return Some(Corner {
-                walls: (a, b),
-                angle: Estimate {
-                    value: PI - between.value,
-                    sigma: between.sigma,
-                },
-                // A receding (room) corner puts each wall on the camera's side of the other.
-                convex: pa.signed_distance(pb.centroid) > 0.0,
-            });
+            return Some(corner_between(walls, a, b));
         }
     }
     None
 }
 
+/// The corner between walls `a` and `b` (indices into `walls`).
+pub(super) fn corner_between(walls: &[Wall], a: usize, b: usize) -> Corner {
+    let (pa, pb) = (&walls[a].plane, &walls[b].plane);
+    let between = normal_angle(pa, pb);
+    Corner {
+        walls: (a, b),
+        angle: Estimate {
+            value: PI - between.value,
+            sigma: between.sigma,
+        },
+        // A receding (room) corner puts each wall on the camera's side of the other.
+        convex: pa.signed_distance(pb.centroid) > 0.0,
+    }
+}
+
 /// Distance between the two largest parallel walls.
 pub(super) fn parallel(walls: &[Wall], params: &WallParams) -> Option<Estimate> {
+    parallel_pair(walls, params).map(|(a, b)| parallel_distance(&walls[a].plane, &walls[b].plane))
+}
+
+/// The two largest parallel walls (indices into `walls`).
+pub(super) fn parallel_pair(walls: &[Wall], params: &WallParams) -> Option<(usize, usize)> {
     for a in 0..walls.len() {
         for b in a + 1..walls.len() {
-            let (pa, pb) = (&walls[a].plane, &walls[b].plane);
-            if normal_angle(pa, pb).value <= params.parallel_max {
-                return Some(parallel_distance(pa, pb));
+            if normal_angle(&walls[a].plane, &walls[b].plane).value <= params.parallel_max {
+                return Some((a, b));
             }
         }
     }
