@@ -40,7 +40,8 @@ impl ValueSigma {
     }
 }
 
-/// One wall as reported.
+/// One wall as reported. The aimed wall's σ include the calibration's errors
+/// (`docs/building.md`, (B10)); another wall's are its fit's alone.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct WallFace {
     /// Distance along the optical axis to the wall's plane (mm).
@@ -122,8 +123,16 @@ impl WallReport {
         let walls = s
             .walls
             .iter()
-            .filter_map(|w| {
-                let o = orientation(&w.plane)?;
+            .enumerate()
+            .filter_map(|(i, w)| {
+                // The aimed wall's orientation is the solution's, whose σ carry the
+                // calibration's errors (`docs/building.md`, (B10)); the other walls' are
+                // their fits' own.
+                let o = if i == s.aimed {
+                    s.orientation
+                } else {
+                    orientation(&w.plane)?
+                };
                 Some(WallFace {
                     axis_distance_mm: ValueSigma::mm(o.axis_distance),
                     yaw_deg: ValueSigma::deg(o.yaw),
