@@ -9,7 +9,9 @@
 use criterion::{criterion_group, criterion_main, Criterion};
 use std::hint::black_box;
 use tangent_core::image::Frame;
-use tangent_core::instrument::{measure_with, Instrument, Sphere, Stem};
+use tangent_core::instrument::{
+    measure_with, Instrument, Sphere, Stem, Wall, WallInstrumentParams,
+};
 use tangent_core::pipeline::{extract_profile, OwnedBuffers, PipelineConfig};
 use tangent_core::solvers::sphere::SphereParams;
 use tangent_core::solvers::stem::CylinderParams;
@@ -159,6 +161,29 @@ fn bench_sphere(c: &mut Criterion) {
     }
 }
 
+/// The whole wall measurement on two corpus captures (two lines, the board calibration):
+/// a room's corner and a niche, each with the readings' calibration σ ((B10),
+/// `docs/building.md` §4: seven more passes over the walls' points).
+fn bench_walls(c: &mut Criterion) {
+    for (name, capture_name) in [
+        ("corner", "wall-corner-z200"),
+        ("niche", "wall-niche-z200-w600-d150"),
+    ] {
+        let capture = corpus_capture(capture_name);
+        let cal = capture.calibration.clone();
+        let (off_f, on_f) = frames(&capture);
+        let mut hw = buffers(&on_f, &cal);
+        bench_measure::<Wall>(
+            c,
+            &format!("measure_wall_{name}"),
+            (&off_f, &on_f),
+            &cal,
+            &WallInstrumentParams::default(),
+            &mut hw,
+        );
+    }
+}
+
 /// `tangent calibrate ball`'s and `wall`'s refinement on six rendered views of the reference
 /// ball and of a flat wall (`docs/calibration.md` §12–13), the views measured once with a
 /// drawn calibration: the cost of the variable-projection fit alone.
@@ -204,6 +229,6 @@ criterion_group! {
     // Criterion's HTML plots need a system font that plotters (built here with the shipped
     // font only) cannot find; the numbers are what we record.
     config = Criterion::default().without_plots();
-    targets = bench, bench_sphere, bench_ball_refinement
+    targets = bench, bench_sphere, bench_walls, bench_ball_refinement
 }
 criterion_main!(benches);
