@@ -24,6 +24,7 @@ use core::fmt;
 use crate::real::Float;
 use crate::real::{norm, sqrt, Real, Vec2, Vec3, PI};
 
+use crate::calibration::PlanesUncertainty;
 use crate::camera::Camera;
 use crate::laser_plane::LaserPlane;
 
@@ -74,6 +75,22 @@ pub struct NoiseModel {
 }
 
 impl NoiseModel {
+    /// This model with plane `k`'s calibration σ as `uncertainty` states them (a refinement's
+    /// posterior, `docs/calibration.md` §14), or unchanged (the board's budget) without one.
+    pub fn for_plane(&self, k: usize, uncertainty: Option<&PlanesUncertainty>) -> NoiseModel {
+        match uncertainty {
+            Some(u) => {
+                let (baseline, tilt) = u.plane_sigma(k);
+                NoiseModel {
+                    baseline,
+                    tilt,
+                    ..*self
+                }
+            }
+            None => *self,
+        }
+    }
+
     /// The reference device (`docs/error-model.md`, "Reference values"): 0.05 px subpixel
     /// noise, fully developed speckle at 650 nm through f/2 with 6 µm pixels, 0.5 px edge
     /// uncertainty, calibration to 0.2 mm in `e`, 1 px in `f`, 0.2 mrad in `δ`.

@@ -390,17 +390,7 @@ pub fn calibration_sigma_radius(
     let mut failed = false;
     for k in 0..n {
         // Each plane moved by its own 1σ: the board's budget, or the refinement's posterior.
-        let plane_noise = match uncertainty {
-            Some(u) => {
-                let (baseline, tilt) = u.plane_sigma(k);
-                NoiseModel {
-                    baseline,
-                    tilt,
-                    ..*noise
-                }
-            }
-            None => *noise,
-        };
+        let plane_noise = noise.for_plane(k, uncertainty);
         let (by_e, ray_scale, by_tilt) = noise::perturbed(&planes[k], focal_px, &plane_noise)
             .map_err(|_| SolveError::Degenerate)?;
         let one = Joint {

@@ -92,17 +92,7 @@ pub fn add_calibration_sigma(
     // Each plane's baseline and tilt, each moved by its own 1σ.
     let mut shifts = [[0.0; PLANE_PARAMS]; READINGS];
     for k in 0..n {
-        let plane_noise = match uncertainty {
-            Some(u) => {
-                let (baseline, tilt) = u.plane_sigma(k);
-                NoiseModel {
-                    baseline,
-                    tilt,
-                    ..*noise
-                }
-            }
-            None => *noise,
-        };
+        let plane_noise = noise.for_plane(k, uncertainty);
         let (by_e, _, by_tilt) = noise::perturbed(&input.planes[k], params.focal_px, &plane_noise)
             .map_err(|_| SolveError::Degenerate)?;
         for (which, plane) in [by_e, by_tilt].into_iter().enumerate() {
