@@ -568,7 +568,7 @@ fn refine_n<const N: usize>(
     let planes = corrected_planes(nominal, u.as_slice(), prior)
         .map_err(|e| CalibrateError::Refinement(format!("corrected planes: {e}")))?;
     let refined = Calibration::new(calibration.id, calibration.camera, &planes)
-        .and_then(|c| c.with_uncertainty(posterior(&cov, &scales)?))
+        .and_then(|c| c.with_uncertainty(posterior(&cov, scales)?))
         .map_err(|e| CalibrateError::Refinement(format!("refined calibration: {e}")))?;
     let surfaces = |u: &[f64]| {
         let plain = Planes {

@@ -101,7 +101,7 @@ impl PlanesUncertainty {
     /// positive semi-definite.
     pub fn new(sigma: &[Real], correlation: &[Real]) -> Result<Self, UncertaintyError> {
         let n = sigma.len();
-        if n == 0 || n % 2 != 0 || n > PLANE_PARAMS {
+        if n == 0 || !n.is_multiple_of(2) || n > PLANE_PARAMS {
             return Err(UncertaintyError::Length(n));
         }
         if correlation.len() != n * n {
