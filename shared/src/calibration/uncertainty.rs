@@ -202,6 +202,15 @@ impl PlanesUncertainty {
         }
     }
 
+    /// [`PlanesUncertainty::spread`] under `uncertainty`, or with the parameters independent
+    /// (`√Σ shift²`, the board calibration's planes) without one.
+    pub fn spread_under(uncertainty: Option<&Self>, shift: &[Real]) -> Real {
+        match uncertainty {
+            Some(u) => u.spread(shift),
+            None => shift.iter().map(|s| s * s).sum::<Real>().sqrt(),
+        }
+    }
+
     /// The standard deviation of a quantity that moves by `shift[i]` when parameter `i` moves
     /// by its own 1σ (`gᵀ ρ g`, `g` in σ units): what a reading's calibration σ is under this
     /// covariance. Entries beyond the parameters covered are ignored.

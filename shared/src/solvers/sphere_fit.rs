@@ -439,10 +439,7 @@ pub fn calibration_sigma_radius(
         shifts[2 * k] = radius_of(&pair[0]);
         shifts[2 * k + 1] = radius_of(&pair[1]);
     }
-    let planes_sigma = match uncertainty {
-        Some(u) => u.spread(&shifts[..2 * n]),
-        None => sqrt(shifts.iter().map(|s| s * s).sum::<Real>()),
-    };
+    let planes_sigma = PlanesUncertainty::spread_under(uncertainty, &shifts[..2 * n]);
     let sigma = sqrt(radius_of(&focal).powi(2) + planes_sigma * planes_sigma);
     if sigma.is_finite() {
         Ok(sigma)

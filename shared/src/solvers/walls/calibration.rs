@@ -38,16 +38,16 @@ const PLUMB: usize = 6;
 /// Every reading's value (0 where the solution has none).
 type Readings = [Real; READINGS];
 
-/// One calibration error: the curves' planes as it moves them, and the ray scale of the
+/// One calibration error applied: the curves' planes as it moves them, and the ray scale of the
 /// focal length (1 when it is a plane's error).
-struct Error {
+struct Perturbation {
     planes: [LaserPlane; MAX_PLANES],
     /// Which curves it moves (bit `k`: curve `k`).
     moves: u8,
     ray_scale: Real,
 }
 
-impl Error {
+impl Perturbation {
     /// How the point `x` of curve `k` moves (zero for a curve this error does not touch).
     fn shift(&self, k: usize, x: Vec3) -> Result<Vec3, SolveError> {
         if self.moves & (1 << k) == 0 {
@@ -83,7 +83,7 @@ pub fn add_calibration_sigma(
     // The focal length: every curve, one error.
     let (_, ray_scale, _) = noise::perturbed(&input.planes[0], params.focal_px, noise)
         .map_err(|_| SolveError::Degenerate)?;
-    let focal = Error {
+    let focal = Perturbation {
         planes,
         moves: u8::MAX,
         ray_scale,
@@ -96,7 +96,7 @@ pub fn add_calibration_sigma(
         let (by_e, _, by_tilt) = noise::perturbed(&input.planes[k], params.focal_px, &plane_noise)
             .map_err(|_| SolveError::Degenerate)?;
         for (which, plane) in [by_e, by_tilt].into_iter().enumerate() {
-            let mut error = Error {
+            let mut error = Perturbation {
                 planes,
                 moves: 1 << k,
                 ray_scale: 1.0,
@@ -109,10 +109,7 @@ pub fn add_calibration_sigma(
         }
     }
     let sigma = |r: usize| {
-        let planes = match uncertainty {
-            Some(u) => u.spread(&shifts[r][..2 * n]),
-            None => sqrt(shifts[r].iter().map(|s| s * s).sum::<Real>()),
-        };
+        let planes = PlanesUncertainty::spread_under(uncertainty, &shifts[r][..2 * n]);
         sqrt(focal_shift[r] * focal_shift[r] + planes * planes)
     };
     let widen = |e: &mut Estimate, r: usize| {
@@ -143,7 +140,7 @@ fn moved(
     input: &WallInput<'_>,
     params: &WallParams,
     solution: &WallSolution,
-    error: &Error,
+    error: &Perturbation,
     base: &Readings,
 ) -> Result<Readings, SolveError> {
     let mut walls: heapless::Vec<Wall, MAX_WALLS> = heapless::Vec::new();
@@ -228,7 +225,7 @@ fn moved_plane(
     solution: &WallSolution,
     w: usize,
     plane: &PlaneFit,
-    error: &Error,
+    error: &Perturbation,
 ) -> Result<PlaneFit, SolveError> {
     let (n, c) = (plane.normal, plane.centroid);
     let [t1, t2] = plane.axes;
