@@ -157,6 +157,7 @@ impl Reading {
     fn from_result(
         capture: &str,
         result: &Result<Solved, PipelineError>,
+        calibration: &Calibration,
         truth: Option<f64>,
     ) -> Self {
         match result {
@@ -201,7 +202,7 @@ impl Reading {
                 }
             }
             // The walls' keys come from `from_wall`; this arm keeps `from_result` total.
-            Ok(Solved::Wall(m)) => Reading::from_wall(capture, Ok(m), None),
+            Ok(Solved::Wall(m)) => Reading::from_wall(capture, Ok(m), calibration, None),
             Err(e) => Reading {
                 // The sentence the caliper's report of this failure reads as.
                 error: Some(Failure::of(e).to_string()),
@@ -215,6 +216,7 @@ impl Reading {
     fn from_wall(
         capture: &str,
         result: Result<&WallMeasurement, &PipelineError>,
+        calibration: &Calibration,
         loaded: Option<&Capture>,
     ) -> Self {
         let blank = Reading::of_capture(capture, Some("wall"));
@@ -224,6 +226,7 @@ impl Reading {
                 points: Some(m.solution.points),
                 wall: Some(WallReport::of(
                     &m.solution,
+                    calibration,
                     loaded.and_then(|c| measure_wall::wall_truth(c, &m.solution)),
                 )),
                 ..blank
@@ -536,14 +539,15 @@ pub fn measure_loaded(
         Mode::Cylinder => {
             let (r, buffers) = solve_capture::<Stem>(capture, &calibration, config, params)?;
             let r = r.map(Solved::Stem);
-            let reading = Reading::from_result(name, &r, truth_diameter(capture));
+            let reading = Reading::from_result(name, &r, &calibration, truth_diameter(capture));
             (r, reading, buffers)
         }
         Mode::Sphere => {
             let params = sphere_params(params);
             let (r, buffers) = solve_capture::<Sphere>(capture, &calibration, config, &params)?;
             let r = r.map(Solved::Sphere);
-            let reading = Reading::from_result(name, &r, truth_sphere_diameter(capture));
+            let reading =
+                Reading::from_result(name, &r, &calibration, truth_sphere_diameter(capture));
             (r, reading, buffers)
         }
         Mode::Wall => {
@@ -560,7 +564,7 @@ pub fn measure_loaded(
                 Some(k) => solve_wall_crossing(capture, &calibration, k, config, &params)?,
                 None => solve_capture::<Wall>(capture, &calibration, config, &params)?,
             };
-            let reading = Reading::from_wall(name, r.as_ref(), Some(capture));
+            let reading = Reading::from_wall(name, r.as_ref(), &calibration, Some(capture));
             (r.map(|m| Solved::Wall(Box::new(m))), reading, buffers)
         }
         mode @ Mode::Road => return Err(MeasureError::UnsupportedMode(mode)),

@@ -5,6 +5,7 @@
 //! Degrees and millimetres here, at the user's edge; the core's SI values underneath.
 
 use serde::Serialize;
+use tangent_core::calibration::Calibration;
 use tangent_core::instrument::wall::WallMeasurement;
 use tangent_core::laser_plane::LaserPlane;
 use tangent_core::protocol::codes;
@@ -103,9 +104,21 @@ pub struct WallReport {
     /// The aimed wall's deviation from the plumb (degrees).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub plumb_deg: Option<ValueSigma>,
+    /// How the laser planes were calibrated: `board` (each plane on its own board poses; the
+    /// readings' σ carry the board's budget, `docs/building.md` (B10)) or `refined` (against
+    /// each other on a reference, `tangent calibrate wall`: `docs/calibration.md` §13–14).
+    pub planes_calibration: &'static str,
     /// The truth, for a simulated capture.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub truth: Option<WallTruth>,
+}
+
+/// [`WallReport::planes_calibration`] of a calibration.
+pub fn planes_calibration(calibration: &Calibration) -> &'static str {
+    match calibration.uncertainty {
+        Some(_) => "refined",
+        None => "board",
+    }
 }
 
 fn end_name(k: EndKind) -> &'static str {
@@ -118,8 +131,8 @@ fn end_name(k: EndKind) -> &'static str {
 }
 
 impl WallReport {
-    /// The report of a solution (`truth`: from [`wall_truth`]).
-    pub fn of(s: &WallSolution, truth: Option<WallTruth>) -> Self {
+    /// The report of a solution measured with `calibration` (`truth`: from [`wall_truth`]).
+    pub fn of(s: &WallSolution, calibration: &Calibration, truth: Option<WallTruth>) -> Self {
         let walls = s
             .walls
             .iter()
@@ -160,6 +173,7 @@ impl WallReport {
                 bounded: g.bounded(),
             }),
             plumb_deg: s.plumb.map(ValueSigma::deg),
+            planes_calibration: planes_calibration(calibration),
             truth,
         }
     }

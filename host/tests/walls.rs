@@ -253,3 +253,54 @@ fn a_calibration_board_capture_is_refused_as_a_wall() {
     assert!(text.contains("laser-calibration capture"), "{text}");
     assert!(text.contains("tangent calibrate"), "{text}");
 }
+
+/// A wall measured with board-calibrated planes says so (`planes_calibration` = `board`) and
+/// `tangent measure` tells the user how to refine them; with planes refined against each
+/// other (a calibration file with `[planes_uncertainty]`) neither.
+#[test]
+fn a_board_calibrated_wall_reading_points_to_the_wall_calibration() {
+    use std::process::{Command, Stdio};
+    use tangent_core::calibration::PlanesUncertainty;
+    let name = "wall-corner-z200";
+    assert_eq!(wall(name).planes_calibration, "board");
+    let dir = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/captures")).join(name);
+    let tangent = |extra: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_tangent"))
+            .arg("measure")
+            .arg(&dir)
+            .args(extra)
+            .stdin(Stdio::null())
+            .output()
+            .expect("the tangent binary runs")
+    };
+    let board = tangent(&[]);
+    assert!(board.status.success());
+    let hint = String::from_utf8_lossy(&board.stderr);
+    assert!(hint.contains("tangent calibrate wall"), "{hint}");
+    // The same head with its planes refined (a small σ, uncorrelated): no hint.
+    let tmp = tempfile::tempdir().unwrap();
+    let calib = tmp.path().join("refined.toml");
+    let capture = Capture::read(&dir).unwrap();
+    let planes = capture.calibration.planes.len();
+    let sigmas: Vec<f64> = (0..planes).flat_map(|_| [2e-5, 2e-5]).collect();
+    let n = 2 * planes;
+    let identity: Vec<f64> = (0..n * n)
+        .map(|i| if i / n == i % n { 1.0 } else { 0.0 })
+        .collect();
+    let refined = capture
+        .calibration
+        .clone()
+        .with_uncertainty(PlanesUncertainty::new(&sigmas, &identity).unwrap())
+        .unwrap();
+    tangent_host::calibration_file::write(&calib, &refined).unwrap();
+    let out = tangent(&["--calib", calib.to_str().unwrap(), "--json"]);
+    assert!(out.status.success());
+    let json = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        json.contains("\"planes_calibration\":\"refined\""),
+        "{json}"
+    );
+    let out = tangent(&["--calib", calib.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("calibrate wall"), "{stderr}");
+}

@@ -170,6 +170,15 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             }
         }
     }
+    let board_walls = results
+        .iter()
+        .filter_map(|r| r.as_ref().ok()?.0.wall.as_ref())
+        .filter(|w| w.planes_calibration == "board")
+        .count();
+    if board_walls > 0 && !args.json {
+        out.flush()?;
+        eprintln!("{}", board_calibration_hint(board_walls));
+    }
     if let Some(section) = &section {
         if let Some(path) = &args.log {
             let stored = tangent_host::fieldlog::FieldLog::open(path)
@@ -198,6 +207,19 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     } else {
         ExitCode::SUCCESS
     })
+}
+
+/// What to do about wall readings measured with board-calibrated planes: their σ are honest
+/// but carry the board's budget, several degrees on a wall's tilt (`docs/building.md` §4), which
+/// refining the planes against each other on a flat wall removes (`docs/calibration.md` §13).
+fn board_calibration_hint(walls: usize) -> String {
+    format!(
+        "note: {walls} wall reading(s) used laser planes calibrated on the board only, so their σ \
+         carry the board's calibration budget (a wall's tilt to several degrees). Refine the planes \
+         against each other once: `tangent calibrate wall --calib FILE CAPTURES...` on three or \
+         more captures of one flat wall at 1–3 m, then measure with `--calib FILE` \
+         (docs/calibration.md, section 13)."
+    )
 }
 
 /// Exit status when some capture gave no reading (and every one was read).

@@ -50,6 +50,7 @@ impl Instrument for Stem {
             curves,
             sigmas: &sigmas[..curves.len()],
             planes: points.planes(),
+            uncertainty: points.uncertainty(),
         };
         let scratch = stem::Scratch {
             points: scratch.points,

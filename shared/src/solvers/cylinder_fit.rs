@@ -58,8 +58,12 @@ pub struct CylinderFit {
 type M5 = SMatrix<Real, 5, 5>;
 type V5 = SVector<Real, 5>;
 
+mod calibration;
 mod weighted;
-pub use weighted::{fit_cylinder_weighted, WeightedCylinderFit, CYLINDER_SCRATCH_PER_POINT};
+pub use calibration::calibration_sigma_radius;
+pub use weighted::{
+    fit_cylinder_weighted, fit_weights, WeightedCylinderFit, CYLINDER_SCRATCH_PER_POINT,
+};
 
 /// Two unit vectors completing `u` to an orthonormal basis.
 fn basis(u: Vec3) -> (Vec3, Vec3) {

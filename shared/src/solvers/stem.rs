@@ -14,8 +14,8 @@ use crate::real::{norm, sqrt, Real, Vec2, Vec3, PI};
 
 use super::circle::{self, RobustParams, WEIGHTED_SCRATCH_PER_POINT};
 use super::cylinder_fit::{
-    fit_cylinder_weighted, initial_cylinder, project_along_axis, to_plane,
-    CYLINDER_SCRATCH_PER_POINT,
+    calibration_sigma_radius, fit_cylinder_weighted, fit_weights, initial_cylinder,
+    project_along_axis, to_plane, CYLINDER_SCRATCH_PER_POINT,
 };
 use super::ellipse::{self, EllipseFit};
 use super::lm::LmParams;
@@ -24,7 +24,7 @@ use super::three_tangent::{
     generalised_three_tangent, three_tangent, ThreeTangent, ThreeTangentParams,
 };
 use super::SolveError;
-use crate::calibration::MAX_PLANES;
+use crate::calibration::{PlanesUncertainty, MAX_PLANES};
 use crate::laser_plane::LaserPlane;
 use crate::noise::{self, NoiseModel};
 
@@ -51,6 +51,10 @@ pub struct CylinderInput<'a> {
     pub sigmas: &'a [&'a [Real]],
     /// The laser planes, same order as `curves`.
     pub planes: &'a [LaserPlane],
+    /// The planes' calibration covariance when they were refined against each other
+    /// ([`crate::calibration::Calibration::uncertainty`]); `None`: independent, each with
+    /// the noise model's σ. Used by the two-plane fit's calibration σ.
+    pub uncertainty: Option<&'a PlanesUncertainty>,
 }
 
 /// Settings of [`solve`].
@@ -448,6 +452,7 @@ pub fn solve(
         curves: &curves[..planes],
         sigmas: &sigmas[..planes],
         planes: input.planes,
+        uncertainty: input.uncertainty,
     };
     let mut scratch = Scratch {
         points,
@@ -621,6 +626,18 @@ fn solve_tilted(
         scratch.values,
     )?
     .fit;
+    // The calibration's part of the radius σ: each plane's own errors, through the fit with
+    // its own weights (docs/cylinder.md, (Cy-cal)).
+    let total = input.curves.iter().map(|c| c.len()).sum();
+    let cal_sigma = calibration_sigma_radius(
+        &fit,
+        input.curves,
+        fit_weights(scratch.values, total).ok_or(SolveError::ScratchTooSmall)?,
+        input.planes,
+        &params.noise,
+        params.focal_px,
+        input.uncertainty,
+    )?;
     let cyl = fit.cylinder;
     let plane0 = &input.planes[0];
     // Generalised three-tangent on every curve; mean radius, σ of the mean of the
@@ -686,7 +703,8 @@ fn solve_tilted(
     } else {
         return Err(SolveError::Degenerate);
     };
-    let cal_rel = noise::calibration_relative_sigma(plane0, centre, &params.noise, params.focal_px);
+    // The calibration's σ relative to the radius, for the methods that share the fit's axis.
+    let cal_rel = cal_sigma / cyl.radius;
     // The cylinder fit's own σ assumes independent, equal point noise; the dim ends of a far
     // curve and coherent bending break that as in one plane. σ of the mean of the per-curve
     // data-driven terms (independent curves) is the floor, as `max` in `solve_plane`.
@@ -695,7 +713,7 @@ fn solve_tilted(
     } else {
         0.0
     };
-    let fit_sigma = sqrt(fit.sigma_radius.max(data_sigma).powi(2) + (cal_rel * cyl.radius).powi(2));
+    let fit_sigma = sqrt(fit.sigma_radius.max(data_sigma).powi(2) + cal_sigma * cal_sigma);
     let tt = if k > 0 {
         let r = rsum / k as Real;
         let edge = edge_sum / k as Real;

@@ -50,6 +50,24 @@ fn residual(st: &CylState, y: Vec3, sigma: Real, direction: Vec3) -> (Real, Real
     )
 }
 
+/// A point's weight in the fit: `tukey(d/(σ_d·cutoff))/σ_d²` for its residual `d` of σ `σ_d`
+/// (0 for a point without a finite σ).
+fn point_weight(d: Real, sd: Real, cutoff: Real) -> Real {
+    if sd.is_finite() {
+        tukey(d / (sd * cutoff)) / (sd * sd)
+    } else {
+        0.0
+    }
+}
+
+/// The points' weights at the result of the [`fit_cylinder_weighted`] of `points` points that
+/// last used `scratch`, in the curves' order (a point's weight `tukey(dᵢ/(σ_{dᵢ}·c))/σ_{dᵢ}²`
+/// in the fit's normalised units: a common scale, which cancels in what is solved with them).
+/// Read them before `scratch` is used again. `None` when `scratch` is too short.
+pub fn fit_weights(scratch: &[Real], points: usize) -> Option<&[Real]> {
+    scratch.get(7 * points..8 * points)
+}
+
 /// Tukey's biweight `(1 − u²)²` for `|u| < 1`.
 fn tukey(u: Real) -> Real {
     if u.abs() < 1.0 {
@@ -155,12 +173,7 @@ pub fn fit_cylinder_weighted(
         let s = (1.2533 * sum / k_in as Real).max(1.0);
         cutoff = params.tuning * s;
         for (w, &sd) in weights.iter_mut().zip(residual_sigmas.iter()) {
-            let d = *w;
-            *w = if sd.is_finite() {
-                tukey(d / (sd * cutoff)) / (sd * sd)
-            } else {
-                0.0
-            };
+            *w = point_weight(*w, sd, cutoff);
         }
         let table = &*weights;
         let problem = CylinderProblem {
@@ -189,11 +202,7 @@ pub fn fit_cylinder_weighted(
     for ((y, c), w) in points().zip(weights.iter_mut()) {
         let (y, s, g) = unpack(y, c);
         let (d, sd) = residual(&st, y, s, g);
-        *w = if sd.is_finite() {
-            tukey(d / (sd * cutoff)) / (sd * sd)
-        } else {
-            0.0
-        };
+        *w = point_weight(d, sd, cutoff);
         if *w > 0.0 {
             ss += d * d;
         }
