@@ -48,7 +48,19 @@ pub struct FrameEntry {
     /// Indices (into the calibration's planes) of the lasers that were on; `[]` for the
     /// laser-off (ambient) frame.
     pub lasers_on: Vec<usize>,
+    /// The exposure pair the frame belongs to: 0, 1, … A capture taken while the trigger was
+    /// held has several pairs, each with its own laser-off frame (`docs/formats.md` §3).
+    #[serde(default, skip_serializing_if = "is_first_pair")]
+    pub pair: usize,
 }
+
+fn is_first_pair(pair: &usize) -> bool {
+    *pair == 0
+}
+
+/// Most exposure pairs one capture holds ([`tangent_core::solvers::stem::MAX_EXPOSURES`]:
+/// a reading combines at most that many).
+pub const MAX_PAIRS: usize = tangent_core::solvers::stem::MAX_EXPOSURES;
 
 /// The `[truth]` table: the exact scene and the exact laser curves.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -278,6 +290,20 @@ pub enum CaptureError {
     /// No frame has `lasers_on = []`, or more than one has.
     #[error("a capture needs exactly one laser-off frame (lasers_on = []), found {0}")]
     OffFrameCount(usize),
+    /// An exposure pair of a capture with several lacks its laser-off or its laser-on frame,
+    /// or has two laser-off frames.
+    #[error(
+        "exposure pair {pair} needs exactly one laser-off frame (lasers_on = []) and at least \
+         one laser-on frame, found {off} and {on}"
+    )]
+    PairFrames {
+        /// The `pair` number.
+        pair: usize,
+        /// Its laser-off frames.
+        off: usize,
+        /// Its laser-on frames.
+        on: usize,
+    },
     /// No frame has a laser on.
     #[error("a capture needs at least one laser-on frame")]
     NoOnFrame,
@@ -427,16 +453,24 @@ impl CaptureMeta {
         if let Some(name) = meta.truth.as_ref().and_then(|t| t.truth_curve.as_ref()) {
             check_file_name(name)?;
         }
-        let off = meta
-            .frames
-            .iter()
-            .filter(|f| f.lasers_on.is_empty())
-            .count();
-        if off != 1 {
-            return Err(CaptureError::OffFrameCount(off));
+        let pairs = meta.frames.iter().map(|f| f.pair + 1).max().unwrap_or(1);
+        if pairs > MAX_PAIRS {
+            return Err(CaptureError::InvalidField(format!(
+                "frame pair {} is beyond the format's {MAX_PAIRS} exposure pairs (pair = 0 to {})",
+                pairs - 1,
+                MAX_PAIRS - 1
+            )));
         }
-        if meta.frames.len() < 2 {
-            return Err(CaptureError::NoOnFrame);
+        for pair in 0..pairs {
+            let frames = || meta.frames.iter().filter(|f| f.pair == pair);
+            let off = frames().filter(|f| f.lasers_on.is_empty()).count();
+            let on = frames().count() - off;
+            match (pairs, off, on) {
+                (_, 1, 1..) => {}
+                (1, 1, 0) => return Err(CaptureError::NoOnFrame),
+                (1, _, _) => return Err(CaptureError::OffFrameCount(off)),
+                _ => return Err(CaptureError::PairFrames { pair, off, on }),
+            }
         }
         Ok(meta)
     }
@@ -616,27 +650,71 @@ impl Capture {
         toml::to_string(&meta).map_err(|e| CaptureError::InvalidField(e.to_string()))
     }
 
-    /// The laser-off frame.
+    /// The laser-off frame (of the first exposure pair).
     pub fn off_frame(&self) -> &Pgm {
-        // `CaptureMeta::parse` guarantees exactly one; `position` cannot fail on read
-        // captures, and a hand-built one falls back to the first frame.
+        // `CaptureMeta::parse` guarantees exactly one per pair; `position` cannot fail on
+        // read captures, and a hand-built one falls back to the first frame.
         let i = self
             .meta
             .frames
             .iter()
-            .position(|f| f.lasers_on.is_empty())
+            .position(|f| f.lasers_on.is_empty() && f.pair == 0)
             .unwrap_or(0);
         &self.frames[i]
     }
 
-    /// The laser-on frames with the planes each one lit.
+    /// The laser-on frames (of the first exposure pair) with the planes each one lit.
     pub fn on_frames(&self) -> impl Iterator<Item = (&[usize], &Pgm)> {
         self.meta
             .frames
             .iter()
             .zip(&self.frames)
-            .filter(|(e, _)| !e.lasers_on.is_empty())
+            .filter(|(e, _)| !e.lasers_on.is_empty() && e.pair == 0)
             .map(|(e, p)| (e.lasers_on.as_slice(), p))
+    }
+
+    /// How many exposure pairs the capture holds (1 for a single trigger's pair).
+    pub fn pairs(&self) -> usize {
+        self.meta
+            .frames
+            .iter()
+            .map(|f| f.pair + 1)
+            .max()
+            .unwrap_or(1)
+    }
+
+    /// The capture of exposure pair `pair` alone, as if it had been taken by itself (its
+    /// frames become pair 0); `None` beyond [`Capture::pairs`].
+    pub fn exposure_pair(&self, pair: usize) -> Option<Capture> {
+        if pair >= self.pairs() {
+            return None;
+        }
+        let (entries, frames): (Vec<FrameEntry>, Vec<Pgm>) = self
+            .meta
+            .frames
+            .iter()
+            .zip(&self.frames)
+            .filter(|(e, _)| e.pair == pair)
+            .map(|(e, p)| {
+                (
+                    FrameEntry {
+                        pair: 0,
+                        ..e.clone()
+                    },
+                    p.clone(),
+                )
+            })
+            .unzip();
+        Some(Capture {
+            meta: CaptureMeta {
+                frames: entries,
+                ..self.meta.clone()
+            },
+            calibration: self.calibration.clone(),
+            frames,
+            truth_curve: self.truth_curve.clone(),
+            truth_curve_unreadable: self.truth_curve_unreadable.clone(),
+        })
     }
 }
 

@@ -66,6 +66,25 @@ impl SeedSet {
     }
 }
 
+/// The exposure pairs each evaluated stem capture holds (`docs/simulator.md`, "Several
+/// exposures"): Tangent combines them; the baseline measures the first.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Exposures {
+    /// Pairs per capture (1: one trigger, one pair).
+    pub pairs: usize,
+    /// The same speckle in every pair (the hand did not renew it).
+    pub frozen_speckle: bool,
+}
+
+impl Default for Exposures {
+    fn default() -> Self {
+        Exposures {
+            pairs: 1,
+            frozen_speckle: false,
+        }
+    }
+}
+
 /// One evaluated capture.
 #[derive(Debug, Clone)]
 pub struct Sample {
@@ -96,6 +115,7 @@ pub fn run(
     count: u64,
     tilt_max_deg: f64,
     calibration: crate::calibration_draw::CalibrationUsed<'_>,
+    exposures: Exposures,
 ) -> anyhow::Result<Vec<Sample>> {
     let config = PipelineConfig::default();
     let params = CylinderParams::default();
@@ -105,6 +125,8 @@ pub fn run(
             let mut spec = random_stem(seed, tilt_max_deg);
             let model = model_for_seed(seed);
             physics::apply(model, seed, &mut spec);
+            spec.params.exposure_pairs = exposures.pairs;
+            spec.params.frozen_speckle = exposures.frozen_speckle;
             let (capture, _) = simulate(&spec)?;
             // The baseline below keeps the exact calibration.
             let drawn = calibration.apply(&capture, &params.noise, seed)?;

@@ -23,7 +23,7 @@ use tangent_core::pipeline::{OwnedBuffers, PipelineConfig, PipelineError, Profil
 use tangent_core::protocol::codes::{self, Failure};
 use tangent_core::real::Vec3;
 use tangent_core::solvers::sphere::SphereParams;
-use tangent_core::solvers::stem::CylinderParams;
+use tangent_core::solvers::stem::{combine_exposures, CylinderParams};
 
 use crate::capture::{Capture, CaptureError, Mode};
 use crate::measure_wall::{self, WallReport};
@@ -126,6 +126,14 @@ pub struct Reading {
     /// Curve points used.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub points: Option<usize>,
+    /// Exposure pairs a stem reading combines, when more than one
+    /// (`docs/error-model.md` §7, (E7)).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub exposures: Option<usize>,
+    /// Exposure pairs the capture holds, when more than one (some may give no reading or be
+    /// dropped as stray).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub exposure_pairs: Option<usize>,
     /// Why no diameter was given.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
@@ -197,6 +205,7 @@ impl Reading {
                     information_uncertainty_m: s.information_uncertainty,
                     distance_m: Some(s.distance),
                     points: Some(s.n_points),
+                    exposures: (s.exposures > 1).then_some(s.exposures),
                     truth_diameter_m: truth,
                     ..Reading::of_capture(capture, None)
                 }
@@ -302,6 +311,11 @@ impl Reading {
                 }
                 if let Some(z) = self.distance_m {
                     s += &format!(", at {:.2} m", z);
+                }
+                match (self.exposures, self.exposure_pairs) {
+                    (Some(k), Some(n)) if k < n => s += &format!(", {k} of {n} exposures"),
+                    (Some(k), _) => s += &format!(", {k} exposures"),
+                    _ => {}
                 }
                 if !self.flags.is_empty() {
                     s += &format!(" [{}]", self.flags.join(", "));
@@ -537,9 +551,10 @@ pub fn measure_loaded(
     // `Reading`.
     let (result, mut reading, buffers) = match capture.meta.mode {
         Mode::Cylinder => {
-            let (r, buffers) = solve_capture::<Stem>(capture, &calibration, config, params)?;
+            let (r, buffers) = solve_stem(capture, &calibration, config, params)?;
             let r = r.map(Solved::Stem);
-            let reading = Reading::from_result(name, &r, &calibration, truth_diameter(capture));
+            let mut reading = Reading::from_result(name, &r, &calibration, truth_diameter(capture));
+            reading.exposure_pairs = (capture.pairs() > 1).then_some(capture.pairs());
             (r, reading, buffers)
         }
         Mode::Sphere => {
@@ -743,6 +758,41 @@ type PlotBuffers = (Vec<u16>, Vec<CurvePoint>, Vec<Vec3>);
 
 /// Runs instrument `I` on the capture's frame pair.
 #[allow(clippy::type_complexity)]
+/// A stem capture's reading: its exposure pair's, or with several pairs the combination of
+/// every pair's reading ([`combine_exposures`], `docs/error-model.md` §7); the buffers (for
+/// plots) are those of the first pair that read. With no pair reading, the first pair's
+/// error.
+fn solve_stem(
+    capture: &Capture,
+    calibration: &Calibration,
+    config: &PipelineConfig,
+    params: &CylinderParams,
+) -> Result<(Result<StemMeasurement, PipelineError>, PlotBuffers), MeasureError> {
+    if capture.pairs() == 1 {
+        return solve_capture::<Stem>(capture, calibration, config, params);
+    }
+    let mut first: Option<(Result<StemMeasurement, PipelineError>, PlotBuffers)> = None;
+    let mut solutions = Vec::with_capacity(capture.pairs());
+    for pair in (0..capture.pairs()).filter_map(|k| capture.exposure_pair(k)) {
+        let (result, buffers) = solve_capture::<Stem>(&pair, calibration, config, params)?;
+        if let Ok(m) = &result {
+            solutions.push(m.solution);
+        }
+        // The first pair that read, else the first pair's failure.
+        match (&first, &result) {
+            (None, _) | (Some((Err(_), _)), Ok(_)) => first = Some((result, buffers)),
+            _ => {}
+        }
+    }
+    // `first` is set: every pair below `pairs()` exists and each one returns a result.
+    let (result, buffers) = first.ok_or(MeasureError::NoFullFrame(calibration.planes.len()))?;
+    let result = result.and_then(|m| {
+        let solution = combine_exposures(&solutions).map_err(PipelineError::Solve)?;
+        Ok(Measured { solution, ..m })
+    });
+    Ok((result, buffers))
+}
+
 fn solve_capture<I: Instrument>(
     capture: &Capture,
     calibration: &Calibration,

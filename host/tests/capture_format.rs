@@ -586,3 +586,59 @@ fn corpus_regenerates_bit_for_bit() {
         }
     }
 }
+
+/// A capture taken while the trigger was held: two exposure pairs, each with its own
+/// laser-off frame (`docs/formats.md` §3), read as two captures of one pair each; a pair
+/// without its laser-off frame is named.
+#[test]
+fn exposure_pairs_read_and_a_broken_pair_is_named() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("pairs");
+    let c = corpus::one_plane_calibration();
+    hand_made(&dir, "", &inline_calibration(&c));
+    for name in ["off.pgm", "on.pgm"] {
+        std::fs::copy(dir.join(name), dir.join(format!("p1-{name}"))).unwrap();
+    }
+    let two_pairs = r#"  { file = "on.pgm", lasers_on = [0] },
+  { file = "p1-off.pgm", lasers_on = [], pair = 1 },
+  { file = "p1-on.pgm", lasers_on = [0], pair = 1 },"#;
+    edit_meta(
+        &dir,
+        r#"  { file = "on.pgm", lasers_on = [0] },"#,
+        two_pairs,
+    );
+    let cap = Capture::read(&dir).unwrap();
+    assert_eq!(cap.pairs(), 2);
+    let second = cap.exposure_pair(1).unwrap();
+    assert_eq!((second.pairs(), second.frames.len()), (1, 2));
+    assert_eq!(second.meta.frames[0].file, "p1-off.pgm");
+    assert!(cap.exposure_pair(2).is_none());
+    // The first pair is what single-pair readers (sphere, wall, road, plots) see.
+    assert_eq!(cap.on_frames().count(), 1);
+
+    edit_meta(
+        &dir,
+        r#"file = "p1-off.pgm", lasers_on = []"#,
+        r#"file = "p1-off.pgm", lasers_on = [0]"#,
+    );
+    let e = Capture::read(&dir).expect_err("pair 1 has no laser-off frame");
+    assert!(
+        matches!(
+            e,
+            CaptureError::PairFrames {
+                pair: 1,
+                off: 0,
+                on: 2
+            }
+        ),
+        "{e}"
+    );
+    assert!(e.to_string().contains("exposure pair 1"), "{e}");
+    edit_meta(
+        &dir,
+        "pair = 1 },\n  { file = \"p1-on.pgm\", lasers_on = [0], pair = 1",
+        "pair = 16 },\n  { file = \"p1-on.pgm\", lasers_on = [0], pair = 16",
+    );
+    let e = Capture::read(&dir).expect_err("pair 16 is beyond the format");
+    assert!(e.to_string().contains("frame pair 16"), "{e}");
+}

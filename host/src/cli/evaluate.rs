@@ -7,7 +7,7 @@ use std::time::Instant;
 
 use anyhow::Context;
 use tangent_host::calibration_draw::{CalibrationUsed, ReferenceKind, ReferenceSessions};
-use tangent_host::evaluate::{comparison_section, run as run_samples, section, SeedSet};
+use tangent_host::evaluate::{comparison_section, run as run_samples, section, Exposures, SeedSet};
 
 /// The long help of `tangent evaluate` (`main.rs` gives it to clap on the subcommand, where
 /// the short doc comment would otherwise replace it).
@@ -105,6 +105,14 @@ pub struct Args {
     /// First seed of the road surfaces (`--road`).
     #[arg(long, default_value_t = 1_000_000)]
     road_seed: u64,
+    /// Exposure pairs per stem capture (frame pairs while the trigger is held,
+    /// `docs/error-model.md` §7): Tangent combines them, the baseline reads the first.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=16))]
+    exposure_pairs: u64,
+    /// With --exposure-pairs: the same speckle in every pair (the hand did not renew it;
+    /// the worst case for averaging).
+    #[arg(long)]
+    frozen_speckle: bool,
 }
 
 /// Runs `tangent evaluate`.
@@ -148,8 +156,18 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let (t_seed, tilt_seed) = (args.set.first_seed(false), args.set.first_seed(true));
     let sessions = ball_sessions(&args)?;
     let used = calibration_used(&args, sessions.as_ref());
-    let transversal = run_samples(t_seed, args.count, 0.0, used)?;
-    let tilted = run_samples(tilt_seed, args.tilted_count, args.tilt_max_deg, used)?;
+    let exposures = Exposures {
+        pairs: args.exposure_pairs as usize,
+        frozen_speckle: args.frozen_speckle,
+    };
+    let transversal = run_samples(t_seed, args.count, 0.0, used, exposures)?;
+    let tilted = run_samples(
+        tilt_seed,
+        args.tilted_count,
+        args.tilt_max_deg,
+        used,
+        exposures,
+    )?;
     let elapsed = start.elapsed().as_secs_f64();
     if let Some(path) = &args.samples {
         let lines: Vec<String> = transversal
@@ -182,13 +200,18 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     );
     doc += &format!(
         "Command parameters: set **{}**, {} transversal stems from seed {}, {} tilted stems \
-         (≤ {}°) from seed {}.\n\n## Evaluation across physics models\n\n",
+         (≤ {}°) from seed {}{}.\n\n## Evaluation across physics models\n\n",
         args.set.name(),
         args.count,
         t_seed,
         args.tilted_count,
         args.tilt_max_deg,
-        tilt_seed
+        tilt_seed,
+        match (exposures.pairs, exposures.frozen_speckle) {
+            (1, _) => String::new(),
+            (k, false) => format!("; {k} exposure pairs per capture, speckle renewed in each"),
+            (k, true) => format!("; {k} exposure pairs per capture, the same speckle in each"),
+        }
     );
     doc += &comparison_section("Transversal stems (one laser plane)", &transversal);
     doc += &comparison_section(

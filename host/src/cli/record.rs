@@ -156,10 +156,12 @@ pub fn build_capture(
             FrameEntry {
                 file: "off.pgm".into(),
                 lasers_on: vec![],
+                pair: 0,
             },
             FrameEntry {
                 file: "on.pgm".into(),
                 lasers_on,
+                pair: 0,
             },
         ],
         calibration: toml::Value::Table(Default::default()),

@@ -80,6 +80,13 @@ enum What {
         /// Physics model, as for `simulate stem` (`by-seed`: as `tangent evaluate` does).
         #[arg(long, default_value = "reference")]
         physics: String,
+        /// Exposure pairs per capture (frame pairs while the trigger is held; `tangent
+        /// measure` combines them, `docs/error-model.md` section 7).
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=16))]
+        exposure_pairs: u64,
+        /// With --exposure-pairs: the same speckle in every pair.
+        #[arg(long)]
+        frozen_speckle: bool,
         /// Output directory.
         #[arg(long)]
         out: PathBuf,
@@ -212,6 +219,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             seed,
             tilt_max_deg,
             physics,
+            exposure_pairs,
+            frozen_speckle,
             out,
         } => {
             physics_model(&physics, seed)?;
@@ -219,6 +228,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
                 let s = seed + k;
                 let mut spec = corpus::random_stem(s, tilt_max_deg);
                 physics::apply(physics_model(&physics, s)?, s, &mut spec);
+                spec.params.exposure_pairs = exposure_pairs as usize;
+                spec.params.frozen_speckle = frozen_speckle;
                 write(&spec, &out.join(format!("random-{s}")))
             })?;
         }

@@ -29,7 +29,7 @@ use serde::{Deserialize, Serialize};
 use tangent_core::calibration::{Calibration, MAX_PLANES};
 
 use crate::calibration_file::CalibrationToml;
-use crate::capture::{Capture, CaptureMeta, FrameEntry, Mode, Truth, FORMAT_VERSION};
+use crate::capture::{Capture, CaptureMeta, FrameEntry, Mode, Truth, FORMAT_VERSION, MAX_PAIRS};
 use crate::pgm::Pgm;
 use crate::truth::{Object, PhysicsModel};
 use accelerometer::AccelerometerSim;
@@ -102,6 +102,15 @@ pub struct SimParams {
     pub hand_motion: Option<HandMotion>,
     /// `n` of the `n × n` supersampling of stripe and edge pixels.
     pub supersampling: usize,
+    /// Exposure pairs taken while the trigger is held (`docs/simulator.md`, "Several
+    /// exposures"): each pair has its own sensor noise and, unless `frozen_speckle`, its own
+    /// speckle.
+    #[serde(default = "one_pair", skip_serializing_if = "is_one_pair")]
+    pub exposure_pairs: usize,
+    /// The same speckle in every exposure pair: the hand did not move enough between the
+    /// pairs to renew it (the worst case for averaging).
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub frozen_speckle: bool,
     /// Name of the physics model these parameters were drawn from ([`physics::apply`]);
     /// also recorded in the capture's `[truth]`.
     #[serde(default, skip_serializing_if = "is_reference")]
@@ -121,6 +130,18 @@ pub struct SimParams {
 
 fn is_reference(m: &PhysicsModel) -> bool {
     *m == PhysicsModel::Reference
+}
+
+fn one_pair() -> usize {
+    1
+}
+
+fn is_one_pair(n: &usize) -> bool {
+    *n == 1
+}
+
+fn is_false(b: &bool) -> bool {
+    !*b
 }
 
 fn one() -> f64 {
@@ -152,6 +173,8 @@ impl Default for SimParams {
             surface_roughness_m: 1e-3,
             hand_motion: None,
             supersampling: 8,
+            exposure_pairs: 1,
+            frozen_speckle: false,
             physics: PhysicsModel::Reference,
             reflectance: Reflectance::Lambertian,
             texture_scale: 1.0,
@@ -212,6 +235,9 @@ pub const CORRELATED_SPECKLE_GRAIN_PX: f64 = 0.25;
 const PRNU_STREAM: u64 = 300;
 /// First random stream of the row noise (plus the frame's stream).
 const ROW_NOISE_STREAM: u64 = 400;
+/// Offset of every per-frame stream (frames, their row noise, the speckle) from one exposure
+/// pair to the next: pair 0's streams are those of a single-pair capture.
+const PAIR_STREAMS: u64 = 1000;
 
 fn rng_for(seed: u64, stream: u64, row: u64) -> Pcg64 {
     Pcg64::seed_from_u64(splitmix(
@@ -254,6 +280,12 @@ pub fn simulate(spec: &SimSpec) -> Result<(Capture, SimReport), SimError> {
         return Err(SimError::Param(format!(
             "lit_planes {:?} must name planes 0..{nplanes}",
             p.lit_planes
+        )));
+    }
+    if !(1..=MAX_PAIRS).contains(&p.exposure_pairs) {
+        return Err(SimError::Param(format!(
+            "exposure_pairs {} must be 1 to {MAX_PAIRS}",
+            p.exposure_pairs
         )));
     }
     if !(1..=16).contains(&p.sensor.bit_depth)
@@ -377,37 +409,40 @@ pub fn simulate(spec: &SimSpec) -> Result<(Capture, SimReport), SimError> {
     // larger ones (a stopped-down lens) are rendered as a correlated field.
     let grain_px = sensor::speckle_correlation_m(p.laser.wavelength_m, p.optics.f_number)
         / p.sensor.pixel_pitch_m;
-    let speckle: Vec<Vec<f64>> = (0..nplanes)
-        .map(|i| {
-            if !(p.speckle && lit[i]) {
-                return Vec::new();
-            }
-            if grain_px >= CORRELATED_SPECKLE_GRAIN_PX {
-                let white: Vec<f64> = (0..h)
+    let speckle_of_pair = |pair: u64| -> Vec<Vec<f64>> {
+        let stream = |i: usize| 100 + i as u64 + pair * PAIR_STREAMS;
+        (0..nplanes)
+            .map(|i| {
+                if !(p.speckle && lit[i]) {
+                    return Vec::new();
+                }
+                if grain_px >= CORRELATED_SPECKLE_GRAIN_PX {
+                    let white: Vec<f64> = (0..h)
+                        .into_par_iter()
+                        .flat_map_iter(|row| {
+                            let mut rng = rng_for(p.seed, stream(i), row as u64);
+                            (0..w)
+                                .map(move |_| rng.sample::<f64, _>(rand_distr::StandardNormal))
+                                .collect::<Vec<_>>()
+                        })
+                        .collect();
+                    // Pixel-integrated grains: the intensity correlation widened by the pixel's
+                    // box (variance 1/12 px²).
+                    let width = (grain_px * grain_px + 1.0 / 12.0).sqrt();
+                    return sensor::correlated_speckle(&white, w, h, width, cells);
+                }
+                (0..h)
                     .into_par_iter()
                     .flat_map_iter(|row| {
-                        let mut rng = rng_for(p.seed, 100 + i as u64, row as u64);
+                        let mut rng = rng_for(p.seed, stream(i), row as u64);
                         (0..w)
-                            .map(move |_| rng.sample::<f64, _>(rand_distr::StandardNormal))
+                            .map(move |_| sensor::speckle_factor(cells, &mut rng))
                             .collect::<Vec<_>>()
                     })
-                    .collect();
-                // Pixel-integrated grains: the intensity correlation widened by the pixel's
-                // box (variance 1/12 px²).
-                let width = (grain_px * grain_px + 1.0 / 12.0).sqrt();
-                return sensor::correlated_speckle(&white, w, h, width, cells);
-            }
-            (0..h)
-                .into_par_iter()
-                .flat_map_iter(|row| {
-                    let mut rng = rng_for(p.seed, 100 + i as u64, row as u64);
-                    (0..w)
-                        .map(move |_| sensor::speckle_factor(cells, &mut rng))
-                        .collect::<Vec<_>>()
-                })
-                .collect()
-        })
-        .collect();
+                    .collect()
+            })
+            .collect()
+    };
 
     // A row-wise plane (the walls' crossing line) is always fired alone, in a frame of its
     // own after the others' (`docs/building.md`, "The crossing line"), as the device does.
@@ -448,45 +483,46 @@ pub fn simulate(spec: &SimSpec) -> Result<(Capture, SimReport), SimError> {
     } else {
         Vec::new()
     };
-    let expose = |stream: u64, planes: &[usize], ambient: &[f64]| -> Vec<u16> {
-        (0..h)
-            .into_par_iter()
-            .flat_map_iter(|row| {
-                let mut rng = rng_for(p.seed, stream, row as u64);
-                // The row's temporal offset comes from its own stream, so the pixels' draws
-                // are those of a sensor without row noise.
-                let row_offset_e = if p.sensor.row_noise_e > 0.0 {
-                    let mut row_rng = rng_for(p.seed, ROW_NOISE_STREAM + stream, row as u64);
-                    p.sensor.row_noise_e * row_rng.sample::<f64, _>(rand_distr::StandardNormal)
-                } else {
-                    0.0
-                };
-                let mut out = Vec::with_capacity(w);
-                for col in 0..w {
-                    let j = row * w + col;
-                    let mut rate = ambient[j];
-                    for &i in planes {
-                        let s = speckle
-                            .get(i)
-                            .and_then(|v| v.get(j))
-                            .copied()
-                            .unwrap_or(1.0);
-                        rate += on.lasers[i][j] * s;
+    let expose =
+        |stream: u64, planes: &[usize], ambient: &[f64], speckle: &[Vec<f64>]| -> Vec<u16> {
+            (0..h)
+                .into_par_iter()
+                .flat_map_iter(|row| {
+                    let mut rng = rng_for(p.seed, stream, row as u64);
+                    // The row's temporal offset comes from its own stream, so the pixels' draws
+                    // are those of a sensor without row noise.
+                    let row_offset_e = if p.sensor.row_noise_e > 0.0 {
+                        let mut row_rng = rng_for(p.seed, ROW_NOISE_STREAM + stream, row as u64);
+                        p.sensor.row_noise_e * row_rng.sample::<f64, _>(rand_distr::StandardNormal)
+                    } else {
+                        0.0
+                    };
+                    let mut out = Vec::with_capacity(w);
+                    for col in 0..w {
+                        let j = row * w + col;
+                        let mut rate = ambient[j];
+                        for &i in planes {
+                            let s = speckle
+                                .get(i)
+                                .and_then(|v| v.get(j))
+                                .copied()
+                                .unwrap_or(1.0);
+                            rate += on.lasers[i][j] * s;
+                        }
+                        if let Some(g) = prnu.get(j) {
+                            rate *= g;
+                        }
+                        out.push(p.sensor.expose_pixel_with_offset(
+                            rate * k * exposure_s,
+                            row_offset_e,
+                            p.gain,
+                            &mut rng,
+                        ));
                     }
-                    if let Some(g) = prnu.get(j) {
-                        rate *= g;
-                    }
-                    out.push(p.sensor.expose_pixel_with_offset(
-                        rate * k * exposure_s,
-                        row_offset_e,
-                        p.gain,
-                        &mut rng,
-                    ));
-                }
-                out
-            })
-            .collect()
-    };
+                    out
+                })
+                .collect()
+        };
     let to_pgm = |data: Vec<u16>| -> Result<Pgm, SimError> {
         let maxval = p.sensor.max_dn();
         let r = if maxval <= 255 {
@@ -502,28 +538,49 @@ pub fn simulate(spec: &SimSpec) -> Result<(Capture, SimReport), SimError> {
         r.map_err(|e| SimError::Capture(e.to_string()))
     };
 
-    let mut frames = vec![to_pgm(expose(0, &[], &off_ambient))?];
-    let mut entries = vec![FrameEntry {
-        file: "off.pgm".into(),
-        lasers_on: vec![],
-    }];
-    for (n, set) in frame_sets.iter().enumerate() {
-        frames.push(to_pgm(expose(1 + n as u64, set, &on.ambient))?);
-        let file = if frame_sets.len() == 1 {
-            "on.pgm".to_string()
+    let (mut frames, mut entries) = (Vec::new(), Vec::new());
+    let mut speckle = speckle_of_pair(0);
+    for pair in 0..p.exposure_pairs {
+        let streams = pair as u64 * PAIR_STREAMS;
+        if pair > 0 && !p.frozen_speckle {
+            speckle = speckle_of_pair(pair as u64);
+        }
+        // Pair 0 keeps the names of a single-pair capture.
+        let prefix = if pair == 0 {
+            String::new()
         } else {
-            format!(
-                "on-{}.pgm",
-                set.iter()
-                    .map(|i| i.to_string())
-                    .collect::<Vec<_>>()
-                    .join("-")
-            )
+            format!("p{pair}-")
         };
+        frames.push(to_pgm(expose(streams, &[], &off_ambient, &speckle))?);
         entries.push(FrameEntry {
-            file,
-            lasers_on: set.clone(),
+            file: format!("{prefix}off.pgm"),
+            lasers_on: vec![],
+            pair,
         });
+        for (n, set) in frame_sets.iter().enumerate() {
+            frames.push(to_pgm(expose(
+                streams + 1 + n as u64,
+                set,
+                &on.ambient,
+                &speckle,
+            ))?);
+            let file = if frame_sets.len() == 1 {
+                format!("{prefix}on.pgm")
+            } else {
+                format!(
+                    "{prefix}on-{}.pgm",
+                    set.iter()
+                        .map(|i| i.to_string())
+                        .collect::<Vec<_>>()
+                        .join("-")
+                )
+            };
+            entries.push(FrameEntry {
+                file,
+                lasers_on: set.clone(),
+                pair,
+            });
+        }
     }
 
     let truth_curve = render::truth_curve(&setup, &p.lit_planes);

@@ -29,10 +29,12 @@ use crate::laser_plane::LaserPlane;
 use crate::noise::{self, NoiseModel};
 
 mod budget;
+mod exposures;
 mod level;
 mod sigma;
 use budget::bin_curves;
 pub use budget::POINT_BUDGET;
+pub use exposures::{combine_exposures, MAX_EXPOSURES};
 use level::LevelMap;
 use sigma::{
     arc_angle, elliptic_diameter, noise_vector, one_point_sigma, projected_section, robust_circle,
@@ -161,6 +163,10 @@ pub struct CylinderSolution {
     /// 1σ uncertainty of `diameter` (metres): random (point noise, edges) and calibration,
     /// from the points' σ, the noise model ([`crate::noise`]) and the data.
     pub uncertainty: Real,
+    /// The part of `uncertainty` the calibration contributes (metres): common to every
+    /// exposure measured with the same calibration, so several exposures do not average it
+    /// ([`combine_exposures`]).
+    pub calibration_uncertainty: Real,
     /// Stem tilt, when two planes measured it.
     pub tilt: Option<Tilt>,
     /// Quality flags.
@@ -170,6 +176,8 @@ pub struct CylinderSolution {
     /// Measured points the reading used: plane 0's for a one-plane reading, every plane's for
     /// a two-plane one (before the point budget's binning).
     pub n_points: usize,
+    /// Exposures (frame pairs) the reading combines: 1 for one pair ([`combine_exposures`]).
+    pub exposures: usize,
     /// Three-tangent diameter (plane 0, or generalised), if it succeeded.
     pub three_tangent_diameter: Option<Real>,
     /// Its 1σ.
@@ -530,10 +538,12 @@ fn finish_plane(
             diameter: d,
             method: Method::CircleFit,
             uncertainty: s,
+            calibration_uncertainty: cal_rel * d,
             tilt: None,
             flags,
             fit_rms: f.rms_residual,
             n_points: one.n,
+            exposures: 1,
             three_tangent_diameter: one.tt.map(|(t, _)| 2.0 * t.radius),
             three_tangent_uncertainty: one.tt.map(|(_, s)| 2.0 * s),
             fit_diameter: Some(2.0 * f.circle.radius),
@@ -581,14 +591,22 @@ fn finish_plane(
             t.nearest_distance,
         )
     };
+    let cal_rel = noise::calibration_relative_sigma(
+        plane,
+        plane.from_plane_coords(level.to_plane(centre)),
+        &params.noise,
+        params.focal_px,
+    );
     Ok(CylinderSolution {
         diameter: 2.0 * radius,
         method,
         uncertainty: 2.0 * sigma,
+        calibration_uncertainty: cal_rel * 2.0 * radius,
         tilt: None,
         flags,
         fit_rms: one.fit.map(|(f, _, _)| f.rms_residual).unwrap_or(0.0),
         n_points: one.n,
+        exposures: 1,
         three_tangent_diameter: one.tt.map(|(t, _)| 2.0 * t.radius),
         three_tangent_uncertainty: one.tt.map(|(_, s)| 2.0 * s),
         fit_diameter: one.fit.map(|(f, _, _)| 2.0 * f.circle.radius),
@@ -770,10 +788,12 @@ fn solve_tilted(
         diameter,
         method,
         uncertainty,
+        calibration_uncertainty: cal_rel * diameter,
         tilt: Some(tilt),
         flags,
         fit_rms: fit.rms_residual,
         n_points: fit.points,
+        exposures: 1,
         three_tangent_diameter: tt.map(|(r, _)| 2.0 * r),
         three_tangent_uncertainty: tt.map(|(_, s)| 2.0 * s),
         fit_diameter: Some(2.0 * cyl.radius),
