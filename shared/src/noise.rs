@@ -24,7 +24,7 @@ use core::fmt;
 use crate::real::Float;
 use crate::real::{norm, sqrt, Real, Vec2, Vec3, PI};
 
-use crate::calibration::PlanesUncertainty;
+use crate::calibration::{PlanesUncertainty, MAX_PLANES, PLANE_PARAMS};
 use crate::camera::Camera;
 use crate::laser_plane::LaserPlane;
 
@@ -458,6 +458,28 @@ pub fn calibration_relative_sigma(
         total += rel * rel;
     }
     sqrt(total)
+}
+
+/// The 1σ of a fitted quantity under the calibration's errors, from its linear responses to
+/// each error at its 1σ: to the focal length (`focal`, common to every plane) and to plane
+/// `k`'s offset and tilt (`response(k, 0)`, `response(k, 1)`, planes `0..planes`), the
+/// planes' parameters combined under `uncertainty` ([`PlanesUncertainty::spread_under`]).
+/// The two-plane fits' calibration σ ((Cy-cal), (S-cal)). `None` when not finite.
+pub fn calibration_spread(
+    uncertainty: Option<&PlanesUncertainty>,
+    focal: Real,
+    planes: usize,
+    response: impl Fn(usize, usize) -> Real,
+) -> Option<Real> {
+    let planes = planes.min(MAX_PLANES);
+    let mut shifts = [0.0; PLANE_PARAMS];
+    for k in 0..planes {
+        shifts[2 * k] = response(k, 0);
+        shifts[2 * k + 1] = response(k, 1);
+    }
+    let spread = PlanesUncertainty::spread_under(uncertainty, &shifts[..2 * planes]);
+    let sigma = sqrt(focal * focal + spread * spread);
+    sigma.is_finite().then_some(sigma)
 }
 
 /// Samples the lit and visible arc of the circle of `centre` and `radius` (in-plane

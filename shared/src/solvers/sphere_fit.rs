@@ -21,7 +21,7 @@ use super::correlation::correlation_length;
 use super::lm::{spd_inverse, LmParams, NormalEquations};
 use super::sphere_sections::{minimise_sphere, Sphere, SphereCost};
 use super::SolveError;
-use crate::calibration::{PlanesUncertainty, MAX_PLANES, PLANE_PARAMS};
+use crate::calibration::{PlanesUncertainty, MAX_PLANES};
 use crate::laser_plane::LaserPlane;
 use crate::noise::{self, NoiseModel};
 
@@ -434,18 +434,10 @@ pub fn calibration_sigma_radius(
     }
     let inverse = spd_inverse(&a).ok_or(SolveError::Degenerate)?;
     let radius_of = |b: &SVector<Real, 4>| (inverse * b)[3];
-    let mut shifts = [0.0; PLANE_PARAMS];
-    for (k, pair) in per_plane.iter().enumerate().take(n) {
-        shifts[2 * k] = radius_of(&pair[0]);
-        shifts[2 * k + 1] = radius_of(&pair[1]);
-    }
-    let planes_sigma = PlanesUncertainty::spread_under(uncertainty, &shifts[..2 * n]);
-    let sigma = sqrt(radius_of(&focal).powi(2) + planes_sigma * planes_sigma);
-    if sigma.is_finite() {
-        Ok(sigma)
-    } else {
-        Err(SolveError::NonFinite)
-    }
+    noise::calibration_spread(uncertainty, radius_of(&focal), n, |k, p| {
+        radius_of(&per_plane[k][p])
+    })
+    .ok_or(SolveError::NonFinite)
 }
 
 #[cfg(test)]

@@ -9,10 +9,10 @@
 
 #[allow(unused_imports)]
 use crate::real::Float;
-use crate::real::{norm, sqrt, Real, Vec3};
+use crate::real::{norm, Real, Vec3};
 
 use super::{basis, Cylinder, CylinderFit, M5, V5};
-use crate::calibration::{PlanesUncertainty, MAX_PLANES, PLANE_PARAMS};
+use crate::calibration::{PlanesUncertainty, MAX_PLANES};
 use crate::laser_plane::LaserPlane;
 use crate::noise::{self, NoiseModel};
 use crate::solvers::lm::spd_inverse;
@@ -125,18 +125,10 @@ pub fn calibration_sigma_radius(
     }
     let inverse = spd_inverse(&a).ok_or(SolveError::Degenerate)?;
     let radius_of = |b: &V5| (inverse * b)[4];
-    let mut shifts = [0.0; PLANE_PARAMS];
-    for (k, pair) in per_plane.iter().enumerate().take(n) {
-        shifts[2 * k] = radius_of(&pair[0]);
-        shifts[2 * k + 1] = radius_of(&pair[1]);
-    }
-    let planes_sigma = PlanesUncertainty::spread_under(uncertainty, &shifts[..2 * n]);
-    let sigma = sqrt(radius_of(&focal).powi(2) + planes_sigma * planes_sigma);
-    if sigma.is_finite() {
-        Ok(sigma)
-    } else {
-        Err(SolveError::NonFinite)
-    }
+    noise::calibration_spread(uncertainty, radius_of(&focal), n, |k, p| {
+        radius_of(&per_plane[k][p])
+    })
+    .ok_or(SolveError::NonFinite)
 }
 
 #[cfg(test)]
@@ -144,6 +136,7 @@ mod tests {
     extern crate std;
     use super::*;
     use crate::calibration::Calibration;
+    use crate::real::sqrt;
     use crate::real::{Vec2, PI};
     use crate::solvers::circle::RobustParams;
     use crate::solvers::cylinder_fit::tests::{section, tilted_cylinder};
