@@ -312,9 +312,9 @@ impl Reading {
                 if let Some(z) = self.distance_m {
                     s += &format!(", at {:.2} m", z);
                 }
-                match (self.exposures, self.exposure_pairs) {
-                    (Some(k), Some(n)) if k < n => s += &format!(", {k} of {n} exposures"),
-                    (Some(k), _) => s += &format!(", {k} exposures"),
+                match (self.exposures.unwrap_or(1), self.exposure_pairs) {
+                    (k, Some(n)) if k < n => s += &format!(", {k} of {n} exposures"),
+                    (k, Some(_)) => s += &format!(", {k} exposures"),
                     _ => {}
                 }
                 if !self.flags.is_empty() {

@@ -94,6 +94,13 @@ pub fn combine_exposures(readings: &[CylinderSolution]) -> Result<CylinderSoluti
             .map(|(rw, _)| rw)
     };
     let k = used().count();
+    if k == 1 {
+        // One exposure saw the lean: its reading alone, with its own σ.
+        return used()
+            .map(|(r, _)| *r)
+            .next()
+            .ok_or(SolveError::InvalidParameter);
+    }
     let sum_w: Real = used().map(|(_, w)| w).sum();
     let mean = |value: fn(&CylinderSolution) -> Real| {
         used().map(|(r, w)| w * value(r)).sum::<Real>() / sum_w
@@ -302,6 +309,9 @@ mod tests {
         assert!((c.diameter - 0.301).abs() < 1e-6, "{}", c.diameter);
         assert!(!c.flags.contains(Flags::TILT_IGNORED));
         assert_eq!(c.tilt, Some(tilt));
+        // One exposure saw the lean: its reading stands alone, σ and all.
+        set[2].tilt = None;
+        assert_eq!(combine_exposures(&set), Ok(set[0]));
     }
 
     #[test]
