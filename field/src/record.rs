@@ -182,7 +182,10 @@ pub fn reading_line(t: &TreeRecord) -> String {
         t.plot_id, t.tree_id, t.kind, t.diameter_mm, t.uncertainty_mm
     );
     if let Some(Measurement::Wall(w)) = &t.measurement {
+        // `Real` is f32 in the device build: the casts are not no-ops there.
+        #[allow(clippy::unnecessary_cast)]
         let degrees = |v: tangent_core::real::Real| (v as f64).to_degrees();
+        #[allow(clippy::unnecessary_cast)]
         let mm = |v: tangent_core::real::Real| v as f64 * 1e3;
         if let Some(c) = w.corner {
             s += &format!(

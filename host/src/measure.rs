@@ -672,7 +672,7 @@ fn solve_wall_crossing(
     k: usize,
     config: &PipelineConfig,
     params: &WallInstrumentParams,
-) -> Result<(Result<WallMeasurement, PipelineError>, PlotBuffers), MeasureError> {
+) -> SolvedFrames<WallMeasurement> {
     let mut across = calibration.clone();
     across.planes.truncate(k);
     // The planes across keep their share of the covariance; the whole one reaches the
@@ -756,6 +756,10 @@ fn run_crossing<P: Pixel>(
 /// The buffers a plot shows: the difference frame (16-bit), the curve points, the 3-D points.
 type PlotBuffers = (Vec<u16>, Vec<CurvePoint>, Vec<Vec3>);
 
+/// A solver's result on one capture with its plot buffers, or why the frames could not be
+/// measured at all.
+type SolvedFrames<S> = Result<(Result<S, PipelineError>, PlotBuffers), MeasureError>;
+
 /// Runs instrument `I` on the capture's frame pair.
 #[allow(clippy::type_complexity)]
 /// A stem capture's reading: its exposure pair's, or with several pairs the combination of
@@ -767,7 +771,7 @@ fn solve_stem(
     calibration: &Calibration,
     config: &PipelineConfig,
     params: &CylinderParams,
-) -> Result<(Result<StemMeasurement, PipelineError>, PlotBuffers), MeasureError> {
+) -> SolvedFrames<StemMeasurement> {
     if capture.pairs() == 1 {
         return solve_capture::<Stem>(capture, calibration, config, params);
     }
@@ -798,7 +802,7 @@ fn solve_capture<I: Instrument>(
     calibration: &Calibration,
     config: &PipelineConfig,
     params: &I::Params,
-) -> Result<(Result<Measured<I::Solution>, PipelineError>, PlotBuffers), MeasureError> {
+) -> SolvedFrames<Measured<I::Solution>> {
     let (off, on) = frame_pair(capture, calibration.planes.len())?;
     Ok(match (&off.samples, &on.samples) {
         (PgmSamples::U8(a), PgmSamples::U8(b)) => {

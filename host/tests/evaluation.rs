@@ -5,8 +5,8 @@
 
 use tangent_host::calibration_draw::CalibrationUsed;
 use tangent_host::evaluate::{
-    baseline_metrics, compare, comparison_section, metrics, run, tangent_metrics, wins, Sample,
-    SeedSet, DISTANCE_BINS_M,
+    baseline_metrics, compare, comparison_section, metrics, run, tangent_metrics, wins, Exposures,
+    Sample, SeedSet, DISTANCE_BINS_M,
 };
 use tangent_host::truth::PhysicsModel;
 
@@ -54,6 +54,7 @@ fn small_evaluation_per_model_with_the_baseline_column() {
         16,
         0.0,
         CalibrationUsed::Exact,
+        Exposures::default(),
     )
     .expect("runs");
     assert_eq!(samples.len(), 16);

@@ -53,8 +53,7 @@ pub fn combine_exposures(readings: &[CylinderSolution]) -> Result<CylinderSoluti
     let mut variance = [0.0 as Real; MAX_EXPOSURES];
     for (v, r) in variance.iter_mut().zip(readings) {
         let finite = |x: Real| x.is_finite() && x > 0.0;
-        if !(finite(r.diameter) && finite(r.uncertainty)) || !r.calibration_uncertainty.is_finite()
-        {
+        if !(finite(r.diameter) && finite(r.uncertainty) && r.calibration_uncertainty.is_finite()) {
             return Err(SolveError::NonFinite);
         }
         let total = r.uncertainty * r.uncertainty;
