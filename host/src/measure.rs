@@ -494,7 +494,7 @@ type SolvedFrames<S> = Result<(Result<S, PipelineError>, PlotBuffers), MeasureEr
 /// Runs instrument `I` on the capture's frame pair.
 #[allow(clippy::type_complexity)]
 /// A stem capture's reading: its exposure pair's, or with several pairs the combination of
-/// every pair's reading ([`combine_exposures`], `docs/error-model.md` §7); the buffers (for
+/// every pair's reading ([`combine_exposures`], `docs/error-model.md` §6, (E7)); the buffers (for
 /// plots) are those of the first pair that read. With no pair reading, the first pair's
 /// error.
 fn solve_stem(

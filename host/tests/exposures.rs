@@ -1,6 +1,6 @@
 //! Several exposure pairs in one capture (the trigger held): `tangent measure` reads each
 //! pair and combines the readings (`tangent_core::solvers::stem::combine_exposures`,
-//! `docs/error-model.md` §7, (E7)).
+//! `docs/error-model.md` §6, (E7)).
 
 use tangent_core::pipeline::PipelineConfig;
 use tangent_core::solvers::stem::CylinderParams;

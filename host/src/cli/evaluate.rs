@@ -106,7 +106,7 @@ pub struct Args {
     #[arg(long, default_value_t = 1_000_000)]
     road_seed: u64,
     /// Exposure pairs per stem capture (frame pairs while the trigger is held,
-    /// `docs/error-model.md` §7): Tangent combines them, the baseline reads the first.
+    /// `docs/error-model.md` §6, (E7)): Tangent combines them, the baseline reads the first.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=16))]
     exposure_pairs: u64,
     /// With --exposure-pairs: the same speckle in every pair (the hand did not renew it;

@@ -81,7 +81,7 @@ enum What {
         #[arg(long, default_value = "reference")]
         physics: String,
         /// Exposure pairs per capture (frame pairs while the trigger is held; `tangent
-        /// measure` combines them, `docs/error-model.md` section 7).
+        /// measure` combines them, `docs/error-model.md` section 6, (E7)).
         #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=16))]
         exposure_pairs: u64,
         /// With --exposure-pairs: the same speckle in every pair.

@@ -76,7 +76,7 @@ pub struct Reading {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub points: Option<usize>,
     /// Exposure pairs a stem reading combines, when more than one
-    /// (`docs/error-model.md` §7, (E7)).
+    /// (`docs/error-model.md` §6, (E7)).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub exposures: Option<usize>,
     /// Exposure pairs the capture holds, when more than one (some may give no reading or be

@@ -1,5 +1,5 @@
 //! One stem reading from several exposures: the frame pairs taken while the trigger is held
-//! (`docs/error-model.md` §7, "Several exposures", (E7)).
+//! (`docs/error-model.md` §6, "Several exposures", (E7)).
 //!
 //! Each exposure is measured on its own and the diameters are combined: the hand moves
 //! between exposures, so their stripes do not line up pixel for pixel and averaging the
