@@ -33,7 +33,7 @@ const MIN_INDEPENDENT_SHARE: Real = 0.01;
 /// ([`CylinderSolution::calibration_uncertainty`], the same in every exposure) and the rest,
 /// `v_k = σ_k² − c_k²`. Exposures that ignored a lean other exposures saw are set aside,
 /// then, while at least three remain, any more than 4σ from the mean of the others. The
-/// diameter is the plain mean of the `K` kept ones, each of variance `v̄` (the mean `v_k`).
+/// diameter is the plain mean of the `K` kept ones, each of variance `v̄` (their mean `v_k`).
 /// With `r = Σ(d_k − d̄)²/((K−1)·v̄)`, the variance of the mean is `r·v̄/K` when they scatter
 /// at least as their σ say (inflated as the scatter demands), and `(K − (K−1)·r)·v̄/K` when
 /// they agree better: the share `1 − r` of their errors that they hold in common (speckle
@@ -60,9 +60,6 @@ pub fn combine_exposures(readings: &[CylinderSolution]) -> Result<CylinderSoluti
         let cal = r.calibration_uncertainty * r.calibration_uncertainty;
         *v = (total - cal).max(MIN_INDEPENDENT_SHARE * total);
     }
-    if n == 1 {
-        return Ok(readings[0]);
-    }
     // A reading that ignored the stem's lean (one plane's fallback) is biased on a leaning
     // stem: when some exposure saw the lean, only those that did are combined.
     let any_tilt = readings.iter().any(|r| r.tilt.is_some());
@@ -70,58 +67,46 @@ pub fn combine_exposures(readings: &[CylinderSolution]) -> Result<CylinderSoluti
     for (k, r) in kept.iter_mut().zip(readings) {
         *k = r.tilt.is_some() || !any_tilt;
     }
-    // Equal weights from the kept exposures' mean variance: each exposure's σ is itself an
-    // estimate that grows with its diameter, and weighting by it would pull the mean low.
-    let count = kept.iter().filter(|&&k| k).count() as Real;
-    let mean_variance = variance
-        .iter()
-        .zip(kept)
-        .filter(|(_, k)| *k)
-        .map(|(v, _)| v)
-        .sum::<Real>()
-        / count;
-    let weight = [1.0 / mean_variance; MAX_EXPOSURES];
-    while let Some(worst) = farthest_outlier(readings, &weight, &kept) {
-        kept[worst] = false;
+    while let Some(stray) = farthest_stray(readings, &variance, &kept) {
+        kept[stray] = false;
     }
     let used = || {
         readings
             .iter()
-            .zip(weight)
+            .zip(variance)
             .zip(kept)
             .filter(|(_, k)| *k)
-            .map(|(rw, _)| rw)
+            .map(|(rv, _)| rv)
     };
-    let k = used().count();
-    if k == 1 {
-        // One exposure saw the lean: its reading alone, with its own σ.
-        return used()
-            .map(|(r, _)| *r)
-            .next()
-            .ok_or(SolveError::InvalidParameter);
+    let mut first = used();
+    let (best, _) = first.next().ok_or(SolveError::InvalidParameter)?;
+    if first.next().is_none() {
+        // One exposure: its reading alone, with its own σ.
+        return Ok(*best);
     }
-    let sum_w: Real = used().map(|(_, w)| w).sum();
-    let mean = |value: fn(&CylinderSolution) -> Real| {
-        used().map(|(r, w)| w * value(r)).sum::<Real>() / sum_w
-    };
+    // Equal weights: each exposure's σ is itself an estimate that grows with its diameter,
+    // and weighting by it would pull the mean low.
+    let k = used().count() as Real;
+    let mean =
+        |value: fn(&CylinderSolution) -> Real| used().map(|(r, _)| value(r)).sum::<Real>() / k;
     let diameter = mean(|r| r.diameter);
     let calibration = mean(|r| r.calibration_uncertainty);
-    let chi2: Real = used()
-        .map(|(r, w)| w * (r.diameter - diameter) * (r.diameter - diameter))
-        .sum();
-    let ratio = chi2 / (k - 1) as Real;
-    let variance = if ratio >= 1.0 {
-        ratio / sum_w
-    } else {
-        (k as Real - (k - 1) as Real * ratio) / sum_w
-    };
-    let uncertainty = sqrt(variance + calibration * calibration);
-    let (best, _) = used().next().ok_or(SolveError::InvalidParameter)?;
+    let independent = used().map(|(_, v)| v).sum::<Real>() / k;
+    let ratio = used()
+        .map(|(r, _)| (r.diameter - diameter) * (r.diameter - diameter))
+        .sum::<Real>()
+        / ((k - 1.0) * independent);
+    let variance = independent / k
+        * if ratio >= 1.0 {
+            ratio
+        } else {
+            k - (k - 1.0) * ratio
+        };
     let optional_mean = |value: fn(&CylinderSolution) -> Option<Real>| {
-        let (sum, weights) = used()
-            .filter_map(|(r, w)| value(r).map(|v| (w * v, w)))
-            .fold((0.0, 0.0), |(s, t), (a, b)| (s + a, t + b));
-        (weights > 0.0).then(|| sum / weights)
+        let (sum, count) = used()
+            .filter_map(|(r, _)| value(r))
+            .fold((0.0, 0.0), |(s, n), v| (s + v, n + 1.0));
+        (count > 0.0).then(|| sum / count)
     };
     let information = used()
         .filter_map(|(r, _)| r.information_uncertainty)
@@ -131,7 +116,7 @@ pub fn combine_exposures(readings: &[CylinderSolution]) -> Result<CylinderSoluti
     used().for_each(|(r, _)| flags.insert(r.flags));
     Ok(CylinderSolution {
         diameter,
-        uncertainty,
+        uncertainty: sqrt(variance + calibration * calibration),
         calibration_uncertainty: calibration,
         flags,
         n_points: used().map(|(r, _)| r.n_points).sum(),
@@ -143,33 +128,27 @@ pub fn combine_exposures(readings: &[CylinderSolution]) -> Result<CylinderSoluti
     })
 }
 
-/// The kept exposure farthest from the weighted mean of the other kept ones, if it lies more
-/// than [`REJECT_Z`] σ from it and at least three would remain.
-fn farthest_outlier(
+/// The kept exposure farthest from the mean of the other kept ones, if it lies more than
+/// [`REJECT_Z`] σ from it (σ of the difference, from the kept exposures' mean independent
+/// variance) and at least three would remain.
+fn farthest_stray(
     readings: &[CylinderSolution],
-    weight: &[Real],
+    variance: &[Real],
     kept: &[bool],
 ) -> Option<usize> {
-    let count = kept.iter().filter(|&&k| k).count();
+    let kept_ones = || (0..readings.len()).filter(|&i| kept[i]);
+    let count = kept_ones().count();
     if count < 4 {
         return None;
     }
-    let (sum_w, sum_wd) = readings
-        .iter()
-        .zip(weight)
-        .zip(kept)
-        .filter(|(_, &k)| k)
-        .fold((0.0, 0.0), |(s, t), ((r, w), _)| {
-            (s + w, t + w * r.diameter)
-        });
-    (0..readings.len())
-        .filter(|&i| kept[i])
+    let n = count as Real;
+    let independent = kept_ones().map(|i| variance[i]).sum::<Real>() / n;
+    let sum = kept_ones().map(|i| readings[i].diameter).sum::<Real>();
+    let spread = sqrt(independent * (1.0 + 1.0 / (n - 1.0)));
+    kept_ones()
         .map(|i| {
-            let (others_w, others_wd) =
-                (sum_w - weight[i], sum_wd - weight[i] * readings[i].diameter);
-            let others = others_wd / others_w;
-            let z = (readings[i].diameter - others).abs() / sqrt(1.0 / weight[i] + 1.0 / others_w);
-            (i, z)
+            let others = (sum - readings[i].diameter) / (n - 1.0);
+            (i, (readings[i].diameter - others).abs() / spread)
         })
         .filter(|&(_, z)| z > REJECT_Z)
         .max_by(|a, b| a.1.total_cmp(&b.1))
