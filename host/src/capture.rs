@@ -456,7 +456,7 @@ impl CaptureMeta {
         if let Some(name) = meta.truth.as_ref().and_then(|t| t.truth_curve.as_ref()) {
             check_file_name(name)?;
         }
-        let pairs = meta.frames.iter().map(|f| f.pair + 1).max().unwrap_or(1);
+        let pairs = meta.pairs();
         if pairs > MAX_PAIRS {
             return Err(CaptureError::InvalidField(format!(
                 "frame pair {} is beyond the format's {MAX_PAIRS} exposure pairs (pair = 0 to {})",
@@ -476,6 +476,12 @@ impl CaptureMeta {
             }
         }
         Ok(meta)
+    }
+
+    /// How many exposure pairs the frames form: one more than the highest `pair` (1 for a
+    /// single trigger's pair).
+    pub fn pairs(&self) -> usize {
+        self.frames.iter().map(|f| f.pair + 1).max().unwrap_or(1)
     }
 
     /// The calibration this metadata names (inline table, or a file relative to `dir`).
@@ -678,12 +684,7 @@ impl Capture {
 
     /// How many exposure pairs the capture holds (1 for a single trigger's pair).
     pub fn pairs(&self) -> usize {
-        self.meta
-            .frames
-            .iter()
-            .map(|f| f.pair + 1)
-            .max()
-            .unwrap_or(1)
+        self.meta.pairs()
     }
 
     /// The capture of exposure pair `pair` alone, as if it had been taken by itself (its
