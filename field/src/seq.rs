@@ -193,6 +193,7 @@ mod tests {
                 tilt: None,
                 axes: None,
                 flags: Flags::default(),
+                exposures: 1,
             }),
             stats: None,
             accelerometer: None,

@@ -17,23 +17,24 @@
 
 use embassy_futures::select::{select, select3, Either, Either3};
 use heapless::Deque;
-use tangent_core::accelerometer::{self, Alignment};
+use tangent_core::accelerometer::Alignment;
 use tangent_core::calibration::{Calibration, CalibrationError};
 use tangent_core::instrument;
-use tangent_core::measurement::{Measurement, Mode};
+use tangent_core::measurement::Mode;
 use tangent_core::protocol::codes::Failure;
 use tangent_core::protocol::codes::HISTORY_LEN;
 use tangent_core::protocol::{
-    self, AccelReading, DeviceError, DeviceInfo, ErrorCode, Feed, FrameEncoder, FrameSel,
-    FrameSetInfo, FromDevice, LinkStats, ModeStoreState, Reading, Request, Response,
-    SelfTestReport, ToDevice, WireCalibration, FRAME_CHUNK_MAX, PROTOCOL_VERSION, UNSOLICITED,
+    self, DeviceError, DeviceInfo, ErrorCode, Feed, FrameEncoder, FrameSel, FrameSetInfo,
+    FromDevice, LinkStats, ModeStoreState, Reading, Request, Response, SelfTestReport, ToDevice,
+    WireCalibration, FRAME_CHUNK_MAX, PROTOCOL_VERSION, UNSOLICITED,
 };
+use tangent_core::solvers::stem::MAX_EXPOSURES;
 
 use crate::exposure::{self, Exposure};
-use crate::measure::{FramePair, Measurer, StreamMeasurer};
+use crate::measure::{Measurer, StreamMeasurer};
 use crate::ports::{
-    AccelError, Accelerometer, Board, CalibrationStore, Camera, CameraError, Clock, Devices,
-    Geometry, Laser, Link, ModeStore, RowSink, Strobe, Trigger, Watchdog,
+    Board, CalibrationStore, Camera, CameraError, Clock, Devices, Laser, Link, ModeStore, RowSink,
+    Strobe, Trigger, Watchdog,
 };
 use crate::stats::Welford;
 
@@ -53,6 +54,11 @@ const PEAK_ROW_STEP: usize = 4;
 /// Accelerometer samples averaged for a reading that uses the vertical: 16 at 62.5 Hz,
 /// 0.26 s (the simulator's reference, `docs/building.md` §6).
 pub const ACCEL_SAMPLES: u16 = 16;
+
+/// Frame pairs a stem reading combines until the host sets another count
+/// ([`Request::SetExposures`]): four halve the held-out error of one pair's reading at a
+/// sixth of a second per trigger press (`docs/error-model.md` §6, `docs/firmware.md`).
+pub const DEFAULT_EXPOSURES: u8 = 4;
 
 /// True for the instruments whose reading uses the vertical (the wall's plumb): only they
 /// read the accelerometer, so the others measure as fast as before.
@@ -96,6 +102,8 @@ pub struct App<'b, B: Board, M: Measurer> {
     mode: Mode,
     /// Where `mode` came from (reported in [`DeviceInfo::mode_store`]).
     mode_store: ModeStoreState,
+    /// Frame pairs one stem reading combines ([`Request::SetExposures`]; RAM only).
+    exposures: u8,
     /// Duration of the last pipeline run (µs of the board clock), for benchmarks.
     pub last_pipeline_us: u64,
 }
@@ -151,6 +159,7 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
             stream: None,
             mode,
             mode_store,
+            exposures: DEFAULT_EXPOSURES,
             last_pipeline_us: 0,
         }
     }
@@ -173,6 +182,11 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
     /// Where the mode came from: the store, or why the default.
     pub fn mode_store(&self) -> ModeStoreState {
         self.mode_store
+    }
+
+    /// Frame pairs one stem reading combines.
+    pub fn exposures(&self) -> u8 {
+        self.exposures
     }
 
     /// Link counters.
@@ -350,7 +364,27 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
                 };
                 self.send(tag, &response).await;
             }
+            Request::SetExposures(count) => {
+                let response = match self.set_exposures(count) {
+                    Ok(()) => Response::Ack,
+                    Err(e) => Response::Error(e),
+                };
+                self.send(tag, &response).await;
+            }
         }
+    }
+
+    /// Sets the frame pairs one stem reading combines: 1 to [`MAX_EXPOSURES`], else
+    /// [`ErrorCode::InvalidSetting`] (detail: the count) and the count stays as it was.
+    pub fn set_exposures(&mut self, count: u8) -> Result<(), DeviceError> {
+        if count == 0 || count as usize > MAX_EXPOSURES {
+            return Err(DeviceError {
+                code: ErrorCode::InvalidSetting,
+                detail: count as u32,
+            });
+        }
+        self.exposures = count;
+        Ok(())
     }
 
     /// Selects the instrument of later readings and stores it, so a reset or power cycle
@@ -477,6 +511,7 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
             link: self.rx.stats(),
             mode: self.mode,
             mode_store: self.mode_store,
+            exposures: self.exposures,
         };
         self.send(tag, &Response::Info(info)).await;
     }
@@ -493,233 +528,6 @@ impl<'b, B: Board, M: Measurer> App<'b, B, M> {
             }
             Err(e) => B::log(format_args!("cannot encode a response: {}", e)),
         }
-    }
-
-    /// Measures once and reports the reading (or the error) with `tag`.
-    pub async fn measure_and_report(&mut self, tag: u16, stats: Option<&mut Welford>) {
-        match self.measure_once().await {
-            Ok(mut reading) => {
-                if let Some(s) = stats {
-                    s.push(reading.measurement.value() as f64);
-                    reading.stats = Some(s.summary());
-                }
-                if self.history.is_full() {
-                    self.history.pop_front();
-                }
-                let _ = self.history.push_back(reading);
-                self.send(tag, &Response::Reading(reading)).await;
-            }
-            Err(e) => {
-                B::log(format_args!(
-                    "measurement failed: {:?} {}",
-                    e.code, e.detail
-                ));
-                self.send(tag, &Response::Error(e)).await;
-            }
-        }
-    }
-
-    /// Captures a pair and runs the pipeline on it: streamed when the measurer streams (the
-    /// laser-off frame into the measurer's memory, the laser-on frame through it as it is
-    /// read out), else stored in the frame buffers and measured afterwards.
-    pub async fn measure_once(&mut self) -> Result<Reading, DeviceError> {
-        let no_calibration = DeviceError {
-            code: ErrorCode::NoCalibration,
-            detail: 0,
-        };
-        if self.calibration.is_none() {
-            return Err(no_calibration);
-        }
-        // The vertical first: the mean of the samples while the user holds the device on
-        // the target, and before the frames, so the reading's time stays the laser-on
-        // exposure's (`docs/firmware.md`, "The vertical").
-        let accelerometer = if uses_vertical(self.mode) {
-            Some(self.read_accelerometer().await)
-        } else {
-            None
-        };
-        let gravity = accelerometer
-            .and_then(|a| a.mean())
-            .zip(self.alignment)
-            .and_then(|(mean, alignment)| accelerometer::vertical(&mean, &alignment).ok());
-        self.measurer
-            .set_vertical(gravity.map(|v| (v.down, v.sigma_rad)));
-        let (info, result) = if self.measurer.streaming().is_some() {
-            self.measure_streamed().await?
-        } else {
-            let info = self.capture_pair().await?;
-            let cal = self.calibration.as_ref().ok_or(no_calibration)?;
-            let pair = FramePair {
-                off: self.off,
-                on: self.on,
-                width: info.width as usize,
-                height: info.height as usize,
-                row_offset: info.row_offset as usize,
-                laser_mask: info.laser_mask,
-            };
-            let t0 = self.dev.clock.now_us();
-            let result = self.measurer.measure(self.mode, &pair, cal);
-            self.last_pipeline_us = self.dev.clock.now_us().saturating_sub(t0);
-            (info, result)
-        };
-        B::log(format_args!(
-            "pipeline capture={} time_us={}",
-            info.capture, self.last_pipeline_us
-        ));
-        let measurement = result.map_err(|failure| failure.device_error())?;
-        let calib_id = self.calibration.as_ref().ok_or(no_calibration)?.id;
-        self.seq = self.seq.wrapping_add(1).max(1);
-        Ok(Reading {
-            seq: self.seq,
-            timestamp_ms: info.timestamp_ms,
-            calib_id,
-            exposure_us: info.exposure_us,
-            measurement,
-            stats: None,
-            accelerometer,
-        })
-    }
-
-    /// The accelerometer's mean over [`ACCEL_SAMPLES`] samples, or why there is none (an
-    /// unfitted part is [`AccelReading::Absent`], a failing one its code; never a panic,
-    /// and the measurement goes on without the vertical).
-    pub async fn read_accelerometer(&mut self) -> AccelReading {
-        let sensor = &mut self.dev.accelerometer;
-        match sensor.mean(ACCEL_SAMPLES).await {
-            Ok(a) => AccelReading::Mean {
-                m_s2: a.m_s2,
-                samples: ACCEL_SAMPLES,
-                sample_sigma_m_s2: sensor.sample_sigma_m_s2(),
-            },
-            Err(AccelError::Absent) => AccelReading::Absent,
-            Err(e) => {
-                B::log(format_args!("accelerometer failed: {:?}", e));
-                AccelReading::Failed(e.code())
-            }
-        }
-    }
-
-    /// The streamed measurement: the laser-off frame into the measurer, the laser-on frame's
-    /// rows through it as they arrive. `last_pipeline_us` is the work after the last pixel.
-    /// The frame buffers do not hold this pair (`ReadFrameChunk` answers `NoFrames`).
-    async fn measure_streamed(
-        &mut self,
-    ) -> Result<(FrameSetInfo, Result<Measurement, Failure>), DeviceError> {
-        let g = self.dev.camera.geometry();
-        let exposure_us = self.exposure.current();
-        let mask = self.laser_mask();
-        self.frames = None;
-        let cal = self.calibration.as_ref().ok_or(DeviceError {
-            code: ErrorCode::NoCalibration,
-            detail: 0,
-        })?;
-        let Some(measurer) = self.measurer.streaming() else {
-            return Err(DeviceError {
-                code: ErrorCode::CameraFailure,
-                detail: CameraError::BufferSize.code(),
-            });
-        };
-        let d = &mut self.dev;
-        let off = measurer
-            .begin(g, cal)
-            .map_err(|failure| failure.device_error())?;
-        expose(&mut d.camera, &mut d.laser, &d.clock, 0, exposure_us, off).await?;
-        let timestamp_ms = d.clock.now_ms();
-        let mut sink = PeakSink {
-            measurer: &mut *measurer,
-            width: g.width as usize,
-            row: 0,
-            peak: 0,
-        };
-        expose_rows(
-            &mut d.camera,
-            &mut d.laser,
-            &d.clock,
-            mask,
-            exposure_us,
-            self.on,
-            &mut sink,
-        )
-        .await?;
-        let peak = sink.peak;
-        self.exposure.update(peak);
-        let t0 = d.clock.now_us();
-        let result = measurer.finish(self.mode);
-        self.last_pipeline_us = d.clock.now_us().saturating_sub(t0);
-        let info = self.next_frame_set(g, exposure_us, timestamp_ms, mask);
-        Ok((info, result))
-    }
-
-    /// The next capture's number and what describes its frame pair.
-    fn next_frame_set(
-        &mut self,
-        g: Geometry,
-        exposure_us: u32,
-        timestamp_ms: u64,
-        laser_mask: u8,
-    ) -> FrameSetInfo {
-        self.capture_no = self.capture_no.wrapping_add(1);
-        FrameSetInfo {
-            capture: self.capture_no,
-            width: g.width,
-            height: g.height,
-            row_offset: g.row_offset,
-            bit_depth: 8,
-            exposure_us,
-            timestamp_ms,
-            laser_mask,
-            calib_id: self.calibration.as_ref().map(|c| c.id),
-        }
-    }
-
-    /// Lasers to light: one per calibrated plane that the board can drive (all the
-    /// board's lasers when there is no calibration, e.g. when recording raw frames) — except
-    /// a crossing plane (row-wise, the walls' third line, `docs/building.md`): its line would
-    /// merge with the others in one frame, so it is never lit with them.
-    fn laser_mask(&self) -> u8 {
-        let n = self
-            .calibration
-            .as_ref()
-            .map(|c| c.planes.len() as u8)
-            .unwrap_or(u8::MAX)
-            .min(self.dev.laser.count())
-            .min(8);
-        let all = ((1u16 << n) - 1) as u8;
-        let crossing = self.calibration.as_ref().map_or(0u8, |c| {
-            c.planes
-                .iter()
-                .take(8)
-                .enumerate()
-                .filter(|(_, p)| p.is_row_wise())
-                .fold(0u8, |m, (i, _)| m | (1 << i))
-        });
-        all & !crossing
-    }
-
-    /// Exposes the laser-off then the laser-on frame into the frame buffers.
-    pub async fn capture_pair(&mut self) -> Result<FrameSetInfo, DeviceError> {
-        let g = self.dev.camera.geometry();
-        let exposure_us = self.exposure.current();
-        let mask = self.laser_mask();
-        // The buffers are invalid from here until both frames are in.
-        self.frames = None;
-        let len = g.frame_len();
-        // A board that streams the laser-on frame (the H743) has no memory for a stored pair.
-        let (Some(off), Some(on)) = (self.off.get_mut(..len), self.on.get_mut(..len)) else {
-            return Err(DeviceError {
-                code: ErrorCode::CameraFailure,
-                detail: CameraError::NoFrameStore.code(),
-            });
-        };
-        let d = &mut self.dev;
-        expose(&mut d.camera, &mut d.laser, &d.clock, 0, exposure_us, off).await?;
-        let timestamp_ms = d.clock.now_ms();
-        expose(&mut d.camera, &mut d.laser, &d.clock, mask, exposure_us, on).await?;
-        self.exposure
-            .update(exposure::peak(on, g.width as usize, PEAK_ROW_STEP));
-        let info = self.next_frame_set(g, exposure_us, timestamp_ms, mask);
-        self.frames = Some(info);
-        Ok(info)
     }
 
     /// Self-test: a capture, the calibration, laser contrast and the dark level.
@@ -851,5 +659,6 @@ async fn guarded<C: Camera, L: Laser, K: Clock, S: RowSink + ?Sized>(
     result
 }
 
+mod reading;
 #[cfg(test)]
 mod tests;

@@ -271,6 +271,7 @@ impl Measurer for VerticalMeasurer {
             tilt: None,
             axes: None,
             flags: Flags::default(),
+            exposures: 1,
         }))
     }
     fn set_vertical(&mut self, gravity: Option<(Vec3, Real)>) {

@@ -8,8 +8,10 @@
 //! (`tangent_core::pipeline::ProfileStream`), so only the work after the last pixel is left
 //! when the frame is in.
 
+use heapless::Vec;
 use tangent_core::calibration::Calibration;
 use tangent_core::image::Frame;
+use tangent_core::instrument::stem::Stem;
 use tangent_core::instrument::{self, InstrumentParams};
 use tangent_core::measurement::{Measurement, Mode};
 use tangent_core::pipeline::{
@@ -17,6 +19,7 @@ use tangent_core::pipeline::{
 };
 use tangent_core::protocol::codes::Failure;
 use tangent_core::real::{Real, Vec3};
+use tangent_core::solvers::stem::{combine_exposures, CylinderSolution, MAX_EXPOSURES};
 
 use crate::ports::{Geometry, RowSink};
 
@@ -60,6 +63,17 @@ pub trait Measurer {
     /// the next measurements, or `None` when the device has no vertical: the wall's plumb
     /// (`tangent_core::accelerometer::vertical`). A measurer without a use for it ignores it.
     fn set_vertical(&mut self, _gravity: Option<(Vec3, Real)>) {}
+
+    /// Starts a reading of several exposures (frame pairs while the trigger is held): the
+    /// pairs measured from here until [`Measurer::combined`] are one reading's.
+    fn begin_exposures(&mut self) {}
+
+    /// The reading combined from the exposures measured since [`Measurer::begin_exposures`]
+    /// (`docs/error-model.md` §6, (E7)), or `None` when this measurer does not combine
+    /// them (the application then reports the first exposure that read).
+    fn combined(&mut self, _mode: Mode) -> Option<Result<Measurement, Failure>> {
+        None
+    }
 }
 
 /// A measurer fed as the frames are read out: [`StreamMeasurer::begin`] gives the buffer the
@@ -94,6 +108,8 @@ pub struct PipelineMeasurer<'w> {
     /// The pair being streamed: its state, its calibration (of the frames' window) and the
     /// first error the rows met.
     stream: Option<(ProfileStream, Calibration, Option<PipelineError>)>,
+    /// The stem solutions of the reading's exposures so far ([`Measurer::begin_exposures`]).
+    exposures: Vec<CylinderSolution, MAX_EXPOSURES>,
 }
 
 /// Durations of the stages of the last measurement (µs of the measurer's `stage_clock`), for
@@ -125,6 +141,7 @@ impl<'w> PipelineMeasurer<'w> {
             stage_clock: None,
             last_stages: StageTimes::default(),
             stream: None,
+            exposures: Vec::new(),
         }
     }
 
@@ -143,7 +160,24 @@ impl<'w> PipelineMeasurer<'w> {
         let profile = profile.map_err(|e| Failure::of(&instrument::image_failure(mode, e)))?;
         let t = self.now();
         // 8-bit frames: full scale 255.
-        let solved = instrument::solve(mode, &profile, 255, cal, &self.params, &mut self.ws);
+        let solved = if mode == Mode::Cylinder {
+            // The stem's solution is kept whole: the reading's exposures combine from it.
+            let solution = instrument::solve_with::<Stem, u8>(
+                &profile,
+                255,
+                cal,
+                &self.params.cylinder,
+                &mut self.ws,
+            );
+            if let Ok(s) = &solution {
+                // Never full: the application measures at most `MAX_EXPOSURES` pairs per
+                // reading, and one beyond would only be left out of the combination.
+                let _ = self.exposures.push(*s);
+            }
+            solution.map(|s| Measurement::from(&s))
+        } else {
+            instrument::solve(mode, &profile, 255, cal, &self.params, &mut self.ws)
+        };
         self.last_stages.solver_us = self.now().saturating_sub(t);
         solved.map_err(|e| Failure::of(&e))
     }
@@ -217,6 +251,21 @@ impl Measurer for PipelineMeasurer<'_> {
 
     fn set_vertical(&mut self, gravity: Option<(Vec3, Real)>) {
         self.params.wall.walls.gravity = gravity;
+    }
+
+    fn begin_exposures(&mut self) {
+        self.exposures.clear();
+    }
+
+    fn combined(&mut self, mode: Mode) -> Option<Result<Measurement, Failure>> {
+        if mode != Mode::Cylinder || self.exposures.is_empty() {
+            return None;
+        }
+        Some(
+            combine_exposures(&self.exposures)
+                .map(|s| Measurement::from(&s))
+                .map_err(|e| Failure::of(&PipelineError::Solve(e))),
+        )
     }
 }
 

@@ -30,12 +30,13 @@ use std::time::{Duration, Instant};
 
 use tangent_core::measurement::Mode;
 use tangent_core::protocol::{
-    self, Board, Decoder, DeviceError, ErrorCode, Feed, FrameEncoder, FrameSel, FrameSetInfo,
-    FromDevice, LinkStats, ModeStoreState, ProtocolError, Reading, Request, SelfTestReport,
-    ToDevice, WireCalibration, FRAME_CHUNK_MAX, MAX_FRAME_LEN, PROTOCOL_VERSION, UNSOLICITED,
+    self, Board, Decoder, DeviceError, ErrorCode, Feed, FrameEncoder, FromDevice, LinkStats,
+    ModeStoreState, ProtocolError, Reading, Request, ToDevice, MAX_FRAME_LEN, PROTOCOL_VERSION,
+    UNSOLICITED,
 };
 use tangent_field::seq::{HistoryOutcome, SeqTracker};
 
+mod commands;
 mod ports;
 mod reply;
 
@@ -223,6 +224,8 @@ pub struct Link {
     on_event: Option<EventSink>,
     /// The mode asked for with [`Link::set_mode`], set again after a device restart.
     mode: Option<Mode>,
+    /// The count asked for with [`Link::set_exposures`], set again after a device restart.
+    exposures: Option<u8>,
 }
 
 /// What one frame turned out to be.
@@ -259,6 +262,8 @@ impl Link {
                 link: LinkStats::default(),
                 mode: Mode::Cylinder,
                 mode_store: ModeStoreState::Empty,
+                // Replaced by the handshake's identity.
+                exposures: 1,
             },
             seq: SeqTracker::default(),
             streaming: false,
@@ -269,6 +274,7 @@ impl Link {
             peer_version: None,
             on_event: None,
             mode: None,
+            exposures: None,
         };
         link.handshake()?;
         link.seq.resume_after(link.identity.last_seq);
@@ -435,6 +441,10 @@ impl Link {
         if let Some(mode) = self.mode.filter(|m| *m != self.identity.mode) {
             self.expect_ack(Request::SetMode(mode), "SetMode")?;
             self.note_mode_set(mode);
+        }
+        // The count of exposures lives in the device's RAM: a restart forgot it.
+        if let Some(count) = self.exposures.filter(|n| *n != self.identity.exposures) {
+            self.set_exposures(count)?;
         }
         if self.streaming {
             self.request_inner(Request::StartStream, "StartStream", true)?;
@@ -707,115 +717,6 @@ impl Link {
             Reply::Error(error) => Err(LinkError::Device { what, error }),
             other => Err(unexpected(what, other)),
         }
-    }
-
-    /// The device's calibration (`None` when it has none).
-    pub fn read_calibration(&mut self) -> Result<Option<WireCalibration>, LinkError> {
-        match self.request_inner(Request::ReadCalibration, "ReadCalibration", true)? {
-            Reply::Calibration(c) => Ok(Some(c)),
-            Reply::Error(DeviceError {
-                code: ErrorCode::NoCalibration,
-                ..
-            }) => Ok(None),
-            Reply::Error(error) => Err(LinkError::Device {
-                what: "ReadCalibration",
-                error,
-            }),
-            other => Err(unexpected("ReadCalibration", other)),
-        }
-    }
-
-    /// Stores and activates a calibration on the device.
-    pub fn write_calibration(&mut self, cal: &WireCalibration) -> Result<(), LinkError> {
-        self.expect_ack(Request::WriteCalibration(cal.clone()), "WriteCalibration")?;
-        self.identity.calib_id = Some(cal.id);
-        Ok(())
-    }
-
-    /// Fixes the exposure (µs) or returns to auto-exposure (`None`).
-    pub fn set_exposure(&mut self, us: Option<u32>) -> Result<(), LinkError> {
-        self.expect_ack(Request::SetExposure(us), "SetExposure")
-    }
-
-    /// Runs the device self-test.
-    pub fn self_test(&mut self) -> Result<SelfTestReport, LinkError> {
-        match self.request_inner(Request::SelfTest, "SelfTest", true)? {
-            Reply::SelfTest(s) => Ok(s),
-            other => Err(unexpected("SelfTest", other)),
-        }
-    }
-
-    /// Captures a raw frame pair (laser off, laser on) into the device's buffers.
-    pub fn capture_frames(&mut self) -> Result<FrameSetInfo, LinkError> {
-        // Not re-sent blindly: a second capture would replace the first. A lost reply just
-        // means asking again, which is harmless here since nothing was read yet.
-        match self.request_inner(Request::CaptureFrames, "CaptureFrames", true)? {
-            Reply::FramesReady(f) => Ok(f),
-            Reply::Error(error) => Err(LinkError::Device {
-                what: "CaptureFrames",
-                error,
-            }),
-            other => Err(unexpected("CaptureFrames", other)),
-        }
-    }
-
-    /// Reads one frame of the captured pair `info`, chunk by chunk (a lost chunk is asked
-    /// for again); `progress` gets the bytes read so far.
-    pub fn read_frame(
-        &mut self,
-        info: &FrameSetInfo,
-        frame: FrameSel,
-        mut progress: impl FnMut(usize),
-    ) -> Result<Vec<u8>, LinkError> {
-        let total = info.width as usize * info.height as usize;
-        let mut data = Vec::with_capacity(total);
-        // Chunk size adapts to the line: a chunk frame lost to noise halves it (a damaged
-        // byte costs a whole frame, so short frames get through a noisy line), a good one
-        // doubles it back up to FRAME_CHUNK_MAX.
-        let mut chunk_len = FRAME_CHUNK_MAX;
-        let mut failures = 0;
-        while data.len() < total {
-            let request = Request::ReadFrameChunk {
-                capture: info.capture,
-                frame,
-                offset: data.len() as u32,
-                max_len: chunk_len as u16,
-            };
-            match self.request_inner(request, "ReadFrameChunk", false) {
-                Ok(Reply::FrameChunk {
-                    capture,
-                    frame: f,
-                    offset,
-                    total: t,
-                    data: chunk,
-                }) if capture == info.capture
-                    && f == frame
-                    && offset as usize == data.len()
-                    && t as usize == total
-                    && !chunk.is_empty() =>
-                {
-                    let take = chunk.len().min(total - data.len());
-                    data.extend_from_slice(&chunk[..take]);
-                    progress(data.len());
-                    failures = 0;
-                    chunk_len = (chunk_len * 2).min(FRAME_CHUNK_MAX);
-                }
-                Ok(Reply::Error(error)) => {
-                    return Err(LinkError::Device {
-                        what: "ReadFrameChunk",
-                        error,
-                    })
-                }
-                Ok(other) => return Err(unexpected("ReadFrameChunk", other)),
-                Err(LinkError::Timeout { .. }) if failures < 4 * self.cfg.attempts.max(1) => {
-                    failures += 1;
-                    self.counters.retries += 1;
-                    chunk_len = (chunk_len / 2).max(32);
-                }
-                Err(e) => return Err(e),
-            }
-        }
-        Ok(data)
     }
 }
 

@@ -574,6 +574,9 @@ fn device_equals_host(
     if set_mode == SetMode::Yes {
         dev.request(Request::SetMode(mode), |r| assert_eq!(r, Response::Ack));
     }
+    // One frame pair per reading, as the host measures these captures (several pairs:
+    // `on_device_exposures_combine_as_the_hosts`).
+    dev.request(Request::SetExposures(1), |r| assert_eq!(r, Response::Ack));
     let mut compared = 0;
     for (name, cal, host) in &cases {
         // Each Measure consumes the next frame pair; each capture has its own calibration.
@@ -753,6 +756,123 @@ fn on_device_measurements_equal_the_hosts() {
         compared >= 5,
         "only {compared} captures measured on both sides"
     );
+}
+
+/// Several exposures on the device (`Request::SetExposures`, `docs/error-model.md` §6,
+/// (E7)): the emulated firmware measures four frame pairs per `Measure` and combines them;
+/// the host measures the same pairs one by one and combines them with the same core
+/// function. The readings agree as one pair's do (each pair within the f32 rounding, the
+/// mean of four no further), name four exposures, and a count the device cannot take is
+/// refused by name with the count unchanged.
+#[test]
+fn on_device_exposures_combine_as_the_hosts() {
+    use tangent_core::instrument::stem::Stem;
+    use tangent_core::instrument::{measure_with, InstrumentParams};
+    use tangent_core::pipeline::{OwnedBuffers, PipelineConfig};
+    use tangent_core::solvers::stem::combine_exposures;
+    use tangent_host::simulate::simulate;
+
+    let Some(elf) = firmware_elf() else {
+        return;
+    };
+    const PAIRS: usize = 4;
+    let wanted = ["cyl-d300-z150-shade", "cyl-d300-z150-tilt10-right-2p"];
+    let dir = tempfile::tempdir().unwrap();
+    let (mut files, mut cases) = (Vec::new(), Vec::new());
+    for entry in tangent_host::simulate::corpus::entries()
+        .into_iter()
+        .filter(|e| wanted.contains(&e.name.as_str()))
+    {
+        let name = entry.name;
+        let mut spec = entry.spec;
+        spec.params.exposure_pairs = PAIRS;
+        let (capture, _) = simulate(&spec).expect("simulate the capture");
+        assert_eq!(capture.pairs(), PAIRS, "{name}");
+        let mut solutions = Vec::new();
+        for k in 0..PAIRS {
+            let pair = capture.exposure_pair(k).expect("a pair");
+            let (off_pgm, (_, on_pgm)) = (pair.off_frame(), pair.on_frames().next().unwrap());
+            let (w, h) = (off_pgm.width, off_pgm.height);
+            let (off, on) = (to_u8(off_pgm), to_u8(on_pgm));
+            let off_path = dir.path().join(format!("{name}-p{k}-off.pgm"));
+            let on_path = dir.path().join(format!("{name}-p{k}-on.pgm"));
+            write_pgm(&off_path, w, h, &off);
+            write_pgm(&on_path, w, h, &on);
+            files.push((off_path, on_path));
+            let off_f = tangent_core::image::Frame::new(&off, w, h, w).unwrap();
+            let on_f = tangent_core::image::Frame::new(&on, w, h, w).unwrap();
+            let planes = capture.calibration.planes.len();
+            let mut ws = OwnedBuffers::<u8>::for_frame(w, h, 8, planes);
+            let measured = measure_with::<Stem, u8>(
+                &off_f,
+                &on_f,
+                &capture.calibration,
+                &PipelineConfig::default(),
+                &InstrumentParams::default().cylinder,
+                &mut ws.workspace(),
+            )
+            .unwrap_or_else(|e| panic!("{name}: pair {k} reads on the host: {e}"));
+            solutions.push(measured.solution);
+        }
+        let host = Measurement::from(&combine_exposures(&solutions).expect("combines"));
+        cases.push((name, capture.calibration.clone(), host));
+    }
+    assert_eq!(cases.len(), wanted.len(), "corpus entries missing");
+
+    let mut dev = Device::boot(&elf, &files, None);
+    for bad in [0u8, 17] {
+        dev.request(Request::SetExposures(bad), |r| {
+            assert_eq!(
+                r,
+                Response::Error(DeviceError {
+                    code: ErrorCode::InvalidSetting,
+                    detail: bad as u32
+                })
+            )
+        });
+    }
+    let info = dev.request(Request::DeviceInfo, |r| match r {
+        Response::Info(i) => i.exposures,
+        other => panic!("{other:?}"),
+    });
+    assert_eq!(info, 4, "the default count, unchanged by the refused ones");
+    dev.request(Request::SetExposures(PAIRS as u8), |r| {
+        assert_eq!(r, Response::Ack)
+    });
+    for (name, cal, host) in &cases {
+        dev.request(Request::WriteCalibration(WireCalibration::from(cal)), |r| {
+            assert_eq!(r, Response::Ack, "{name}")
+        });
+        dev.request(Request::Measure, |r| {
+            let Response::Reading(reading) = r else {
+                panic!("{name}: device {r:?}");
+            };
+            let (Measurement::Stem(d), Measurement::Stem(h)) = (&reading.measurement, host) else {
+                panic!("{name}: not stems: {:?}, {host:?}", reading.measurement);
+            };
+            let rel = (d.diameter - h.diameter).abs() / h.diameter;
+            eprintln!(
+                "{name}: host {:.4} ± {:.4} mm, device {:.4} ± {:.4} mm ({} exposures), \
+                 relative difference {rel:.2e}",
+                h.diameter * 1e3,
+                h.uncertainty * 1e3,
+                d.diameter * 1e3,
+                d.uncertainty * 1e3,
+                d.exposures
+            );
+            assert_eq!(
+                (d.exposures, h.exposures),
+                (PAIRS as u8, PAIRS as u8),
+                "{name}"
+            );
+            assert_eq!(d.method, h.method, "{name}: method");
+            assert_eq!(d.flags, h.flags, "{name}: flags");
+            assert!(rel <= 1e-4, "{name}: diameter");
+            // σ: rounding moves each pair by ≈ 1e-5 of d, against a scatter of ≈ 1e-3 of d.
+            let rel_sigma = (d.uncertainty - h.uncertainty).abs() / h.uncertainty;
+            assert!(rel_sigma <= 1e-2, "{name}: σ differs by {rel_sigma:.2e}");
+        });
+    }
 }
 
 /// The road instrument on the emulated device (mode set from the host) gives the host's

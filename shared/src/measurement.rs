@@ -143,6 +143,15 @@ pub struct StemReading {
     pub axes: Option<Axes>,
     /// Quality flags (solver and image).
     pub flags: Flags,
+    /// Exposures (frame pairs) the reading combines (`docs/error-model.md` §6, (E7)); 1 in
+    /// readings recorded before there were several (protocol version 7).
+    #[serde(default = "one_exposure")]
+    pub exposures: u8,
+}
+
+/// What a reading recorded without [`StemReading::exposures`] took: one frame pair.
+fn one_exposure() -> u8 {
+    1
 }
 
 /// A sphere's diameter, where it is, and what qualifies it (`docs/sphere.md`).
@@ -328,6 +337,7 @@ mod tests {
             }),
             axes: None,
             flags: Flags::TILT_IGNORED,
+            exposures: 1,
         })
     }
 

@@ -19,6 +19,7 @@ fn reading(seq: u32, flags: u32) -> Reading {
             tilt: None,
             axes: None,
             flags: Flags(flags),
+            exposures: 1,
         }),
         stats: None,
         accelerometer: None,

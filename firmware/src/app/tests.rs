@@ -6,7 +6,10 @@
 use std::cell::RefCell;
 use std::rc::Rc;
 
-use tangent_core::protocol::{ErrorCode, Request, WirePlanesUncertainty, MAX_FRAME_LEN};
+use tangent_core::accelerometer;
+use tangent_core::protocol::{
+    AccelReading, ErrorCode, Request, WirePlanesUncertainty, MAX_FRAME_LEN,
+};
 
 use super::*;
 use crate::adxl355::model::Adxl355Model;
@@ -17,8 +20,10 @@ use crate::fakes::{
 };
 use crate::fakes::{VerticalMeasurer, Verticals};
 use crate::i2c_target::TargetBus;
-use crate::measure::Measurer;
+use crate::measure::{FramePair, Measurer};
 use crate::mode_log::ModeLog;
+use tangent_core::measurement::Measurement;
+use tangent_core::real::Real;
 
 /// Polls enough for any bounded capture here (each poll advances the time by ≥ one guard
 /// poll while a capture hangs, and CAPTURE_TIMEOUT_US / GUARD_POLL_US = 500).
@@ -253,8 +258,9 @@ fn the_idle_loop_feeds_the_watchdog_every_tick() {
 #[test]
 fn a_long_stream_feeds_the_watchdog_between_measurements() {
     // A stream of measurements — with a working camera, and with a dead one (every
-    // exposure runs into the capture timeout) — is fed once per measurement: the longest
-    // gap is one measurement, bounded by two guarded exposures.
+    // exposure runs into the capture timeout) — is fed once per measurement and between a
+    // stem reading's frame pairs: the longest gap is one pair, bounded by two guarded
+    // exposures.
     for camera in [
         CameraBehaviour::Works,
         CameraBehaviour::HangsDark,
@@ -271,7 +277,12 @@ fn a_long_stream_feeds_the_watchdog_between_measurements() {
             }
         }
         let feeds = feeds.borrow();
-        assert_eq!(feeds.len(), 200, "{camera:?}");
+        // A dead camera ends the reading at its first pair.
+        let per_step = match camera {
+            CameraBehaviour::Works => DEFAULT_EXPOSURES as usize,
+            _ => 1,
+        };
+        assert_eq!(feeds.len(), 200 * per_step, "{camera:?}");
         assert_eq!(
             writes.get(),
             1 + 200,
@@ -293,8 +304,8 @@ fn a_long_stream_feeds_the_watchdog_between_measurements() {
 #[test]
 fn a_hang_in_the_main_loop_stops_the_feeding() {
     // The link's write never completes (a hang the guard does not cover): the step that
-    // hangs fed the watchdog once when it started and never again, so the hardware
-    // watchdog's countdown runs out — nothing else feeds it.
+    // hangs fed the watchdog when it started and between its reading's frame pairs, and
+    // never again, so the hardware watchdog's countdown runs out — nothing else feeds it.
     let mut rig = Rig::new();
     let feeds = rig.feeds.clone();
     {
@@ -305,7 +316,12 @@ fn a_hang_in_the_main_loop_stops_the_feeding() {
             "the step should hang"
         );
     }
-    assert_eq!(feeds.borrow().len(), 1, "{:?}", feeds.borrow());
+    assert_eq!(
+        feeds.borrow().len(),
+        DEFAULT_EXPOSURES as usize,
+        "{:?}",
+        feeds.borrow()
+    );
 }
 
 /// The mode from the host: every mode this build measures is taken and remembered, every
@@ -620,4 +636,123 @@ fn an_accelerometer_calibration_that_is_not_finite_is_refused() {
         })
     );
     assert_eq!(app.alignment, None);
+}
+
+/// Reads a stem of 300 mm + 10 mm per pair measured and, asked to combine, reports how many
+/// pairs the reading took in its `exposures` (how the application drives the exposures is
+/// under test here; the combination itself is the core's, tested there and under QEMU).
+struct CountingMeasurer {
+    measured: Rc<core::cell::Cell<usize>>,
+}
+
+impl Measurer for CountingMeasurer {
+    fn measure(
+        &mut self,
+        mode: Mode,
+        _: &FramePair<'_>,
+        _: &Calibration,
+    ) -> Result<Measurement, Failure> {
+        let k = self.measured.get();
+        self.measured.set(k + 1);
+        // The second pair of every reading fails: a pair that cannot be read does not end
+        // the reading.
+        if k % 4 == 1 {
+            return Err(Failure::Frame);
+        }
+        let diameter = 0.3 + 0.01 * k as Real;
+        Ok(match mode {
+            Mode::Cylinder => Measurement::Stem(tangent_core::measurement::StemReading {
+                diameter,
+                uncertainty: 0.001,
+                method: tangent_core::protocol::Method::CircleFit,
+                distance: 1.0,
+                tilt: None,
+                axes: None,
+                flags: tangent_core::solvers::result::Flags::default(),
+                exposures: 1,
+            }),
+            _ => return Err(Failure::UnsupportedMode(mode)),
+        })
+    }
+
+    fn begin_exposures(&mut self) {
+        self.measured.set(0);
+    }
+
+    fn combined(&mut self, _: Mode) -> Option<Result<Measurement, Failure>> {
+        let n = self.measured.get();
+        Some(
+            self.measure(Mode::Cylinder, &PAIR, &Calibration::reference_design())
+                .map(|m| match m {
+                    Measurement::Stem(s) => {
+                        Measurement::Stem(tangent_core::measurement::StemReading {
+                            exposures: n as u8,
+                            ..s
+                        })
+                    }
+                    other => other,
+                }),
+        )
+    }
+}
+
+const PAIR: FramePair<'static> = FramePair {
+    off: &[],
+    on: &[],
+    width: 0,
+    height: 0,
+    row_offset: 0,
+    laser_mask: 0,
+};
+
+/// A stem reading measures the set number of frame pairs and reports the measurer's
+/// combination of them; one pair is reported as it is; other instruments take one pair;
+/// a count of 0 or above 16 is refused and the count stays as it was.
+#[test]
+fn a_stem_reading_takes_the_set_number_of_pairs() {
+    use tangent_core::measurement::Mode;
+    let measured = Rc::new(core::cell::Cell::new(0));
+    let mut rig = Rig::new();
+    let mut app = rig.app_with(
+        CameraBehaviour::Works,
+        false,
+        CountingMeasurer {
+            measured: measured.clone(),
+        },
+    );
+    assert_eq!(app.exposures(), DEFAULT_EXPOSURES);
+    let stem = |r: Reading| match r.measurement {
+        Measurement::Stem(s) => s,
+        other => panic!("not a stem: {other:?}"),
+    };
+    let reading = stem(poll_bounded(app.measure_once(), POLLS).unwrap().unwrap());
+    assert_eq!(
+        measured.get(),
+        DEFAULT_EXPOSURES as usize + 1,
+        "pairs, then the combination"
+    );
+    assert_eq!(reading.exposures, DEFAULT_EXPOSURES);
+    for bad in [0, 17, u8::MAX] {
+        let error = app.set_exposures(bad).unwrap_err();
+        assert_eq!(error.code, ErrorCode::InvalidSetting);
+        assert_eq!(error.detail, bad as u32);
+        assert_eq!(
+            app.exposures(),
+            DEFAULT_EXPOSURES,
+            "a refused count changes nothing"
+        );
+    }
+    app.set_exposures(1).unwrap();
+    let reading = stem(poll_bounded(app.measure_once(), POLLS).unwrap().unwrap());
+    assert_eq!(measured.get(), 1, "one pair, not combined");
+    assert_eq!((reading.exposures, reading.diameter), (1, 0.3));
+    app.set_exposures(16).unwrap();
+    poll_bounded(app.measure_once(), POLLS).unwrap().unwrap();
+    assert_eq!(measured.get(), 17);
+    app.set_mode(Mode::Sphere).unwrap();
+    let failed = poll_bounded(app.measure_once(), POLLS)
+        .unwrap()
+        .unwrap_err();
+    assert_eq!(measured.get(), 1, "a sphere takes one pair");
+    assert_eq!(failed.code, ErrorCode::MeasurementFailed);
 }

@@ -40,6 +40,7 @@ fn requests(cal: &WireCalibration) -> Vec<ToDevice> {
         },
         Request::WriteCalibration(cal.clone()),
         Request::SetExposure(Some(2000)),
+        Request::SetExposures(4),
     ]
     .into_iter()
     .enumerate()

@@ -14,7 +14,7 @@ use std::time::Duration;
 
 use anyhow::{Context, Result};
 use plotters::prelude::*;
-use tangent_core::measurement::Mode;
+use tangent_core::measurement::{Measurement, Mode};
 use tangent_core::protocol::Reading;
 use tangent_host::fieldlog::{self, FieldLog, PlotHeader, Record, TreeRecord};
 use tangent_host::link::{self, Link, LinkConfig, LinkEvent};
@@ -54,6 +54,12 @@ pub struct Args {
     /// until told otherwise or restarted (the link sets it again after a restart).
     #[arg(long, value_parser = parse_mode)]
     mode: Option<Mode>,
+    /// Frame pairs one stem reading combines (1–16, `docs/error-model.md` §6): more pairs
+    /// average the speckle the hand renews, each pair two more frames (about 35 ms at the
+    /// sensor's 60 frames/s); the device keeps the
+    /// count until it restarts (the link sets it again after a restart).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(1..=16))]
+    exposures: Option<u8>,
     /// Ask the device to measure continuously (as if the trigger were held).
     #[arg(long)]
     stream: bool,
@@ -122,6 +128,9 @@ pub fn run(args: Args) -> Result<ExitCode> {
     if let Some(mode) = args.mode {
         link.set_mode(mode)?;
     }
+    if let Some(count) = args.exposures {
+        link.set_exposures(count)?;
+    }
     // The error names the file.
     let mut log = FieldLog::open(&args.log).context("cannot open the field log")?;
     if log.torn_bytes() > 0 {
@@ -172,13 +181,18 @@ pub fn run(args: Args) -> Result<ExitCode> {
         }
     }
     eprintln!(
-        "listening to {} on {path} (firmware {}, calibration {}, mode {}), plot {plot_id}, log {}",
+        "listening to {} on {path} (firmware {}, calibration {}, mode {}{}), plot {plot_id}, log {}",
         device_id,
         id.fw_version,
         id.calib_id
             .map(|c| c.to_string())
             .unwrap_or_else(|| "NONE — push one with `tangent device-calibration push`".into()),
         id.mode.name(),
+        if id.mode == Mode::Cylinder {
+            format!(", {} exposures per reading", id.exposures)
+        } else {
+            String::new()
+        },
         args.log.display()
     );
     if args.mode.is_none() && id.mode_store.is_default() {
@@ -316,6 +330,11 @@ fn describe(t: &TreeRecord, r: &Reading) -> String {
             t.kind, t.tree_id, species, t.diameter_mm, t.uncertainty_mm
         )
     };
+    if let Measurement::Stem(stem) = &r.measurement {
+        if stem.exposures > 1 {
+            s += &format!("  ({} exposures)", stem.exposures);
+        }
+    }
     if let Some(st) = r.stats.filter(|s| s.count > 1) {
         s += &format!(
             "  (held: {} readings, mean {:.1} mm, spread {:.1} mm)",

@@ -32,6 +32,8 @@ pub struct DeviceIdentity {
     pub mode: Mode,
     /// Whether `mode` was read from the device's mode store, or why it is the default.
     pub mode_store: ModeStoreState,
+    /// Frame pairs one stem reading combines.
+    pub exposures: u8,
 }
 
 /// A device message, owned ([`Response`] borrows from the receive buffer).
@@ -88,6 +90,7 @@ impl From<Response<'_>> for Reply {
                 link: i.link,
                 mode: i.mode,
                 mode_store: i.mode_store,
+                exposures: i.exposures,
             }),
             Response::Reading(r) => Reply::Reading(r),
             Response::Error(e) => Reply::Error(e),

@@ -236,6 +236,7 @@ impl Measurer for TestMeasurer {
             }),
             axes: None,
             flags: Flags::TILT_IGNORED,
+            exposures: 1,
         }))
     }
 }

@@ -80,6 +80,8 @@ impl From<&CylinderSolution> for Measurement {
             }),
             axes: s.axes.map(|(major, minor)| Axes { major, minor }),
             flags: s.flags,
+            // At most `MAX_EXPOSURES` (16) by `combine_exposures`.
+            exposures: u8::try_from(s.exposures).unwrap_or(u8::MAX),
         })
     }
 }

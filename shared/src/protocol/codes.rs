@@ -518,6 +518,9 @@ impl fmt::Display for DeviceError {
             }
             ErrorCode::OutOfRange => write!(f, "the read went past the end of the frame"),
             ErrorCode::Busy => write!(f, "it is busy (e.g. streaming); try again"),
+            ErrorCode::InvalidSetting => {
+                write!(f, "it does not accept the value {d} for this setting")
+            }
         }
     }
 }

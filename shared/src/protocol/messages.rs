@@ -88,6 +88,14 @@ pub enum Request {
     /// and the detail of [`Failure::UnsupportedMode`](super::codes::Failure::UnsupportedMode),
     /// and the mode stays as it was.
     SetMode(Mode),
+    /// Sets how many frame pairs one stem reading combines (a trigger press, a
+    /// [`Request::Measure`], each reading of a stream): 1 to
+    /// [`MAX_EXPOSURES`](crate::solvers::stem::MAX_EXPOSURES), combined by
+    /// [`combine_exposures`](crate::solvers::stem::combine_exposures) (protocol version 7) →
+    /// [`Response::Ack`]; any other count is refused with [`ErrorCode::InvalidSetting`] and
+    /// the count stays as it was. Kept until the next reset ([`DeviceInfo::exposures`]); the
+    /// other instruments measure one pair per reading.
+    SetExposures(u8),
 }
 
 /// One frame of a captured pair.
@@ -164,6 +172,9 @@ pub struct DeviceInfo<'a> {
     /// Where [`DeviceInfo::mode`] came from: the device's non-volatile mode store, or the
     /// default because the store was empty, damaged or unreadable (protocol version 4).
     pub mode_store: ModeStoreState,
+    /// Frame pairs one stem reading combines ([`Request::SetExposures`]; protocol
+    /// version 7).
+    pub exposures: u8,
 }
 
 /// What the device's mode store held at boot, or did since: why [`DeviceInfo::mode`] is
@@ -372,6 +383,9 @@ pub enum ErrorCode {
     OutOfRange,
     /// The device is busy (e.g. streaming) and cannot do this now.
     Busy,
+    /// A setting's value is outside what the device accepts (`detail` = the value sent;
+    /// protocol version 7).
+    InvalidSetting,
 }
 
 /// Description of a captured frame pair.

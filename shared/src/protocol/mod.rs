@@ -61,7 +61,7 @@ pub use messages::{
 /// Version of this protocol, the first byte of every raw frame. Bump it on any change to
 /// the message types (postcard has no field names: adding a variant in the middle or a
 /// field changes the bytes). The history of versions is in `docs/protocol.md`.
-pub const PROTOCOL_VERSION: u8 = 6;
+pub const PROTOCOL_VERSION: u8 = 7;
 
 /// Most pixel bytes in one [`Response::FrameChunk`].
 pub const FRAME_CHUNK_MAX: usize = 512;

@@ -28,6 +28,7 @@ fn reading(seq: u32) -> Reading {
             }),
             axes: None,
             flags: Flags(0x1803),
+            exposures: 1,
         }),
         stats: Some(RunningStats {
             count: 4,
@@ -90,6 +91,7 @@ fn every_request_round_trips() {
         Request::SetMode(Mode::Cylinder),
         Request::SetMode(Mode::Sphere),
         Request::SetMode(Mode::Road),
+        Request::SetExposures(4),
     ];
     for (i, request) in requests.into_iter().enumerate() {
         let msg = ToDevice {
@@ -608,6 +610,7 @@ fn the_mode_travels_as_its_number() {
         link: LinkStats::default(),
         mode: Mode::Sphere,
         mode_store: ModeStoreState::Loaded(Mode::Sphere),
+        exposures: 4,
     });
     let msg = FromDevice {
         tag: 3,
