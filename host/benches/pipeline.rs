@@ -224,11 +224,40 @@ fn bench_ball_refinement(c: &mut Criterion) {
     });
 }
 
+/// The combination of four exposures' stem readings ((E7), `docs/error-model.md` §6): what
+/// a several-pair reading adds to its pairs' own work. The four are one corpus stem's
+/// reading with its diameter moved by ±½σ and ±σ.
+fn bench_exposures(c: &mut Criterion) {
+    use tangent_core::solvers::stem::combine_exposures;
+    let capture = corpus_capture("cyl-d300-z150-shade");
+    let cal = capture.calibration.clone();
+    let (off_f, on_f) = frames(&capture);
+    let mut hw = buffers(&on_f, &cal);
+    let Ok(one) = measure_with::<Stem, u8>(
+        &off_f,
+        &on_f,
+        &cal,
+        &PipelineConfig::default(),
+        &CylinderParams::default(),
+        &mut hw.workspace(),
+    ) else {
+        return;
+    };
+    let s = one.solution;
+    let four = [-1.0, -0.5, 0.5, 1.0].map(|k| tangent_core::solvers::stem::CylinderSolution {
+        diameter: s.diameter + k * s.uncertainty,
+        ..s
+    });
+    c.bench_function("combine_exposures_four", |b| {
+        b.iter(|| combine_exposures(black_box(&four)).map(|r| r.diameter))
+    });
+}
+
 criterion_group! {
     name = benches;
     // Criterion's HTML plots need a system font that plotters (built here with the shipped
     // font only) cannot find; the numbers are what we record.
     config = Criterion::default().without_plots();
-    targets = bench, bench_sphere, bench_walls, bench_ball_refinement
+    targets = bench, bench_sphere, bench_walls, bench_ball_refinement, bench_exposures
 }
 criterion_main!(benches);

@@ -56,8 +56,10 @@ fn bench(app: &mut App<'_, Qemu<'static>, PipelineMeasurer<'_>>, scenes: usize) 
         t1 - t0,
         1_000_000_000 / qemu::SYSCLK_HZ
     ));
+    // One pair per reading: the counts are those of one frame pair (a stem reading of K
+    // pairs costs K of them and the combination, `docs/performance.md`).
+    let mut ok = app.set_exposures(1).is_ok();
     embassy_futures::block_on(async {
-        let mut ok = true;
         for i in 0..scenes {
             match app.measure_once().await {
                 Ok(r) => {

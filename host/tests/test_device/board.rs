@@ -222,8 +222,6 @@ impl Measurer for TestMeasurer {
                 FRAME.row_offset as usize
             )
         );
-        self.made += 1;
-        self.control.lock().unwrap().issued = self.made;
         Ok(Measurement::Stem(StemReading {
             diameter: diameter_of(self.made).into(),
             uncertainty: 0.0015f32.into(),
@@ -238,6 +236,13 @@ impl Measurer for TestMeasurer {
             flags: Flags::TILT_IGNORED,
             exposures: 1,
         }))
+    }
+
+    /// A reading begins (the firmware's default several frame pairs follow; it reports
+    /// the first, since this measurer does not combine them): the next number.
+    fn begin_exposures(&mut self) {
+        self.made += 1;
+        self.control.lock().unwrap().issued = self.made;
     }
 }
 
