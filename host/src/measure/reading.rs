@@ -69,6 +69,10 @@ pub struct Reading {
     /// allow (metres; stems: the single-exposure information bound, `docs/error-model.md` §6).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub information_uncertainty_m: Option<f64>,
+    /// The diameter the fit's second-order pull correction removed (metres; stems, 0 when
+    /// none was evaluated, `docs/error-model.md` §5e).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pull_correction_m: Option<f64>,
     /// Distance from the laser source to the stem (metres).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub distance_m: Option<f64>,
@@ -152,6 +156,7 @@ impl Reading {
                     three_tangent_diameter_m: s.three_tangent_diameter,
                     fit_diameter_m: s.fit_diameter,
                     information_uncertainty_m: s.information_uncertainty,
+                    pull_correction_m: Some(s.pull_correction),
                     distance_m: Some(s.distance),
                     points: Some(s.n_points),
                     exposures: (s.exposures > 1).then_some(s.exposures),

@@ -159,6 +159,8 @@ pub struct Scratch<'a> {
 struct PlaneResult {
     tt: Option<(ThreeTangent, Real)>,
     fit: Option<(circle::CircleFit, Real, Real)>, // fit, σ_r, arc angle
+    /// The radius the pull correction removed from the fit.
+    pull: Real,
     /// The whole-arc fit's information radius σ (`sigma::RobustCircle::information`).
     information: Option<Real>,
     ellipse: Option<EllipseFit>,
@@ -218,6 +220,7 @@ fn solve_plane(
         |i: usize| level.to_level(field.direction_in_plane(level.to_plane(pts[i])) * sigmas[i]);
     let near_sigma = |q: Vec2| norm(&noise_at(q));
     let mut information = None;
+    let mut pull = 0.0;
     let fit = robust_circle(
         pts,
         Start::Fit,
@@ -250,6 +253,7 @@ fn solve_plane(
         // (docs/error-model.md §5e, "The pull to second order"); the tests above judged the
         // fitted circle itself.
         f.circle.radius -= rc.pull;
+        pull = rc.pull;
         (f, s, arc)
     });
     if fit.is_none() {
@@ -268,6 +272,7 @@ fn solve_plane(
     Ok(PlaneResult {
         tt,
         fit,
+        pull,
         information,
         ellipse,
         flags,
@@ -505,6 +510,7 @@ fn finish_plane(
             fit_diameter: Some(2.0 * f.circle.radius),
             fit_uncertainty: one.fit.map(|(_, s, _)| 2.0 * s),
             information_uncertainty: one.information.map(|s| 2.0 * s),
+            pull_correction: 2.0 * one.pull,
             distance: norm(&c) - f.circle.radius,
             centre: plane.from_plane_coords(level.to_plane(e.centre)),
             axes: Some((2.0 * e.semi_axes.0, 2.0 * e.semi_axes.1)),
@@ -568,6 +574,7 @@ fn finish_plane(
         fit_diameter: one.fit.map(|(f, _, _)| 2.0 * f.circle.radius),
         fit_uncertainty: one.fit.map(|(_, s, _)| 2.0 * s),
         information_uncertainty: one.information.map(|s| 2.0 * s),
+        pull_correction: if use_fit { 2.0 * one.pull } else { 0.0 },
         distance,
         centre: plane.from_plane_coords(level.to_plane(centre)),
         axes: None,
@@ -755,6 +762,7 @@ fn solve_tilted(
         fit_diameter: Some(2.0 * cyl.radius),
         fit_uncertainty: Some(2.0 * fit_sigma),
         information_uncertainty: (kf > 0).then(|| 2.0 * sqrt(info_s2sum) / kf as Real),
+        pull_correction: 0.0,
         distance: norm(&c0) - cyl.radius,
         centre,
         axes,

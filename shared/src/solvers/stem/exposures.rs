@@ -124,6 +124,7 @@ pub fn combine_exposures(readings: &[CylinderSolution]) -> Result<CylinderSoluti
         fit_diameter: optional_mean(|r| r.fit_diameter),
         three_tangent_diameter: optional_mean(|r| r.three_tangent_diameter),
         information_uncertainty: (information > 0.0).then(|| 1.0 / sqrt(information)),
+        pull_correction: mean(|r| r.pull_correction),
         ..*best
     })
 }
@@ -177,6 +178,7 @@ mod tests {
             fit_diameter: Some(diameter),
             fit_uncertainty: Some(sigma),
             information_uncertainty: Some(sigma / 2.0),
+            pull_correction: 0.0,
             distance: 2.0,
             centre: Vec3::new(0.0, 0.0, 2.0),
             axes: None,

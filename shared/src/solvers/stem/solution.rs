@@ -42,6 +42,10 @@ pub struct CylinderSolution {
     /// residuals' χ², the coherent bending and the calibration of `fit_uncertainty`. The
     /// evaluation's bound columns come from it.
     pub information_uncertainty: Option<Real>,
+    /// The diameter the second-order pull correction removed from the fit (metres,
+    /// `docs/error-model.md` §5e, "The pull to second order"): how far the fit's noise bends
+    /// it, to second order; 0 where no pull was evaluated (the two-plane fit).
+    pub pull_correction: Real,
     /// Distance from the source of plane 0 to the stem (nearest point, metres).
     pub distance: Real,
     /// Centre of the section in plane 0 (camera frame, metres).
