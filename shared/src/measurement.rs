@@ -345,9 +345,9 @@ mod tests {
     fn scalars_travel_as_f32() {
         let mut buf = [0u8; 64];
         let bytes = postcard::to_slice(&stem(), &mut buf).expect("fits");
-        // Variant (1) + 3 f32 + method (1) + Some (1) + 3 f32 + None (1) + flags varint (1):
-        // 4 bytes per scalar whatever `Real` is.
-        assert_eq!(bytes.len(), 1 + 12 + 1 + 1 + 12 + 1 + 1);
+        // Variant (1) + 3 f32 + method (1) + Some (1) + 3 f32 + None (1) + flags varint (1)
+        // + exposures (1): 4 bytes per scalar whatever `Real` is.
+        assert_eq!(bytes.len(), 1 + 12 + 1 + 1 + 12 + 1 + 1 + 1);
         let back: Measurement = postcard::from_bytes(bytes).expect("decodes");
         let Measurement::Stem(b) = back else {
             panic!("a stem came back as {back:?}")
@@ -356,6 +356,28 @@ mod tests {
         assert_eq!(b.method, Method::CircleFit);
         assert_eq!(back.mode(), Mode::Cylinder);
         assert_eq!(back.flags(), Flags::TILT_IGNORED);
+        assert_eq!(b.exposures, 1);
+    }
+
+    /// A stem reading recorded before protocol version 7 (a field log's JSON without
+    /// `exposures`) reads as one exposure.
+    #[test]
+    fn a_reading_without_exposures_reads_as_one() {
+        let Measurement::Stem(s) = stem() else {
+            unreachable!()
+        };
+        let recorded = StemReading { exposures: 4, ..s };
+        let mut json = serde_json::to_value(Measurement::Stem(recorded)).expect("json");
+        assert_eq!(json["Stem"]["exposures"], 4);
+        json["Stem"]
+            .as_object_mut()
+            .expect("an object")
+            .remove("exposures");
+        let back: Measurement = serde_json::from_value(json).expect("an older reading decodes");
+        let Measurement::Stem(b) = back else {
+            panic!("{back:?}")
+        };
+        assert_eq!(b.exposures, 1);
     }
 
     #[test]
