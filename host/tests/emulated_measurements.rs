@@ -187,14 +187,8 @@ fn on_device_exposures_combine_as_the_hosts() {
         let mut solutions = Vec::new();
         for k in 0..PAIRS {
             let pair = capture.exposure_pair(k).expect("a pair");
-            let (off_pgm, (_, on_pgm)) = (pair.off_frame(), pair.on_frames().next().unwrap());
-            let (w, h) = (off_pgm.width, off_pgm.height);
-            let (off, on) = (to_u8(off_pgm), to_u8(on_pgm));
-            let off_path = dir.path().join(format!("{name}-p{k}-off.pgm"));
-            let on_path = dir.path().join(format!("{name}-p{k}-on.pgm"));
-            write_pgm(&off_path, w, h, &off);
-            write_pgm(&on_path, w, h, &on);
-            files.push((off_path, on_path));
+            let (paths, (off, on), (w, h)) = write_pair(dir.path(), &format!("{name}-p{k}"), &pair);
+            files.push(paths);
             let off_f = tangent_core::image::Frame::new(&off, w, h, w).unwrap();
             let on_f = tangent_core::image::Frame::new(&on, w, h, w).unwrap();
             let planes = capture.calibration.planes.len();

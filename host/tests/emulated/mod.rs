@@ -270,17 +270,9 @@ pub fn device_equals_host(
     {
         let name = entry.name;
         let (capture, _) = simulate(&entry.spec).expect("simulate the corpus capture");
-        let off_pgm = capture.off_frame();
-        let (lit, on_pgm) = capture.on_frames().next().expect("an on frame");
         let planes = capture.calibration.planes.len();
-        assert_eq!(lit.len(), planes, "{name}: all planes lit in one frame");
-        let (w, h) = (off_pgm.width, off_pgm.height);
-        let (off, on) = (to_u8(off_pgm), to_u8(on_pgm));
-        let off_path = dir.path().join(format!("{name}-off.pgm"));
-        let on_path = dir.path().join(format!("{name}-on.pgm"));
-        write_pgm(&off_path, w, h, &off);
-        write_pgm(&on_path, w, h, &on);
-        pairs.push((off_path, on_path));
+        let (paths, (off, on), (w, h)) = write_pair(dir.path(), &name, &capture);
+        pairs.push(paths);
         let off_f = tangent_core::image::Frame::new(&off, w, h, w).unwrap();
         let on_f = tangent_core::image::Frame::new(&on, w, h, w).unwrap();
         let mut ws = OwnedBuffers::<u8>::for_frame(w, h, 8, planes);
@@ -335,6 +327,27 @@ pub fn device_equals_host(
         });
     }
     Some(compared)
+}
+
+/// A capture's laser-off frame and first laser-on frame (which must light every plane)
+/// written to `dir` as the 8-bit PGMs `<name>-off.pgm` and `<name>-on.pgm` the emulated
+/// camera serves: their paths, their pixels and their size.
+pub fn write_pair(
+    dir: &Path,
+    name: &str,
+    capture: &tangent_host::capture::Capture,
+) -> ((PathBuf, PathBuf), (Vec<u8>, Vec<u8>), (usize, usize)) {
+    let off_pgm = capture.off_frame();
+    let (lit, on_pgm) = capture.on_frames().next().expect("an on frame");
+    let planes = capture.calibration.planes.len();
+    assert_eq!(lit.len(), planes, "{name}: all planes lit in one frame");
+    let (w, h) = (off_pgm.width, off_pgm.height);
+    let (off, on) = (to_u8(off_pgm), to_u8(on_pgm));
+    let off_path = dir.join(format!("{name}-off.pgm"));
+    let on_path = dir.join(format!("{name}-on.pgm"));
+    write_pgm(&off_path, w, h, &off);
+    write_pgm(&on_path, w, h, &on);
+    ((off_path, on_path), (off, on), (w, h))
 }
 
 /// 8-bit version of a capture frame: 8-bit data as is, deeper data reduced to its top 8
