@@ -510,7 +510,8 @@ fn finish_plane(
             fit_diameter: Some(2.0 * f.circle.radius),
             fit_uncertainty: one.fit.map(|(_, s, _)| 2.0 * s),
             information_uncertainty: one.information.map(|s| 2.0 * s),
-            pull_correction: 2.0 * one.pull,
+            // The ellipse's axes, not the corrected circle, give the diameter.
+            pull_correction: 0.0,
             distance: norm(&c) - f.circle.radius,
             centre: plane.from_plane_coords(level.to_plane(e.centre)),
             axes: Some((2.0 * e.semi_axes.0, 2.0 * e.semi_axes.1)),
