@@ -329,14 +329,13 @@ pub fn device_equals_host(
     Some(compared)
 }
 
+/// What [`write_pair`] wrote: the two files' paths, their 8-bit pixels, their width and height.
+pub type WrittenPair = ((PathBuf, PathBuf), (Vec<u8>, Vec<u8>), (usize, usize));
+
 /// A capture's laser-off frame and first laser-on frame (which must light every plane)
 /// written to `dir` as the 8-bit PGMs `<name>-off.pgm` and `<name>-on.pgm` the emulated
 /// camera serves: their paths, their pixels and their size.
-pub fn write_pair(
-    dir: &Path,
-    name: &str,
-    capture: &tangent_host::capture::Capture,
-) -> ((PathBuf, PathBuf), (Vec<u8>, Vec<u8>), (usize, usize)) {
+pub fn write_pair(dir: &Path, name: &str, capture: &tangent_host::capture::Capture) -> WrittenPair {
     let off_pgm = capture.off_frame();
     let (lit, on_pgm) = capture.on_frames().next().expect("an on frame");
     let planes = capture.calibration.planes.len();
